@@ -1,0 +1,66 @@
+"""Readers and writers of the 3DGS file formats found in the wild.
+
+``read_gaussians(path, fmt=None)`` dispatches on the format name or the file name:
+
+| format           | reader                      | writer                   |
+| ---------------- | --------------------------- | ------------------------ |
+| inria_ply        | INRIA binary/ascii PLY, SH 0-3 | write_inria_ply       |
+| supersplat_ply   | SuperSplat compressed PLY   | -                        |
+| splat            | antimatter15 .splat         | write_splat (also NavArena compressed.splat) |
+| spz              | Niantic .spz (v2, v3)       | write_spz                |
+| npy_folder       | SceneSplat / InteriorGS .npy folder | write_npy_folder |
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from stages.gaussians.errors import SceneFormatError
+from stages.gaussians.formats.npy_folder import read_npy_folder, write_npy_folder
+from stages.gaussians.formats.ply import read_ply, write_inria_ply
+from stages.gaussians.formats.splat import read_splat, write_splat
+from stages.gaussians.formats.spz import read_spz, write_spz
+
+FORMATS = ("inria_ply", "supersplat_ply", "splat", "spz", "npy_folder")
+
+
+def detect_format(path: str | Path) -> str:
+    """Format name from the path: a folder is an .npy folder, otherwise the suffix decides."""
+    p = Path(path)
+    if p.is_dir():
+        return "npy_folder"
+    name = p.name.lower()
+    if name.endswith(".ply"):
+        return "ply"  # INRIA or SuperSplat: the header tells
+    if name.endswith(".splat"):
+        return "splat"
+    if name.endswith(".spz"):
+        return "spz"
+    raise SceneFormatError(p, f"cannot tell the 3DGS format from the name; expected .ply, .splat, .spz or an .npy folder")
+
+
+def read_gaussians(path: str | Path, fmt: str | None = None):
+    """Read a 3DGS file into a GaussianScene (unvalidated: see stages.gaussians.validate).
+
+    Args:
+        path: file or folder.
+        fmt: one of FORMATS, "ply" (either PLY flavour) or None to detect from the name.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise SceneFormatError(p, "file does not exist")
+    fmt = fmt or detect_format(p)
+    if fmt in ("ply", "inria_ply", "supersplat_ply"):
+        return read_ply(p)
+    if fmt == "splat":
+        return read_splat(p)
+    if fmt == "spz":
+        return read_spz(p)
+    if fmt == "npy_folder":
+        return read_npy_folder(p)
+    raise SceneFormatError(p, f"unknown format {fmt!r}; known: {', '.join(FORMATS)}")
+
+
+__all__ = [
+    "FORMATS", "detect_format", "read_gaussians", "read_ply", "write_inria_ply", "read_splat", "write_splat",
+    "read_spz", "write_spz", "read_npy_folder", "write_npy_folder",
+]

@@ -1,0 +1,51 @@
+"""SceneSplat / InteriorGS ``.npy`` folders: coord.npy [N, 3] metres, color.npy [N, 3] (uint8 0-255,
+or float in [0, 1]), opacity.npy [N] or [N, 1] (activated, 0-1), quat.npy [N, 4] (w, x, y, z),
+scale.npy [N, 3] (activated, metres). Other files in the folder (lang_feat.npy, ...) are ignored."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from stages.gaussians.errors import SceneFormatError
+from stages.gaussians.model import GaussianScene
+
+REQUIRED = ("coord", "color", "opacity", "quat", "scale")
+
+
+def read_npy_folder(path: str | Path) -> GaussianScene:
+    """Read a SceneSplat-style folder of .npy arrays."""
+    path = Path(path)
+    missing = [f"{k}.npy" for k in REQUIRED if not (path / f"{k}.npy").exists()]
+    if missing:
+        raise SceneFormatError(path, f".npy folder lacks {', '.join(missing)}")
+    arrs = {}
+    for k in REQUIRED:
+        try:
+            arrs[k] = np.load(path / f"{k}.npy", allow_pickle=False)
+        except (ValueError, OSError, EOFError) as e:
+            raise SceneFormatError(path / f"{k}.npy", f"unreadable .npy ({e})") from None
+    n = len(arrs["coord"])
+    want = {"coord": (n, 3), "color": (n, 3), "quat": (n, 4), "scale": (n, 3)}
+    for k, shape in want.items():
+        if arrs[k].shape != shape:
+            raise SceneFormatError(path / f"{k}.npy", f"shape {arrs[k].shape}, expected {shape} (N from coord.npy)")
+    op = arrs["opacity"].reshape(-1)
+    if op.shape != (n,):
+        raise SceneFormatError(path / "opacity.npy", f"holds {op.size} values, expected {n}")
+    color = arrs["color"].astype(np.float64)
+    if arrs["color"].dtype == np.uint8 or color.max(initial=0) > 1.0 + 1e-6:
+        color = color / 255.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return GaussianScene.from_colors(arrs["coord"], arrs["quat"], arrs["scale"], op, color)
+
+
+def write_npy_folder(path: str | Path, scene: GaussianScene) -> None:
+    """Write a SceneSplat-style folder (colour as uint8)."""
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    np.save(path / "coord.npy", scene.means)
+    np.save(path / "color.npy", np.round(scene.colors * 255).astype(np.uint8))
+    np.save(path / "opacity.npy", scene.alphas.astype(np.float32)[:, None])
+    np.save(path / "quat.npy", scene.quats)
+    np.save(path / "scale.npy", scene.scales.astype(np.float32))
