@@ -1,0 +1,1 @@
+"""Procedural indoor scenes as 3D Gaussians, with ground truth (mesh, labels, transform)."""
