@@ -25,6 +25,7 @@ class Part:
     yaw: float
     instance: int  # 0 = structure (walls, floor, ceiling), >= 1 objects
     skip_bottom: bool = False  # bottom face rests on the floor: a real capture never sees it
+    skip_top: bool = False  # top face of a ceiling slab: outside the rooms, never seen
 
 
 @dataclass
@@ -223,10 +224,10 @@ def make_layout(rng: np.random.Generator, cfg: LayoutConfig) -> Layout:
         x0, x1, y0, y1 = xs[c], xs[c + 1], ys[r], ys[r + 1]
         lay.rooms.append((x0 + t / 2, y0 + t / 2, x1 - t / 2, y1 - t / 2))
         lay.parts.append(Part("box", np.array([(x0 + x1) / 2, (y0 + y1) / 2, -0.025]),
-                              np.array([x1 - x0 + t, y1 - y0 + t, 0.05]), 0.0, 0))
+                              np.array([x1 - x0 + t, y1 - y0 + t, 0.05]), 0.0, 0, skip_bottom=True))
         if cfg.ceiling:
             lay.parts.append(Part("box", np.array([(x0 + x1) / 2, (y0 + y1) / 2, cfg.wall_height_m + 0.025]),
-                                  np.array([x1 - x0 + t, y1 - y0 + t, 0.05]), 0.0, 0))
+                                  np.array([x1 - x0 + t, y1 - y0 + t, 0.05]), 0.0, 0, skip_top=True))
     _place_furniture(lay, rng, cfg)
     return lay
 

@@ -1,0 +1,225 @@
+"""Costmap construction (DESIGN.md spatial layer, steps 3-5).
+
+For an embodiment with radius r and body interval [h_min, h_max] above the floor:
+- M_raw: a column is an obstacle when any voxel of it whose z-extent meets the body interval
+  is occupied (A >= tau_occ). The body band is voxelized at a finer xy resolution
+  (``raw_resolution``) than the stored map so obstacle boundaries are known to ~1 cm.
+- M_sup: DBSCAN on the occupied voxels of the whole aligned field drops isolated clusters; the
+  alpha shape (Delaunay triangles with circumradius <= alpha_radius) of the remaining voxels'
+  ground projection is the supported domain.
+- clearance: Euclidean distance from each map cell centre to the nearest obstacle (EDT on the
+  fine raw grid), in metres; unsupported cells hold -1.
+- M_occ = (clearance < r + margin) OR NOT M_sup, i.e. Dilate(M_raw, disk(r)) OR NOT M_sup with
+  the dilation done exactly by the distance transform.
+``margin`` bounds the error of bilinear interpolation of the clearance between cell centres
+(h^2 / (4 (r - h / sqrt 2)) for a distance field, h the map resolution), so the continuous
+query ``clearance(p) >= r + margin`` never accepts a pose closer than r to an obstacle cell.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import Delaunay
+
+from stages.gaussians.model import GaussianScene
+from stages.voxelize import VoxelGrid, VoxelizeConfig, column_max_opacity, opacity_field
+
+
+@dataclass
+class Embodiment:
+    """A robot body for the costmap and, later, the camera and kinematic limits."""
+
+    name: str = "locobot"
+    """Name used in output paths."""
+    radius: float = 0.18
+    """Footprint radius, metres."""
+    h_min: float = 0.05
+    """Lowest point of the body above the floor that collides, metres (lower things are stepped over)."""
+    h_max: float = 0.9
+    """Highest point of the body, metres."""
+    camera_height: float = 0.88
+    """Camera height above the floor, metres."""
+    camera_pitch_deg: float = 0.0
+    """Camera pitch, degrees (negative looks down)."""
+    hfov_deg: float = 90.0
+    """Horizontal field of view, degrees."""
+    max_linear_velocity: float = 0.45
+    """m/s."""
+    max_angular_velocity: float = 0.8
+    """rad/s."""
+    max_linear_acceleration: float = 0.25
+    """m/s^2."""
+    max_angular_acceleration: float = 0.6
+    """rad/s^2."""
+
+
+@dataclass
+class CostmapConfig:
+    """Parameters of the costmap stage."""
+
+    resolution: float = 0.05
+    """Stored map cell size, metres."""
+    raw_resolution: float = 0.01
+    """Target xy cell size of the body-band voxelization that locates obstacle boundaries, metres
+    (rounded so that an odd number of fine cells spans one map cell)."""
+    z_resolution: float = 0.05
+    """Voxel height in the body band, metres."""
+    margin_xy: float = 0.5
+    """Map border around the scene's Gaussians, metres."""
+    extent_quantile: float = 0.1
+    """Percentile (and 100 minus it) of Gaussian centres that bounds the map, so far strays do not."""
+    dbscan_eps: float = 0.15
+    """DBSCAN neighbourhood radius on occupied voxel centres, metres."""
+    dbscan_min_samples: int = 4
+    """DBSCAN core-point threshold."""
+    min_cluster_fraction: float = 0.02
+    """Clusters smaller than this share of the largest are dropped from the support."""
+    alpha_radius: float = 0.3
+    """Alpha-shape radius: Delaunay triangles with a larger circumradius are not supported, metres."""
+    support_z_min: float = -0.3
+    """Occupied voxels below this height are ignored for the support, metres."""
+    support_z_max: float = 3.0
+    """Occupied voxels above this height are ignored for the support, metres."""
+    extra_margin: float = 0.0
+    """Added to the interpolation margin, metres (a safety buffer beyond the exact bound)."""
+    embodiments: list[str] = field(default_factory=list)
+    """Further embodiments (conf/embodiment/*.yaml names) to build maps for besides the main one."""
+
+
+@dataclass
+class CostmapLayers:
+    """The layers of one embodiment's costmap. Arrays are [ny, nx] (row = y), cell (i, j) has
+    centre origin + ((j + 0.5) res, (i + 0.5) res)."""
+
+    origin: tuple[float, float]
+    resolution: float
+    raw: np.ndarray  # bool, body-band obstacle in the cell (any fine cell)
+    support: np.ndarray  # bool
+    occ: np.ndarray  # bool
+    clearance: np.ndarray  # float32 metres; -1 where unsupported
+    radius: float
+    margin: float
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.occ.shape
+
+
+def interpolation_margin(res: float, radius: float) -> float:
+    """Upper bound of the bilinear interpolation error of a Euclidean distance field at distance
+    ~radius: h^2 / 8 * (|f_xx| + |f_yy|) <= h^2 / (4 rho) with rho >= radius - h / sqrt 2."""
+    rho = max(radius - res / np.sqrt(2.0), res)
+    return res * res / (4.0 * rho)
+
+
+def supersample_factor(res: float, raw_res: float) -> int:
+    """Odd number of fine cells per map cell, so map cell centres fall on fine cell centres."""
+    s = max(1, int(round(res / raw_res)))
+    return s if s % 2 == 1 else s + 1
+
+
+def map_extent(scene: GaussianScene, cfg: CostmapConfig) -> tuple[tuple[float, float], tuple[int, int]]:
+    """Map origin (x, y) and shape (ny, nx) covering the scene's Gaussians plus a margin."""
+    q = cfg.extent_quantile
+    lo, hi = np.percentile(scene.means[:, :2], [q, 100 - q], axis=0)
+    res = cfg.resolution
+    lo = np.floor((lo - cfg.margin_xy) / res) * res
+    hi = np.ceil((hi + cfg.margin_xy) / res) * res
+    n = np.maximum(np.round((hi - lo) / res).astype(int), 1)
+    return (float(lo[0]), float(lo[1])), (int(n[1]), int(n[0]))
+
+
+def raw_obstacles_fine(scene: GaussianScene, origin, shape, s: int, emb: Embodiment, cfg: CostmapConfig,
+                       vcfg: VoxelizeConfig) -> np.ndarray:
+    """Fine [ny*s, nx*s] bool: body-band obstacle per fine cell (voxel z-layers start at h_min)."""
+    res_f = cfg.resolution / s
+    nz = max(1, int(np.ceil((emb.h_max - emb.h_min) / cfg.z_resolution - 1e-9)))
+    grid = VoxelGrid((origin[0], origin[1], emb.h_min), (res_f, res_f, cfg.z_resolution),
+                     (shape[1] * s, shape[0] * s, nz))
+    a = column_max_opacity(scene, grid, vcfg)  # [nx_f, ny_f]
+    return (a >= vcfg.tau_occ).T
+
+
+def support_mask(scene: GaussianScene, origin, shape, cfg: CostmapConfig, vcfg: VoxelizeConfig) -> tuple[np.ndarray, dict]:
+    """M_sup [ny, nx] from DBSCAN + alpha shape of the aligned occupied voxels."""
+    from sklearn.cluster import DBSCAN
+
+    res = cfg.resolution
+    nz = max(1, int(np.ceil((cfg.support_z_max - cfg.support_z_min) / res)))
+    grid = VoxelGrid((origin[0], origin[1], cfg.support_z_min), (res, res, res), (shape[1], shape[0], nz))
+    occ = opacity_field(scene, grid, vcfg) >= vcfg.tau_occ
+    idx = np.argwhere(occ)  # (ix, iy, iz), lexicographic: deterministic
+    info = {"occupied_voxels": int(len(idx))}
+    sup = np.zeros(shape, dtype=bool)
+    if len(idx) < 3:
+        return sup, info
+    labels = DBSCAN(eps=cfg.dbscan_eps / res, min_samples=cfg.dbscan_min_samples).fit_predict(idx.astype(np.float32))
+    counts = np.bincount(labels[labels >= 0]) if (labels >= 0).any() else np.zeros(0, int)
+    if len(counts) == 0:
+        return sup, info
+    keep_lab = np.nonzero(counts >= cfg.min_cluster_fraction * counts.max())[0]
+    kept = idx[np.isin(labels, keep_lab)]
+    info.update(clusters=int(len(counts)), kept_clusters=int(len(keep_lab)), dropped_voxels=int(len(idx) - len(kept)))
+    cells = np.unique(kept[:, :2], axis=0)  # (ix, iy) ground projection
+    pts = (cells + 0.5) * res
+    sup[cells[:, 1], cells[:, 0]] = True
+    if len(cells) >= 3:
+        tri = Delaunay(pts)
+        p = pts[tri.simplices]  # [T, 3, 2]
+        a = np.linalg.norm(p[:, 1] - p[:, 2], axis=1)
+        b = np.linalg.norm(p[:, 0] - p[:, 2], axis=1)
+        c = np.linalg.norm(p[:, 0] - p[:, 1], axis=1)
+        cross = np.abs((p[:, 1, 0] - p[:, 0, 0]) * (p[:, 2, 1] - p[:, 0, 1])
+                       - (p[:, 1, 1] - p[:, 0, 1]) * (p[:, 2, 0] - p[:, 0, 0]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            circ = a * b * c / (2.0 * cross)
+        keep = np.isfinite(circ) & (circ <= cfg.alpha_radius)
+        _rasterize_triangles(p[keep] / res - 0.5, sup)
+        info["alpha_triangles"] = int(keep.sum())
+    return sup, info
+
+
+def _rasterize_triangles(tris: np.ndarray, out: np.ndarray) -> None:
+    """Set cells of out [ny, nx] whose centre (integer coords) lies in any triangle [T, 3, 2] (x, y)."""
+    from stages.costmap.kernels import rasterize_triangles
+
+    rasterize_triangles(np.ascontiguousarray(tris, dtype=np.float64), out)
+
+
+def build_costmap(scene: GaussianScene, emb: Embodiment, cfg: CostmapConfig, vcfg: VoxelizeConfig,
+                  support: tuple[np.ndarray, dict] | None = None, extent=None) -> tuple[CostmapLayers, dict]:
+    """All layers of one embodiment's costmap from aligned Gaussians (z up, floor at z = 0).
+
+    Args:
+        support: a precomputed (M_sup, info) for this extent (shared between embodiments).
+        extent: a precomputed map_extent.
+    """
+    origin, shape = extent or map_extent(scene, cfg)
+    s = supersample_factor(cfg.resolution, cfg.raw_resolution)
+    fine = raw_obstacles_fine(scene, origin, shape, s, emb, cfg, vcfg)
+    res_f = cfg.resolution / s
+    if fine.any():
+        dist_f = ndimage.distance_transform_edt(~fine) * res_f
+    else:
+        dist_f = np.full(fine.shape, np.inf)
+    c = s // 2
+    # distance from a map cell centre to the nearest obstacle fine cell, minus half a fine cell
+    # (the obstacle may reach the near edge of its fine cell)
+    clearance = np.maximum(dist_f[c::s, c::s] - 0.5 * res_f, 0.0).astype(np.float32)
+    clearance[fine[c::s, c::s]] = 0.0
+    clearance = np.minimum(clearance, 1e3)
+    raw = fine.reshape(shape[0], s, shape[1], s).any(axis=(1, 3))
+    sup, sinfo = support if support is not None else support_mask(scene, origin, shape, cfg, vcfg)
+    clearance[~sup] = -1.0
+    margin = interpolation_margin(cfg.resolution, emb.radius) + cfg.extra_margin
+    occ = (clearance < emb.radius + margin) | ~sup
+    layers = CostmapLayers(origin, cfg.resolution, raw, sup, occ, clearance, emb.radius, margin)
+    free = ~occ
+    n_comp = ndimage.label(free, structure=np.ones((3, 3)))[1] if free.any() else 0
+    info = {"shape": list(shape), "origin": list(origin), "supersample": s, "margin_m": margin,
+            "free_cells": int(free.sum()), "free_area_m2": float(free.sum() * cfg.resolution ** 2),
+            "supported_area_m2": float(sup.sum() * cfg.resolution ** 2), "free_components": int(n_comp),
+            "support": sinfo}
+    return layers, info

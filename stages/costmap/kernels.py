@@ -1,0 +1,157 @@
+"""Numba kernels of the costmap: triangle rasterization and the state / motion queries.
+
+Queries read the clearance field F [ny, nx] (metres, -1 where unsupported) and interpolate it
+bilinearly between cell centres. A state (x, y) is valid when F(x, y) >= thr (thr = r + margin);
+a straight motion is valid when F >= thr along the whole segment, checked exactly: on each
+bilinear patch the segment's F is a quadratic in t, whose minimum is taken analytically.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def rasterize_triangles(tris, out):
+    """Set out[y, x] = True for integer points (x, y) inside any triangle tris[T, 3, 2]."""
+    ny, nx = out.shape
+    for t in range(tris.shape[0]):
+        x0, y0 = tris[t, 0, 0], tris[t, 0, 1]
+        x1, y1 = tris[t, 1, 0], tris[t, 1, 1]
+        x2, y2 = tris[t, 2, 0], tris[t, 2, 1]
+        den = (y1 - y2) * (x0 - x2) + (x2 - x1) * (y0 - y2)
+        if den == 0.0:
+            continue
+        xa = max(int(np.ceil(min(x0, x1, x2))), 0)
+        xb = min(int(np.floor(max(x0, x1, x2))), nx - 1)
+        ya = max(int(np.ceil(min(y0, y1, y2))), 0)
+        yb = min(int(np.floor(max(y0, y1, y2))), ny - 1)
+        for y in range(ya, yb + 1):
+            for x in range(xa, xb + 1):
+                l0 = ((y1 - y2) * (x - x2) + (x2 - x1) * (y - y2)) / den
+                l1 = ((y2 - y0) * (x - x2) + (x0 - x2) * (y - y2)) / den
+                if l0 >= -1e-9 and l1 >= -1e-9 and 1.0 - l0 - l1 >= -1e-9:
+                    out[y, x] = True
+
+
+@numba.njit(cache=True, inline="always")
+def _field(f, u, v):
+    """Bilinear F at patch coordinates (u, v) (cell centre (j, i) at u = j, v = i); -1 outside."""
+    ny, nx = f.shape
+    if not (u >= 0.0 and v >= 0.0 and u <= nx - 1 and v <= ny - 1):
+        return -1.0
+    j = min(int(u), nx - 2) if nx > 1 else 0
+    i = min(int(v), ny - 2) if ny > 1 else 0
+    fu = u - j
+    fv = v - i
+    a = f[i, j]
+    b = f[i, j + 1] if nx > 1 else a
+    c = f[i + 1, j] if ny > 1 else a
+    d = f[i + 1, j + 1] if (nx > 1 and ny > 1) else a
+    return a + (b - a) * fu + (c - a) * fv + (a - b - c + d) * fu * fv
+
+
+@numba.njit(cache=True)
+def state_valid(f, ox, oy, inv_res, thr, x, y):
+    return _field(f, (x - ox) * inv_res - 0.5, (y - oy) * inv_res - 0.5) >= thr
+
+
+@numba.njit(cache=True, parallel=True)
+def states_valid(f, ox, oy, inv_res, thr, xy):
+    n = xy.shape[0]
+    out = np.empty(n, dtype=np.bool_)
+    for k in numba.prange(n):
+        out[k] = _field(f, (xy[k, 0] - ox) * inv_res - 0.5, (xy[k, 1] - oy) * inv_res - 0.5) >= thr
+    return out
+
+
+@numba.njit(cache=True)
+def clearance_at(f, ox, oy, inv_res, xy):
+    n = xy.shape[0]
+    out = np.empty(n, dtype=np.float64)
+    for k in range(n):
+        out[k] = _field(f, (xy[k, 0] - ox) * inv_res - 0.5, (xy[k, 1] - oy) * inv_res - 0.5)
+    return out
+
+
+@numba.njit(cache=True)
+def _motion(f, u0, v0, u1, v1, thr):
+    ny, nx = f.shape
+    # both end points and everything between must lie inside the map
+    if min(u0, u1) < 0.0 or min(v0, v1) < 0.0 or max(u0, u1) > nx - 1 or max(v0, v1) > ny - 1:
+        return False
+    du = u1 - u0
+    dv = v1 - v0
+    # walk the breakpoints where u or v crosses an integer (patch borders), in increasing t
+    if du > 0:
+        nu = np.floor(u0) + 1.0
+        tu_step = 1.0 / du
+        tu = (nu - u0) / du
+    elif du < 0:
+        nu = np.ceil(u0) - 1.0
+        tu_step = -1.0 / du
+        tu = (nu - u0) / du
+    else:
+        tu = 2.0
+        tu_step = 2.0
+    if dv > 0:
+        nv = np.floor(v0) + 1.0
+        tv_step = 1.0 / dv
+        tv = (nv - v0) / dv
+    elif dv < 0:
+        nv = np.ceil(v0) - 1.0
+        tv_step = -1.0 / dv
+        tv = (nv - v0) / dv
+    else:
+        tv = 2.0
+        tv_step = 2.0
+    ta = 0.0
+    while ta < 1.0:
+        tb = min(tu, tv, 1.0)
+        tm = 0.5 * (ta + tb)
+        um = u0 + tm * du
+        vm = v0 + tm * dv
+        j = min(int(um), nx - 2) if nx > 1 else 0
+        i = min(int(vm), ny - 2) if ny > 1 else 0
+        a = f[i, j]
+        b = f[i, j + 1] if nx > 1 else a
+        c = f[i + 1, j] if ny > 1 else a
+        d = f[i + 1, j + 1] if (nx > 1 and ny > 1) else a
+        # F(t) = a + (b-a) fu + (c-a) fv + e fu fv with fu = pu + du t, fv = pv + dv t
+        e = a - b - c + d
+        pu = u0 - j
+        pv = v0 - i
+        c2 = e * du * dv
+        c1 = (b - a) * du + (c - a) * dv + e * (pu * dv + pv * du)
+        c0 = a + (b - a) * pu + (c - a) * pv + e * pu * pv
+        fa = c0 + c1 * ta + c2 * ta * ta
+        fb = c0 + c1 * tb + c2 * tb * tb
+        m = min(fa, fb)
+        if c2 > 0.0:
+            tv_ = -c1 / (2.0 * c2)
+            if ta < tv_ < tb:
+                m = min(m, c0 + c1 * tv_ + c2 * tv_ * tv_)
+        if m < thr:
+            return False
+        ta = tb
+        if tb == tu:
+            tu += tu_step
+        if tb == tv:
+            tv += tv_step
+    return True
+
+
+@numba.njit(cache=True)
+def motion_valid(f, ox, oy, inv_res, thr, x0, y0, x1, y1):
+    return _motion(f, (x0 - ox) * inv_res - 0.5, (y0 - oy) * inv_res - 0.5,
+                   (x1 - ox) * inv_res - 0.5, (y1 - oy) * inv_res - 0.5, thr)
+
+
+@numba.njit(cache=True, parallel=True)
+def motions_valid(f, ox, oy, inv_res, thr, seg):
+    n = seg.shape[0]
+    out = np.empty(n, dtype=np.bool_)
+    for k in numba.prange(n):
+        out[k] = _motion(f, (seg[k, 0] - ox) * inv_res - 0.5, (seg[k, 1] - oy) * inv_res - 0.5,
+                         (seg[k, 2] - ox) * inv_res - 0.5, (seg[k, 3] - oy) * inv_res - 0.5, thr)
+    return out

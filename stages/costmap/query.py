@@ -1,0 +1,80 @@
+"""The query API of a costmap: state and straight-motion validity of a disk footprint, one at a
+time (for planners' callbacks) or batched over numpy arrays (for samplers and benchmarks).
+
+A pose is valid when the interpolated clearance at its centre is >= radius + margin and it lies
+in the supported region; the heading does not matter for a disk.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from stages.costmap import kernels as K
+
+
+class Costmap:
+    """Queryable costmap of one embodiment.
+
+    Args:
+        clearance: [ny, nx] float32 metres, -1 where unsupported (row = y).
+        origin: (x, y) of the map's minimum corner, metres.
+        resolution: cell size, metres.
+        radius: footprint radius, metres. margin: interpolation margin, metres.
+    """
+
+    def __init__(self, clearance: np.ndarray, origin, resolution: float, radius: float, margin: float):
+        self.clearance = np.ascontiguousarray(clearance, dtype=np.float32)
+        self.origin = (float(origin[0]), float(origin[1]))
+        self.resolution = float(resolution)
+        self.radius = float(radius)
+        self.margin = float(margin)
+        self._args = (self.clearance, self.origin[0], self.origin[1], 1.0 / self.resolution,
+                      self.radius + self.margin)
+        self._f, self._ox, self._oy, self._inv, self._thr = self._args
+
+    @classmethod
+    def from_layers(cls, layers) -> "Costmap":
+        return cls(layers.clearance, layers.origin, layers.resolution, layers.radius, layers.margin)
+
+    @classmethod
+    def load(cls, zarr_path: str | Path, embodiment: str) -> "Costmap":
+        """Open the costmap of one embodiment from a costmap stage's Zarr store."""
+        import zarr
+
+        g = zarr.open_group(str(zarr_path), mode="r")[embodiment]
+        a = g.attrs
+        return cls(np.asarray(g["clearance"][...]), a["origin"], a["resolution"], a["radius"], a["margin"])
+
+    @property
+    def occupancy(self) -> np.ndarray:
+        """[ny, nx] bool M_occ (cell centres that are not valid states)."""
+        return self.clearance < self.radius + self.margin
+
+    def is_state_valid(self, x: float, y: float) -> bool:
+        """Single pose (metres); yaw is irrelevant for a disk footprint."""
+        return K.state_valid(self._f, self._ox, self._oy, self._inv, self._thr, x, y)
+
+    def are_states_valid(self, xy: np.ndarray) -> np.ndarray:
+        """[N, 2+] poses (x, y[, yaw]) -> [N] bool."""
+        xy = np.ascontiguousarray(np.asarray(xy, dtype=np.float64)[:, :2])
+        return K.states_valid(self._f, self._ox, self._oy, self._inv, self._thr, xy)
+
+    def is_motion_valid(self, x0: float, y0: float, x1: float, y1: float) -> bool:
+        """Straight segment between two positions: every point of it is a valid state."""
+        return K.motion_valid(self._f, self._ox, self._oy, self._inv, self._thr, x0, y0, x1, y1)
+
+    def are_motions_valid(self, segments: np.ndarray) -> np.ndarray:
+        """[N, 4] segments (x0, y0, x1, y1) -> [N] bool."""
+        seg = np.ascontiguousarray(np.asarray(segments, dtype=np.float64))
+        return K.motions_valid(self._f, self._ox, self._oy, self._inv, self._thr, seg)
+
+    def clearance_at(self, xy: np.ndarray) -> np.ndarray:
+        """Interpolated clearance (metres; negative outside the supported region) at [N, 2] points."""
+        return K.clearance_at(self._f, self._ox, self._oy, self._inv, np.ascontiguousarray(np.asarray(xy, float)[:, :2]))
+
+    def cell_centers(self, cells: np.ndarray) -> np.ndarray:
+        """[N, 2] (row, col) -> [N, 2] (x, y) metres."""
+        cells = np.asarray(cells)
+        return np.stack([self.origin[0] + (cells[:, 1] + 0.5) * self.resolution,
+                         self.origin[1] + (cells[:, 0] + 0.5) * self.resolution], 1)
