@@ -1,0 +1,98 @@
+"""Catalogs: which scenes exist (id, group, path, format) and where each logical dataset lives.
+
+A catalog YAML has ``scenes:`` (explicit entries) and/or ``synthetic:`` (a generated range of
+procedural scenes), and may override entries of the shared layout (catalogs/layout.yaml) under
+``layout:``. Stage code asks ``catalog.path("costmaps", scene)``, never builds paths itself.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+LAYOUT_FILE = Path(__file__).resolve().parent.parent / "catalogs" / "layout.yaml"
+
+
+def scene_id_for(dataset: str, name: str, taken: set[str] | None = None) -> str:
+    """NavArena scene id: first 8 hex chars of sha256("{dataset}:{name}"), 12 on collision."""
+    h = hashlib.sha256(f"{dataset}:{name}".encode()).hexdigest()
+    return h[:12] if taken and h[:8] in taken else h[:8]
+
+
+@dataclass(frozen=True)
+class SceneEntry:
+    scene_id: str
+    name: str
+    group: str
+    path: str  # source file / folder ("" for synthetic until generated)
+    format: str  # inria_ply, supersplat_ply, ply, splat, spz, npy_folder, synthetic
+    seed: int | None = None
+    num_gaussians: int | None = None
+
+    @property
+    def synthetic(self) -> bool:
+        return self.format == "synthetic"
+
+
+class Catalog:
+    """Scenes of one catalog file plus the data layout rooted at ``root``."""
+
+    def __init__(self, catalog_file: str | Path, root: str | Path, synthetic_count: int | None = None,
+                 synthetic_num_gaussians: int | None = None):
+        self.file = Path(catalog_file)
+        if not self.file.exists():
+            raise FileNotFoundError(f"catalog {self.file} does not exist (scenes.catalog=...)")
+        spec = yaml.safe_load(self.file.read_text()) or {}
+        self.root = Path(root).resolve()
+        self.layout = dict(yaml.safe_load(LAYOUT_FILE.read_text()))
+        self.layout.update(spec.get("layout") or {})
+        self.scenes: list[SceneEntry] = []
+        taken: set[str] = set()
+        for e in spec.get("scenes") or []:
+            for key in ("name", "path", "format"):
+                if key not in e:
+                    raise ValueError(f"catalog {self.file}: scene entry {e} lacks '{key}'")
+            group = e.get("group", "default")
+            sid = e.get("id") or scene_id_for(group, e["name"], taken)
+            path = Path(e["path"])
+            if not path.is_absolute():
+                path = (self.file.parent.parent / path).resolve()  # relative to the project root
+            self.scenes.append(SceneEntry(sid, e["name"], group, str(path), e["format"]))
+            taken.add(sid)
+        syn = spec.get("synthetic")
+        if syn:
+            syn = dict(syn)
+            if synthetic_count is not None:
+                syn["count"] = synthetic_count
+            if synthetic_num_gaussians is not None:
+                syn["num_gaussians"] = synthetic_num_gaussians
+            for k in range(int(syn.get("count", 0))):
+                seed = int(syn.get("first_seed", 0)) + k
+                name = f"{syn.get('prefix', 'synth')}_{seed:04d}"
+                group = syn.get("group", "synthetic")
+                sid = scene_id_for(group, name, taken)
+                taken.add(sid)
+                self.scenes.append(SceneEntry(sid, name, group, "", "synthetic", seed,
+                                              syn.get("num_gaussians")))
+
+    def path(self, dataset: str, scene: SceneEntry | None = None, **extra) -> Path:
+        """Resolve a logical dataset name to a path."""
+        if dataset not in self.layout:
+            raise KeyError(f"dataset {dataset!r} is not in the layout ({', '.join(self.layout)})")
+        fields = {"root": str(self.root), **extra}
+        if scene is not None:
+            fields.update(scene_id=scene.scene_id, group=scene.group, name=scene.name)
+        return Path(self.layout[dataset].format(**fields))
+
+    def select(self, shard: int = 0, num_shards: int = 1, ids: list[str] | None = None,
+               limit: int | None = None) -> list[SceneEntry]:
+        """Shard k of n: a disjoint, deterministic slice (by scene id order), optionally filtered."""
+        if not 0 <= shard < num_shards:
+            raise ValueError(f"shard {shard} is outside 0..{num_shards - 1}")
+        scenes = sorted(self.scenes, key=lambda s: s.scene_id)
+        if ids:
+            scenes = [s for s in scenes if s.scene_id in ids or s.name in ids]
+        scenes = scenes[shard::num_shards]
+        return scenes[:limit] if limit else scenes

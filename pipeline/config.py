@@ -1,0 +1,111 @@
+"""Structured config of the whole pipeline: one dataclass per stage (defaults live there, not in
+YAML), registered in Hydra's ConfigStore as the schema that conf/config.yaml extends."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from hydra.core.config_store import ConfigStore
+from omegaconf import OmegaConf
+
+from stages.align.floor import AlignConfig
+from stages.costmap.build import CostmapConfig, Embodiment
+from stages.gaussians.validate import ValidationLimits
+from stages.synthetic.generate import SyntheticConfig
+from stages.voxelize.field import VoxelizeConfig
+
+CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
+
+
+@dataclass
+class ScenesConfig:
+    """Which scenes this run covers."""
+
+    catalog: str = "catalogs/synthetic.yaml"
+    """Catalog file, relative to the project root or absolute."""
+    shard: int = 0
+    """This run's shard index k (0-based)."""
+    num_shards: int = 1
+    """Number of shards n; shard k takes every n-th scene in scene-id order."""
+    ids: list[str] | None = None
+    """Only these scene ids or names (null = all)."""
+    limit: int | None = None
+    """At most this many scenes of the shard (null = all)."""
+    count: int | None = None
+    """Override the number of generated scenes of a synthetic catalog (null = the catalog's)."""
+    num_gaussians: int | None = None
+    """Override the Gaussians per generated synthetic scene (null = the catalog's)."""
+
+
+@dataclass
+class ExecutorConfig:
+    """Where the tasks run."""
+
+    kind: str = "local"
+    """'local' (a distributed LocalCluster), 'address' (connect to executor.address) or 'sync'
+    (in this process, one task after another: debugging and tests)."""
+    n_workers: int = 2
+    """LocalCluster worker processes."""
+    threads_per_worker: int = 1
+    """Threads per worker (the numba kernels use their own threads)."""
+    processes: bool = True
+    """Workers are processes (true) or threads (false)."""
+    memory_limit: str = "auto"
+    """Per-worker memory limit of the LocalCluster."""
+    address: str | None = None
+    """tcp://host:port of an existing scheduler; setting it implies kind=address."""
+    dashboard: bool = True
+    """Start the Dask dashboard of a LocalCluster."""
+
+
+@dataclass
+class IngestConfig:
+    """Scene ingest."""
+
+    limits: ValidationLimits = field(default_factory=ValidationLimits)
+
+
+@dataclass
+class AssetConfig:
+    """NavArena V1 asset export."""
+
+    write_compressed_splat: bool = True
+    """Also write compressed.splat (32 bytes a Gaussian)."""
+    write_source_ply: bool = True
+    """Write source.ply (INRIA layout of the ingested scene)."""
+
+
+@dataclass
+class NavArenaConfig:
+    stages: list[str] = field(default_factory=lambda: ["synthesize", "ingest", "voxelize", "align", "costmap", "asset"])
+    """Stages to run (their missing or stale upstream stages run too)."""
+    force: bool = False
+    """Recompute the selected stages even when their markers are current."""
+    data_root: str = "data"
+    """Root of the data layout."""
+    strict: bool = False
+    """Exit with status 1 when any (stage, scene) failed (the run still completes the others)."""
+    synthetic: SyntheticConfig = field(default_factory=SyntheticConfig)
+    ingest: IngestConfig = field(default_factory=IngestConfig)
+    voxelize: VoxelizeConfig = field(default_factory=VoxelizeConfig)
+    align: AlignConfig = field(default_factory=AlignConfig)
+    costmap: CostmapConfig = field(default_factory=CostmapConfig)
+    asset: AssetConfig = field(default_factory=AssetConfig)
+    embodiment: Embodiment = field(default_factory=Embodiment)
+    scenes: ScenesConfig = field(default_factory=ScenesConfig)
+    executor: ExecutorConfig = field(default_factory=ExecutorConfig)
+
+
+def register_configs() -> None:
+    cs = ConfigStore.instance()
+    cs.store(name="navarena_schema", node=NavArenaConfig)
+
+
+def load_embodiment(name: str) -> Embodiment:
+    """An embodiment from conf/embodiment/{name}.yaml (for costmap.embodiments)."""
+    path = CONF_DIR / "embodiment" / f"{name}.yaml"
+    if not path.exists():
+        known = sorted(p.stem for p in (CONF_DIR / "embodiment").glob("*.yaml"))
+        raise ValueError(f"unknown embodiment {name!r}; known: {', '.join(known)}")
+    node = OmegaConf.merge(OmegaConf.structured(Embodiment), OmegaConf.load(path))
+    return OmegaConf.to_object(node)

@@ -1,0 +1,175 @@
+"""Run the stage graph over scenes as Dask tasks, one task per (stage, scene).
+
+Dependencies are per scene only: scene B's costmap never waits for scene A's voxels. A task
+never raises: failures come back as results, so one bad scene cannot stop the run, and its
+downstream stages are skipped with the reason.
+"""
+from __future__ import annotations
+
+import datetime as dt
+import json
+import os
+import time
+import traceback
+from pathlib import Path
+
+from omegaconf import OmegaConf
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from pipeline.atomic import write_text_atomic
+from pipeline.catalog import Catalog, SceneEntry
+from pipeline.graph import BY_NAME, closure, config_hashes
+from pipeline.markers import is_done, write_marker
+
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+FAILED = ("failed", "skipped")
+
+
+def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_hash: str, force: bool,
+             *upstream: dict) -> dict:
+    """Run one (stage, scene) unless it is current; never raises."""
+    base = {"stage": stage_name, "scene_id": scene.scene_id, "scene": scene.name}
+    for up in upstream:
+        if up["status"] in FAILED:
+            return {**base, "status": "skipped", "error": f"upstream {up['stage']} {up['status']}"}
+    stage = BY_NAME[stage_name]
+    if stage.only_synthetic and not scene.synthetic:
+        return {**base, "status": "n/a"}
+    marker = catalog.path("markers", scene, stage=stage_name)
+    if not force and is_done(marker, config_hash):
+        return {**base, "status": "cached"}
+    marker.unlink(missing_ok=True)  # outputs are about to change: the old marker must not vouch for them
+    t0 = time.perf_counter()
+    try:
+        info = stage.function()(scene, cfg, catalog) or {}
+    except Exception as e:  # noqa: BLE001 - recorded, the run goes on
+        return {**base, "status": "failed", "error": f"{type(e).__name__}: {e}",
+                "traceback": traceback.format_exc(limit=6), "duration_s": round(time.perf_counter() - t0, 3)}
+    duration = round(time.perf_counter() - t0, 3)
+    write_marker(marker, {"stage": stage_name, "scene_id": scene.scene_id, "config_hash": config_hash,
+                          "duration_s": duration, "info": info})
+    return {**base, "status": "done", "duration_s": duration}
+
+
+def _client(ex, console: Console):
+    from dask.distributed import Client, LocalCluster
+
+    if ex.kind == "address" or ex.address:
+        if not ex.address:
+            raise ValueError("executor.kind=address needs executor.address=tcp://host:port")
+        return Client(ex.address), None
+    # numba threads per worker: share the cores instead of oversubscribing them
+    os.environ.setdefault("NUMBA_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // max(ex.n_workers, 1))))
+    cluster = LocalCluster(n_workers=ex.n_workers, threads_per_worker=ex.threads_per_worker,
+                           processes=ex.processes, memory_limit=ex.memory_limit,
+                           dashboard_address=":0" if ex.dashboard else None, silence_logs=40)
+    return Client(cluster), cluster
+
+
+def execute(cfg, console: Console | None = None) -> dict:
+    """Run the configured stages over the configured scenes; returns (and writes) the run summary."""
+    console = console or Console()
+    root = Path(cfg.data_root)
+    if not root.is_absolute():
+        root = Path.cwd() / root
+    cat_file = Path(cfg.scenes.catalog)
+    if not cat_file.is_absolute():
+        cat_file = (Path.cwd() / cat_file) if (Path.cwd() / cat_file).exists() else PROJECT_ROOT / cat_file
+    catalog = Catalog(cat_file, root, cfg.scenes.count, cfg.scenes.num_gaussians)
+    scenes = catalog.select(cfg.scenes.shard, cfg.scenes.num_shards, cfg.scenes.ids, cfg.scenes.limit)
+    stages = closure(list(cfg.stages))
+    hashes = config_hashes(cfg)
+    selected = set(cfg.stages)
+    started = dt.datetime.now(dt.timezone.utc)
+    console.print(f"[bold]navarena[/]: {len(scenes)} scene(s) from {cat_file.name} "
+                  f"(shard {cfg.scenes.shard}/{cfg.scenes.num_shards}), stages {[s.name for s in stages]}, "
+                  f"data in {root}")
+    results: list[dict] = []
+    n_tasks = len(scenes) * len(stages)
+    progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                        console=console, transient=False)
+    if cfg.executor.kind == "sync" and not cfg.executor.address:
+        with progress:
+            bar = progress.add_task("tasks", total=n_tasks)
+            for scene in scenes:
+                prev: dict[str, dict] = {}
+                for st in stages:
+                    r = run_task(st.name, scene, cfg, catalog, hashes[st.name], cfg.force and st.name in selected,
+                                 *[prev[n] for n in st.needs if n in prev])
+                    prev[st.name] = r
+                    results.append(r)
+                    progress.advance(bar)
+    else:
+        from dask.distributed import as_completed
+
+        client, cluster = _client(cfg.executor, console)
+        try:
+            if client.dashboard_link:
+                console.print(f"Dask dashboard: {client.dashboard_link}")
+            futures = []
+            for scene in scenes:
+                prev = {}
+                for st in stages:
+                    fut = client.submit(run_task, st.name, scene, cfg, catalog, hashes[st.name],
+                                        cfg.force and st.name in selected, *[prev[n] for n in st.needs if n in prev],
+                                        key=f"{st.name}-{scene.scene_id}-{hashes[st.name]}-{os.getpid()}-{time.time_ns()}",
+                                        pure=False)
+                    prev[st.name] = fut
+                    futures.append(fut)
+            with progress:
+                bar = progress.add_task("tasks", total=n_tasks)
+                for fut in as_completed(futures):
+                    r = fut.result()
+                    results.append(r)
+                    if r["status"] == "failed":
+                        progress.console.print(f"[red]failed[/] {r['stage']} {r['scene_id']}: {r['error']}")
+                    progress.advance(bar)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    order = {s.name: i for i, s in enumerate(stages)}
+    results.sort(key=lambda r: (r["scene_id"], order[r["stage"]]))
+    summary = {"started_at": started.isoformat(timespec="seconds"),
+               "finished_at": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+               "catalog": str(cat_file), "shard": [cfg.scenes.shard, cfg.scenes.num_shards],
+               "stages": [s.name for s in stages], "config_hashes": {s.name: hashes[s.name] for s in stages},
+               "counts": {}, "failures": [r for r in results if r["status"] in FAILED], "results": results}
+    for r in results:
+        c = summary["counts"].setdefault(r["stage"], {})
+        c[r["status"]] = c.get(r["status"], 0) + 1
+    runs = catalog.path("runs")
+    stamp = started.strftime("%Y%m%dT%H%M%S")
+    text = json.dumps(summary, indent=1, default=str)
+    write_text_atomic(runs / f"run-{stamp}-shard{cfg.scenes.shard}.json", text)
+    write_text_atomic(runs / "latest.json", text)
+    _print_summary(summary, console)
+    console.print(f"run summary: {runs / 'latest.json'}")
+    return summary
+
+
+def _print_summary(summary: dict, console: Console) -> None:
+    t = Table(title="run summary")
+    statuses = ["done", "cached", "n/a", "failed", "skipped"]
+    t.add_column("stage")
+    for s in statuses:
+        t.add_column(s, justify="right")
+    for stage, c in summary["counts"].items():
+        t.add_row(stage, *[str(c.get(s, 0)) for s in statuses])
+    console.print(t)
+    if summary["failures"]:
+        f = Table(title="failures", show_lines=False)
+        for col in ("scene", "stage", "status", "error"):
+            f.add_column(col, overflow="fold")
+        for r in summary["failures"]:
+            f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], r["status"], r.get("error", ""))
+        console.print(f)
+
+
+def main_cfg(cfg) -> int:
+    summary = execute(cfg)
+    return 1 if (cfg.strict and summary["failures"]) else 0
+
+

@@ -1,0 +1,77 @@
+"""The stage graph: what each stage needs and which config sections decide its output."""
+from __future__ import annotations
+
+import hashlib
+import importlib
+import json
+from dataclasses import dataclass
+from typing import Callable
+
+from omegaconf import OmegaConf
+
+
+@dataclass(frozen=True)
+class Stage:
+    """A pipeline stage keyed by scene.
+
+    Attributes:
+        name: stage name (config key `stages`, marker folder).
+        target: "module:function" of its run(scene, cfg, catalog) -> dict.
+        needs: upstream stages (per scene).
+        config: config sections that determine its output (their change recomputes it).
+        version: bump when the stage's code changes its output.
+        only_synthetic: the stage applies to synthetic scenes only (others pass through).
+    """
+
+    name: str
+    target: str
+    needs: tuple[str, ...] = ()
+    config: tuple[str, ...] = ()
+    version: str = "1"
+    only_synthetic: bool = False
+
+    def function(self) -> Callable:
+        mod, fn = self.target.split(":")
+        return getattr(importlib.import_module(mod), fn)
+
+
+STAGES: tuple[Stage, ...] = (
+    Stage("synthesize", "stages.synthetic.stage:run", (), ("synthetic",), only_synthetic=True),
+    Stage("ingest", "stages.ingest:run", ("synthesize",), ("ingest",)),
+    Stage("voxelize", "stages.voxelize.stage:run", ("ingest",), ("voxelize",)),
+    Stage("align", "stages.align.stage:run", ("voxelize",), ("align",)),
+    Stage("costmap", "stages.costmap.stage:run", ("align",), ("costmap", "voxelize", "embodiment")),
+    Stage("asset", "stages.asset:run", ("costmap",), ("asset",)),
+)
+BY_NAME = {s.name: s for s in STAGES}
+
+
+def closure(selected: list[str]) -> list[Stage]:
+    """Selected stages plus everything upstream of them, in graph order."""
+    unknown = [s for s in selected if s not in BY_NAME]
+    if unknown:
+        raise ValueError(f"unknown stage(s) {unknown}; stages are {[s.name for s in STAGES]}")
+    need: set[str] = set()
+    todo = list(selected)
+    while todo:
+        n = todo.pop()
+        if n not in need:
+            need.add(n)
+            todo.extend(BY_NAME[n].needs)
+    return [s for s in STAGES if s.name in need]
+
+
+def config_hashes(cfg) -> dict[str, str]:
+    """Hash per stage of its config sections, its version and its upstream hashes: a changed
+    config recomputes that stage and everything downstream of it."""
+    out: dict[str, str] = {}
+    for s in STAGES:
+        part = {k: OmegaConf.to_container(cfg[k], resolve=True) for k in s.config}
+        if s.name == "costmap":  # extra embodiments are part of the costmap's inputs
+            from stages.costmap.stage import embodiments
+
+            part["_embodiments"] = [vars(e) for e in embodiments(cfg)]
+        blob = json.dumps({"stage": s.name, "version": s.version, "config": part,
+                           "needs": [out[n] for n in s.needs]}, sort_keys=True, default=str)
+        out[s.name] = hashlib.sha256(blob.encode()).hexdigest()[:16]
+    return out

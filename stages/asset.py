@@ -1,0 +1,113 @@
+"""Stage `asset`: the NavArena V1 scene asset directory (NAVARENA_FORMATS.md section 1) of the
+main embodiment: manifest.json, source.ply, aligned.ply, nav_map.pgm + nav_map.yaml (ROS
+map_server), nav_mask.png, labels.json (synthetic ground truth, aligned frame),
+compressed.splat and costmap_topdown.png."""
+from __future__ import annotations
+
+import datetime as dt
+import json
+from pathlib import Path
+
+import numpy as np
+import zarr
+from PIL import Image
+
+from pipeline.atomic import atomic_path
+from stages.gaussians.formats import write_inria_ply, write_splat
+from stages.gaussians.store import read_scene_zarr
+
+NORMALIZER_VERSION = "navarena-0.1"
+
+
+def write_pgm(path: Path, occ: np.ndarray) -> None:
+    """ROS map_server PGM (P5): 0 occupied, 255 free; rows flipped so the first row is max y."""
+    img = np.where(occ, 0, 255).astype(np.uint8)[::-1]
+    h, w = img.shape
+    path.write_bytes(f"P5\n{w} {h}\n255\n".encode() + img.tobytes())
+
+
+def read_pgm(path: Path) -> np.ndarray:
+    """Inverse of write_pgm: [ny, nx] bool occupancy, row = y ascending."""
+    data = Path(path).read_bytes()
+    parts = data.split(maxsplit=4)
+    w, h = int(parts[1]), int(parts[2])
+    img = np.frombuffer(parts[4][: w * h], dtype=np.uint8).reshape(h, w)
+    return (img[::-1] < 128)
+
+
+def topdown_image(raw, support, occ) -> np.ndarray:
+    """RGB picture of a costmap (north up): free white, obstacles black, inflation grey,
+    unsupported pink."""
+    img = np.full(occ.shape + (3,), 255, np.uint8)
+    img[occ & support] = (160, 160, 160)
+    img[raw] = (0, 0, 0)
+    img[~support] = (235, 190, 190)
+    return img[::-1]
+
+
+def run(scene, cfg, catalog) -> dict:
+    out = catalog.path("asset", scene)
+    src, _ = read_scene_zarr(catalog.path("scene", scene))
+    aligned, aattrs = read_scene_zarr(catalog.path("aligned", scene))
+    t = np.asarray(aattrs["source_to_aligned"])
+    emb = cfg.embodiment.name
+    g = zarr.open_group(str(catalog.path("costmaps", scene)), mode="r")[emb]
+    occ, sup, raw = (np.asarray(g[k][...]) for k in ("occ", "support", "raw"))
+    res, origin = float(g.attrs["resolution"]), list(g.attrs["origin"])
+    steps = []
+    for stage in ("ingest", "voxelize", "align", "costmap"):
+        mpath = catalog.path("markers", scene, stage=stage)
+        if mpath.exists():
+            m = json.loads(mpath.read_text())
+            steps.append({"name": stage, "status": "done", "duration_s": m.get("duration_s")})
+    labels_file = None
+    with atomic_path(out) as tmp:
+        tmp.mkdir(parents=True)
+        files = {"source_ply": None, "aligned_ply": "aligned.ply", "nav_map": "nav_map.pgm",
+                 "nav_map_config": "nav_map.yaml", "nav_mask": "nav_mask.png", "labels": None, "structure": None,
+                 "compressed_ply": None}
+        if cfg.asset.write_source_ply:
+            write_inria_ply(tmp / "source.ply", src)
+            files["source_ply"] = "source.ply"
+        write_inria_ply(tmp / "aligned.ply", aligned)
+        write_pgm(tmp / "nav_map.pgm", occ)
+        (tmp / "nav_map.yaml").write_text(
+            "image: nav_map.pgm\n" f"resolution: {res}\n" f"origin: [{origin[0]}, {origin[1]}, 0.0]\n"
+            "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n")
+        Image.fromarray(np.where(sup, 255, 0).astype(np.uint8)[::-1]).save(tmp / "nav_mask.png")
+        Image.fromarray(topdown_image(raw, sup, occ)).save(tmp / "costmap_topdown.png")
+        if cfg.asset.write_compressed_splat:
+            write_splat(tmp / "compressed.splat", aligned)
+            files["compressed_ply"] = "compressed.splat"
+        if scene.synthetic:
+            gt = catalog.path("source_synthetic", scene) / "ground_truth"
+            tf = np.asarray(json.loads((gt / "transform.json").read_text())["canonical_to_source"])
+            to_aligned = t @ tf
+            labels = json.loads((gt / "labels.json").read_text())["labels"]
+            for lab in labels:
+                lab["position"] = (to_aligned[:3, :3] @ np.asarray(lab["position"]) + to_aligned[:3, 3]).tolist()
+                box = lab.get("bounding_box")
+                if box:  # axis-aligned box of the transformed corners
+                    c = np.array(np.meshgrid(*zip(box["min"], box["max"]), indexing="ij")).reshape(3, -1).T
+                    c = c @ to_aligned[:3, :3].T + to_aligned[:3, 3]
+                    lab["bounding_box"] = {"min": c.min(0).tolist(), "max": c.max(0).tolist()}
+            (tmp / "labels.json").write_text(json.dumps({"schema_version": "1.0", "labels": labels}, indent=1))
+            files["labels"] = labels_file = "labels.json"
+        now = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+        manifest = {
+            "schema_version": "1.0", "scene_id": scene.scene_id,
+            "source": {"dataset": scene.group, "subset": None, "original_id": scene.name,
+                       "original_name": scene.name, "url": None, "license": None},
+            "files": files,
+            "map_info": {"resolution": res, "origin": [origin[0], origin[1], 0.0],
+                         "size": [int(occ.shape[1]), int(occ.shape[0])]},
+            "nav_region": {"area_m2": float((~occ).sum() * res * res), "method": "opacity_field_costmap",
+                           "params": {"embodiment": emb, "radius": float(g.attrs["radius"]),
+                                      "h_min": float(g.attrs["h_min"]), "h_max": float(g.attrs["h_max"]),
+                                      "tau_occ": float(cfg.voxelize.tau_occ)}},
+            "processing": {"normalizer_version": NORMALIZER_VERSION, "processed_at": now, "normalized": True,
+                           "extrinsic_matrix": t.tolist(), "steps": steps},
+            "tags": [scene.group], "created_at": now, "updated_at": now,
+        }
+        (tmp / "manifest.json").write_text(json.dumps(manifest, indent=1))
+    return {"outputs": [str(out)], "labels": labels_file is not None}

@@ -1,0 +1,48 @@
+"""Stage `costmap`: per embodiment, the costmap layers of the aligned scene -> 03_costmaps Zarr
+(one group per embodiment: raw, support, occ, clearance; plus the aligned support voxels)."""
+from __future__ import annotations
+
+import numpy as np
+import zarr
+from omegaconf import OmegaConf
+
+from pipeline.atomic import atomic_path
+from stages.costmap.build import CostmapConfig, build_costmap, map_extent, support_mask
+from stages.gaussians.store import read_scene_zarr
+
+
+def embodiments(cfg) -> list:
+    """The main embodiment, then costmap.embodiments (loaded from conf/embodiment)."""
+    from pipeline.config import load_embodiment
+
+    main = OmegaConf.to_object(cfg.embodiment)
+    extra = [load_embodiment(n) for n in cfg.costmap.embodiments if n != main.name]
+    return [main] + extra
+
+
+def run(scene, cfg, catalog) -> dict:
+    ccfg: CostmapConfig = OmegaConf.to_object(cfg.costmap)
+    vcfg = OmegaConf.to_object(cfg.voxelize)
+    gs, _ = read_scene_zarr(catalog.path("aligned", scene))
+    extent = map_extent(gs, ccfg)
+    support = support_mask(gs, *extent, ccfg, vcfg)
+    out = catalog.path("costmaps", scene)
+    result = {"outputs": [str(out)], "embodiments": {}}
+    with atomic_path(out) as tmp:
+        root = zarr.open_group(str(tmp), mode="w")
+        for emb in embodiments(cfg):
+            layers, info = build_costmap(gs, emb, ccfg, vcfg, support=support, extent=extent)
+            g = root.create_group(emb.name)
+            for name in ("raw", "support", "occ", "clearance"):
+                arr = getattr(layers, name)
+                g.create_array(name, data=arr, chunks=arr.shape)
+            g.attrs.update({"origin": list(layers.origin), "resolution": layers.resolution, "radius": emb.radius,
+                            "margin": layers.margin, "h_min": emb.h_min, "h_max": emb.h_max,
+                            "layout": "[ny, nx], row = y; cell (i, j) centre = origin + ((j+.5) res, (i+.5) res)",
+                            "info": info})
+            result["embodiments"][emb.name] = {"free_area_m2": round(info["free_area_m2"], 2),
+                                               "free_components": info["free_components"]}
+        root.attrs["main_embodiment"] = cfg.embodiment.name
+        if not np.asarray(support[0]).any():
+            raise ValueError("the supported region is empty: no occupied structure found near the floor")
+    return result

@@ -1,0 +1,38 @@
+"""Stage `ingest`: read a source scene in any supported format, validate it, store it canonically
+(Zarr) with a report of what was dropped and why."""
+from __future__ import annotations
+
+import json
+
+from omegaconf import OmegaConf
+
+from pipeline.atomic import atomic_path, write_text_atomic
+from stages.gaussians.errors import SceneFormatError
+from stages.gaussians.formats import read_gaussians
+from stages.gaussians.store import write_scene_zarr
+from stages.gaussians.validate import sanitize
+from stages.synthetic.generate import SOURCE_FILE
+
+
+def source_path(scene, catalog):
+    """Where a scene's source file is (synthetic scenes: the synthesize stage's output)."""
+    if scene.synthetic:
+        return catalog.path("source_synthetic", scene) / SOURCE_FILE, "inria_ply"
+    return scene.path, scene.format
+
+
+def run(scene, cfg, catalog) -> dict:
+    path, fmt = source_path(scene, catalog)
+    try:
+        raw = read_gaussians(path, fmt)
+    except SceneFormatError as e:
+        raise SceneFormatError(e.path, e.problem, scene.scene_id) from None
+    limits = OmegaConf.to_object(cfg.ingest).limits
+    clean, report = sanitize(raw, path, scene.scene_id, limits)
+    out = catalog.path("scene", scene)
+    with atomic_path(out) as tmp:
+        write_scene_zarr(tmp, clean, {"scene_id": scene.scene_id, "source": str(path), "format": fmt})
+    rep = {"scene_id": scene.scene_id, "name": scene.name, "group": scene.group, "source": str(path),
+           "format": fmt, "validation": report.as_dict()}
+    write_text_atomic(catalog.path("ingest_report", scene), json.dumps(rep, indent=1))
+    return {"outputs": [str(out)], "validation": report.summary(), **report.as_dict()}
