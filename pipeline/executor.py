@@ -54,8 +54,16 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
 
 
 def _client(ex, console: Console):
+    import dask
     from dask.distributed import Client, LocalCluster
 
+    import logging
+
+    for name in list(logging.root.manager.loggerDict):
+        if name.startswith(("distributed", "bokeh", "tornado")):
+            logging.getLogger(name).setLevel(logging.WARNING)
+    # a task that kills its worker (out of memory) is a failure of that scene, not worth 3 retries
+    dask.config.set({"distributed.scheduler.allowed-failures": 1})
     if ex.kind == "address" or ex.address:
         if not ex.address:
             raise ValueError("executor.kind=address needs executor.address=tcp://host:port")
@@ -109,6 +117,7 @@ def execute(cfg, console: Console | None = None) -> dict:
             if client.dashboard_link:
                 console.print(f"Dask dashboard: {client.dashboard_link}")
             futures = []
+            what = {}
             for scene in scenes:
                 prev = {}
                 for st in stages:
@@ -118,10 +127,16 @@ def execute(cfg, console: Console | None = None) -> dict:
                                         pure=False)
                     prev[st.name] = fut
                     futures.append(fut)
+                    what[fut.key] = (st.name, scene)
             with progress:
                 bar = progress.add_task("tasks", total=n_tasks)
                 for fut in as_completed(futures):
-                    r = fut.result()
+                    try:
+                        r = fut.result()
+                    except Exception as e:  # noqa: BLE001 - a killed worker, a lost dependency
+                        st_name, sc = what[fut.key]
+                        r = {"stage": st_name, "scene_id": sc.scene_id, "scene": sc.name, "status": "failed",
+                             "error": f"{type(e).__name__}: {e}"}
                     results.append(r)
                     if r["status"] == "failed":
                         progress.console.print(f"[red]failed[/] {r['stage']} {r['scene_id']}: {r['error']}")

@@ -78,6 +78,9 @@ class CostmapConfig:
     """Clusters smaller than this share of the largest are dropped from the support."""
     alpha_radius: float = 0.3
     """Alpha-shape radius: Delaunay triangles with a larger circumradius are not supported, metres."""
+    support_resolution: float = 0.05
+    """Voxel size of the full-height field used for DBSCAN and the alpha shape, metres (the
+    support needs no finer detail, and DBSCAN cost grows fast with resolution)."""
     support_z_min: float = -0.3
     """Occupied voxels below this height are ignored for the support, metres."""
     support_z_max: float = 3.0
@@ -146,9 +149,11 @@ def support_mask(scene: GaussianScene, origin, shape, cfg: CostmapConfig, vcfg: 
     """M_sup [ny, nx] from DBSCAN + alpha shape of the aligned occupied voxels."""
     from sklearn.cluster import DBSCAN
 
-    res = cfg.resolution
+    res = cfg.support_resolution
     nz = max(1, int(np.ceil((cfg.support_z_max - cfg.support_z_min) / res)))
-    grid = VoxelGrid((origin[0], origin[1], cfg.support_z_min), (res, res, res), (shape[1], shape[0], nz))
+    extent_xy = (shape[1] * cfg.resolution, shape[0] * cfg.resolution)
+    nxy = (int(np.ceil(extent_xy[0] / res)), int(np.ceil(extent_xy[1] / res)))
+    grid = VoxelGrid((origin[0], origin[1], cfg.support_z_min), (res, res, res), (nxy[0], nxy[1], nz))
     occ = opacity_field(scene, grid, vcfg) >= vcfg.tau_occ
     idx = np.argwhere(occ)  # (ix, iy, iz), lexicographic: deterministic
     info = {"occupied_voxels": int(len(idx))}
@@ -163,8 +168,9 @@ def support_mask(scene: GaussianScene, origin, shape, cfg: CostmapConfig, vcfg: 
     kept = idx[np.isin(labels, keep_lab)]
     info.update(clusters=int(len(counts)), kept_clusters=int(len(keep_lab)), dropped_voxels=int(len(idx) - len(kept)))
     cells = np.unique(kept[:, :2], axis=0)  # (ix, iy) ground projection
-    pts = (cells + 0.5) * res
-    sup[cells[:, 1], cells[:, 0]] = True
+    pts = (cells + 0.5) * res  # metres from the map origin
+    mc = np.minimum((pts / cfg.resolution).astype(np.int64), [shape[1] - 1, shape[0] - 1])
+    sup[mc[:, 1], mc[:, 0]] = True
     if len(cells) >= 3:
         tri = Delaunay(pts)
         p = pts[tri.simplices]  # [T, 3, 2]
@@ -176,7 +182,7 @@ def support_mask(scene: GaussianScene, origin, shape, cfg: CostmapConfig, vcfg: 
         with np.errstate(divide="ignore", invalid="ignore"):
             circ = a * b * c / (2.0 * cross)
         keep = np.isfinite(circ) & (circ <= cfg.alpha_radius)
-        _rasterize_triangles(p[keep] / res - 0.5, sup)
+        _rasterize_triangles(p[keep] / cfg.resolution - 0.5, sup)
         info["alpha_triangles"] = int(keep.sum())
     return sup, info
 
