@@ -61,7 +61,7 @@ class CostmapConfig:
 
     resolution: float = 0.05
     """Stored map cell size, metres."""
-    raw_resolution: float = 0.01
+    raw_resolution: float = 0.005
     """Target xy cell size of the body-band voxelization that locates obstacle boundaries, metres
     (rounded so that an odd number of fine cells spans one map cell)."""
     z_resolution: float = 0.05

@@ -6,11 +6,19 @@ in the supported region; the heading does not matter for a disk.
 """
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import numpy as np
 
 from stages.costmap import kernels as K
+
+
+def _entry(dispatcher, *example_args):
+    """Compiled entry point of a numba function for the types of example_args."""
+    dispatcher(*example_args)  # compile (or load from cache) this signature
+    types = tuple(dispatcher.typeof_pyval(a) for a in example_args)
+    return dispatcher.overloads[types].entry_point
 
 
 class Costmap:
@@ -32,6 +40,11 @@ class Costmap:
         self._args = (self.clearance, self.origin[0], self.origin[1], 1.0 / self.resolution,
                       self.radius + self.margin)
         self._f, self._ox, self._oy, self._inv, self._thr = self._args
+        # Single-call fast paths: bind the compiled entry points directly. Numba's dispatcher
+        # resolves argument types on every call (~0.2 us); the entry point of the one signature
+        # we use skips that, halving the cost of a planner's validity callback.
+        self.is_state_valid = functools.partial(_entry(K.state_valid, *self._args, 0.0, 0.0), *self._args)
+        self.is_motion_valid = functools.partial(_entry(K.motion_valid, *self._args, 0.0, 0.0, 0.0, 0.0), *self._args)
 
     @classmethod
     def from_layers(cls, layers) -> "Costmap":
@@ -51,7 +64,7 @@ class Costmap:
         """[ny, nx] bool M_occ (cell centres that are not valid states)."""
         return self.clearance < self.radius + self.margin
 
-    def is_state_valid(self, x: float, y: float) -> bool:
+    def is_state_valid(self, x: float, y: float) -> bool:  # replaced per instance by the fast path
         """Single pose (metres); yaw is irrelevant for a disk footprint."""
         return K.state_valid(self._f, self._ox, self._oy, self._inv, self._thr, x, y)
 
@@ -60,7 +73,7 @@ class Costmap:
         xy = np.ascontiguousarray(np.asarray(xy, dtype=np.float64)[:, :2])
         return K.states_valid(self._f, self._ox, self._oy, self._inv, self._thr, xy)
 
-    def is_motion_valid(self, x0: float, y0: float, x1: float, y1: float) -> bool:
+    def is_motion_valid(self, x0: float, y0: float, x1: float, y1: float) -> bool:  # fast path per instance
         """Straight segment between two positions: every point of it is a valid state."""
         return K.motion_valid(self._f, self._ox, self._oy, self._inv, self._thr, x0, y0, x1, y1)
 

@@ -1,0 +1,51 @@
+# NavArena. Two commands on a fresh machine:
+#   make dataset   # installs what it needs, then runs the pipeline on the built-in scene set
+#   make test      # installs what it needs, then runs the tests
+PY ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+ARGS ?=
+
+.PHONY: setup system-deps dataset test test-all bench bench-spatial bench-spatial-gpu clean
+
+# open3d needs libusb at import time; install it when missing (root or sudo).
+system-deps:
+	@if ! ldconfig -p 2>/dev/null | grep -q libusb-1.0.so.0; then \
+	  echo "installing libusb-1.0-0 (needed by open3d)"; \
+	  if [ "$$(id -u)" = 0 ]; then SUDO=; else SUDO=sudo; fi; \
+	  $$SUDO apt-get install -y -q libusb-1.0-0 >/dev/null 2>&1 || \
+	  ($$SUDO apt-get update -q >/dev/null && $$SUDO apt-get install -y -q libusb-1.0-0 >/dev/null); \
+	fi
+
+$(STAMP): pyproject.toml
+	$(MAKE) system-deps
+	test -x $(BIN)/python || $(PY) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	# the CPU build of torch (an unpinned torch would pull several GB of CUDA packages)
+	$(BIN)/python -m pip install -q "torch==2.13.0" || $(BIN)/python -m pip install -q torch --index-url https://download.pytorch.org/whl/cpu
+	$(BIN)/python -m pip install -q -e ".[test,bench]"
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+dataset: $(STAMP)
+	$(BIN)/python -m pipeline $(ARGS)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q $(ARGS)
+
+test-all: $(STAMP)
+	$(BIN)/python -m pytest -q -m "slow or not slow" $(ARGS)
+
+bench: bench-spatial
+
+bench-spatial: $(STAMP)
+	$(BIN)/python -m benchmarks.spatial $(ARGS)
+
+# on a CUDA machine: writes data/08_reports/voxelize_gpu.json, merged by bench-spatial
+bench-spatial-gpu: $(STAMP)
+	$(BIN)/python -m benchmarks.voxelize_gpu $(ARGS)
+
+clean:
+	rm -rf data/_hydra data/_runs

@@ -1,0 +1,21 @@
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "2")
+REAL_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+PROJECT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="session")
+def small_scene():
+    from stages.synthetic.generate import SyntheticConfig, generate_scene
+
+    return generate_scene(1, SyntheticConfig(num_gaussians=150_000))
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(0)
