@@ -146,3 +146,18 @@ def test_costmap_is_safe_against_fcl_on_a_scene(small_scene):
     ours_valid = cm.are_states_valid(states)
     assert not (ours_valid & hit).any()  # never accept a colliding pose
     assert (~ours_valid & ~hit).sum() / (~hit).sum() < 0.1  # and rarely reject a free one
+
+
+@pytest.mark.gpu
+def test_cuda_voxelizer_matches_numba(small_scene):
+    torch = pytest.importorskip("torch")
+    if not torch.cuda.is_available():
+        pytest.skip("no CUDA device")
+    from stages.voxelize.grid import grid_for_points
+
+    g = small_scene.gaussians
+    grid = grid_for_points(g.means, 0.05, margin=0.1)
+    cpu = opacity_field(g, grid, VoxelizeConfig(), device="cpu")
+    gpu = opacity_field(g, grid, VoxelizeConfig(), device="cuda")
+    assert np.abs(gpu - cpu).max() < 0.02
+    assert ((gpu >= 0.5) != (cpu >= 0.5)).mean() < 1e-3
