@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,14 @@ from stages.gaussians.formats import write_inria_ply, write_splat
 from stages.gaussians.store import read_scene_zarr
 
 NORMALIZER_VERSION = "navarena-0.1"
+
+
+def build_time() -> str:
+    """UTC time stamp for manifests; SOURCE_DATE_EPOCH (reproducible-builds convention) pins it
+    so that reruns give byte-identical assets."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    t = dt.datetime.fromtimestamp(int(epoch), dt.timezone.utc) if epoch else dt.datetime.now(dt.timezone.utc)
+    return t.isoformat(timespec="seconds")
 
 
 def write_pgm(path: Path, occ: np.ndarray) -> None:
@@ -93,7 +102,7 @@ def run(scene, cfg, catalog) -> dict:
                     lab["bounding_box"] = {"min": c.min(0).tolist(), "max": c.max(0).tolist()}
             (tmp / "labels.json").write_text(json.dumps({"schema_version": "1.0", "labels": labels}, indent=1))
             files["labels"] = labels_file = "labels.json"
-        now = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+        now = build_time()
         manifest = {
             "schema_version": "1.0", "scene_id": scene.scene_id,
             "source": {"dataset": scene.group, "subset": None, "original_id": scene.name,

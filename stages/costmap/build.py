@@ -111,10 +111,19 @@ class CostmapLayers:
 
 
 def interpolation_margin(res: float, radius: float) -> float:
-    """Upper bound of the bilinear interpolation error of a Euclidean distance field at distance
-    ~radius: h^2 / 8 * (|f_xx| + |f_yy|) <= h^2 / (4 rho) with rho >= radius - h / sqrt 2."""
+    """Upper bound of the overestimate of bilinear interpolation of a Euclidean distance field
+    at points closer than ``radius`` to an obstacle.
+
+    The error is h^2 / 8 (fu-weighted f_xx(xi1) + fv-weighted f_yy(xi2)) <= h^2 / 8 (f_xx(xi1) +
+    f_yy(xi2)) for two points of the patch. For the distance to the nearest obstacle point,
+    f_xx = sin^2(theta) / rho and f_yy = cos^2(theta) / rho (theta the direction to it), and
+    across a patch at distance >= rho the direction turns by at most sqrt2 h / rho, so the sum
+    is <= (1 + sqrt2 h / rho) / rho. Only convex obstacle corners make the interpolation
+    overestimate; the distance to a set is a minimum of such point distances and inherits the
+    bound. rho >= radius - h / sqrt2 for a patch containing a point at distance < radius.
+    """
     rho = max(radius - res / np.sqrt(2.0), res)
-    return res * res / (4.0 * rho)
+    return res * res * (1.0 + np.sqrt(2.0) * res / rho) / (8.0 * rho)
 
 
 def supersample_factor(res: float, raw_res: float) -> int:

@@ -1,6 +1,6 @@
 """Canonical Gaussian scene: the single in-memory representation every stage uses.
 
-Conventions (see stages/gaussians/design.md):
+Conventions (see design.md beside this file):
 - means in metres, quaternions (w, x, y, z) normalized, log-scales (natural log of the
   standard deviations in metres), opacity logits (alpha = sigmoid(logit)).
 - sh [N, K, 3] spherical-harmonic coefficients, K = (degree + 1)^2, sh[:, 0] is the DC term
