@@ -94,3 +94,20 @@ def test_shards_are_disjoint_and_cover(tmp_path):
     shards = [cat.select(k, 3) for k in range(3)]
     ids = [s.scene_id for sh in shards for s in sh]
     assert len(ids) == len(set(ids)) == len(cat.scenes)
+
+
+def test_several_embodiments_and_existing_scheduler(tmp_path):
+    """costmap.embodiments adds maps per scene; executor.address runs on a given scheduler."""
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, processes=False, dashboard_address=None) as cluster:
+        s = execute(make_cfg(tmp_path, "stages=[costmap]", "costmap.embodiments=[stretch,navarena_default]",
+                             "costmap.resolution=0.1", f"executor.address={cluster.scheduler_address}"))
+    assert not s["failures"]
+    sid = s["results"][0]["scene_id"]
+    g = zarr.open_group(str(tmp_path / "03_costmaps" / f"{sid}.zarr"))
+    assert sorted(g.group_keys()) == ["locobot", "navarena_default", "stretch"]
+    free = {k: (~np.asarray(g[k]["occ"][...])).sum() for k in g.group_keys()}
+    # a bigger body has less free space; all maps share one grid
+    assert free["locobot"] > free["stretch"] > free["navarena_default"] > 0
+    assert len({g[k]["occ"].shape for k in g.group_keys()}) == 1

@@ -74,6 +74,17 @@ def clearance_at(f, ox, oy, inv_res, xy):
     return out
 
 
+@numba.njit(cache=True, inline="always")
+def _first_crossing(c0, dc):
+    """Parameter t of the first integer crossing of c0 + t dc, and the t between crossings
+    (2.0, i.e. never within [0, 1], when dc == 0)."""
+    if dc > 0:
+        return (np.floor(c0) + 1.0 - c0) / dc, 1.0 / dc
+    if dc < 0:
+        return (np.ceil(c0) - 1.0 - c0) / dc, -1.0 / dc
+    return 2.0, 2.0
+
+
 @numba.njit(cache=True)
 def _motion(f, u0, v0, u1, v1, thr):
     ny, nx = f.shape
@@ -83,28 +94,8 @@ def _motion(f, u0, v0, u1, v1, thr):
     du = u1 - u0
     dv = v1 - v0
     # walk the breakpoints where u or v crosses an integer (patch borders), in increasing t
-    if du > 0:
-        nu = np.floor(u0) + 1.0
-        tu_step = 1.0 / du
-        tu = (nu - u0) / du
-    elif du < 0:
-        nu = np.ceil(u0) - 1.0
-        tu_step = -1.0 / du
-        tu = (nu - u0) / du
-    else:
-        tu = 2.0
-        tu_step = 2.0
-    if dv > 0:
-        nv = np.floor(v0) + 1.0
-        tv_step = 1.0 / dv
-        tv = (nv - v0) / dv
-    elif dv < 0:
-        nv = np.ceil(v0) - 1.0
-        tv_step = -1.0 / dv
-        tv = (nv - v0) / dv
-    else:
-        tv = 2.0
-        tv_step = 2.0
+    tu, tu_step = _first_crossing(u0, du)
+    tv, tv_step = _first_crossing(v0, dv)
     ta = 0.0
     while ta < 1.0:
         tb = min(tu, tv, 1.0)
