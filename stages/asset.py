@@ -44,10 +44,12 @@ def read_pgm(path: Path) -> np.ndarray:
     return (img[::-1] < 128)
 
 
-def topdown_image(raw, support, occ) -> np.ndarray:
-    """RGB picture of a costmap (north up): free white, obstacles black, inflation grey,
-    unsupported pink."""
+def topdown_image(raw, support, occ, components=None) -> np.ndarray:
+    """RGB picture of a costmap (north up): free white (islands not connected to the largest
+    free component light blue), obstacles black, inflation grey, unsupported pink."""
     img = np.full(occ.shape + (3,), 255, np.uint8)
+    if components is not None:
+        img[components > 1] = (170, 205, 240)
     img[occ & support] = (160, 160, 160)
     img[raw] = (0, 0, 0)
     img[~support] = (235, 190, 190)
@@ -61,7 +63,7 @@ def run(scene, cfg, catalog) -> dict:
     t = np.asarray(aattrs["source_to_aligned"])
     emb = cfg.embodiment.name
     g = zarr.open_group(str(catalog.path("costmaps", scene)), mode="r")[emb]
-    occ, sup, raw = (np.asarray(g[k][...]) for k in ("occ", "support", "raw"))
+    occ, sup, raw, comp = (np.asarray(g[k][...]) for k in ("occ", "support", "raw", "components"))
     res, origin = float(g.attrs["resolution"]), list(g.attrs["origin"])
     steps = []
     for stage in ("ingest", "voxelize", "align", "costmap"):
@@ -84,7 +86,7 @@ def run(scene, cfg, catalog) -> dict:
             "image: nav_map.pgm\n" f"resolution: {res}\n" f"origin: [{origin[0]}, {origin[1]}, 0.0]\n"
             "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n")
         Image.fromarray(np.where(sup, 255, 0).astype(np.uint8)[::-1]).save(tmp / "nav_mask.png")
-        Image.fromarray(topdown_image(raw, sup, occ)).save(tmp / "costmap_topdown.png")
+        Image.fromarray(topdown_image(raw, sup, occ, comp)).save(tmp / "costmap_topdown.png")
         if cfg.asset.write_compressed_splat:
             write_splat(tmp / "compressed.splat", aligned)
             files["compressed_ply"] = "compressed.splat"

@@ -161,3 +161,16 @@ def test_cuda_voxelizer_matches_numba(small_scene):
     gpu = opacity_field(g, grid, VoxelizeConfig(), device="cuda")
     assert np.abs(gpu - cpu).max() < 0.02
     assert ((gpu >= 0.5) != (cpu >= 0.5)).mean() < 1e-3
+
+
+def test_free_components_are_ranked_by_size():
+    from stages.costmap.build import free_components
+
+    free = np.zeros((10, 12), bool)
+    free[1:3, 1:3] = True  # 4 cells, seen first
+    free[5:9, 4:10] = True  # 24 cells
+    free[1:3, 8:11] = True  # 6 cells
+    lab = free_components(free)
+    assert lab[6, 5] == 1 and lab[1, 9] == 2 and lab[1, 1] == 3 and (lab[~free] == 0).all()
+    cm = Costmap(np.ones((10, 12), np.float32), (0.0, 0.0), 0.1, 0.1, 0.0, lab)
+    assert list(cm.component_at(np.array([[0.55, 0.65], [0.15, 0.15], [-1.0, 0.0]]))) == [1, 3, 0]

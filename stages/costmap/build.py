@@ -102,6 +102,8 @@ class CostmapLayers:
     support: np.ndarray  # bool
     occ: np.ndarray  # bool
     clearance: np.ndarray  # float32 metres; -1 where unsupported
+    components: np.ndarray  # int32 label of each free cell's 8-connected free component (0 = occupied),
+    # 1 = the largest; others are islands (a blocked room, the hollow inside of a tall cabinet)
     radius: float
     margin: float
 
@@ -203,6 +205,19 @@ def _rasterize_triangles(tris: np.ndarray, out: np.ndarray) -> None:
     rasterize_triangles(np.ascontiguousarray(tris, dtype=np.float64), out)
 
 
+def free_components(free: np.ndarray) -> np.ndarray:
+    """8-connected components of free cells, relabelled by decreasing size (ties: first cell in
+    row-major order), so label 1 is the largest. 0 marks occupied cells."""
+    lab, n = ndimage.label(free, structure=np.ones((3, 3)))
+    if n == 0:
+        return lab.astype(np.int32)
+    sizes = np.bincount(lab.ravel())[1:]
+    order = np.lexsort((np.arange(n), -sizes))  # stable: size desc, then label (first seen)
+    remap = np.zeros(n + 1, np.int32)
+    remap[order + 1] = np.arange(1, n + 1, dtype=np.int32)
+    return remap[lab]
+
+
 def build_costmap(scene: GaussianScene, emb: Embodiment, cfg: CostmapConfig, vcfg: VoxelizeConfig,
                   support: tuple[np.ndarray, dict] | None = None, extent=None) -> tuple[CostmapLayers, dict]:
     """All layers of one embodiment's costmap from aligned Gaussians (z up, floor at z = 0).
@@ -230,11 +245,13 @@ def build_costmap(scene: GaussianScene, emb: Embodiment, cfg: CostmapConfig, vcf
     clearance[~sup] = -1.0
     margin = interpolation_margin(cfg.resolution, emb.radius) + cfg.extra_margin
     occ = (clearance < emb.radius + margin) | ~sup
-    layers = CostmapLayers(origin, cfg.resolution, raw, sup, occ, clearance, emb.radius, margin)
     free = ~occ
-    n_comp = ndimage.label(free, structure=np.ones((3, 3)))[1] if free.any() else 0
-    info = {"shape": list(shape), "origin": list(origin), "supersample": s, "margin_m": margin,
+    components = free_components(free)
+    n_comp = int(components.max())
+    layers = CostmapLayers(origin, cfg.resolution, raw, sup, occ, clearance, components, emb.radius, margin)
+    info = {"shape": list(shape), "origin": list(origin), "supersample": s, "margin_m": float(margin),
             "free_cells": int(free.sum()), "free_area_m2": float(free.sum() * cfg.resolution ** 2),
+            "main_component_area_m2": float((components == 1).sum() * cfg.resolution ** 2),
             "supported_area_m2": float(sup.sum() * cfg.resolution ** 2), "free_components": int(n_comp),
             "support": sinfo}
     return layers, info

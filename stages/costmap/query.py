@@ -31,12 +31,14 @@ class Costmap:
         radius: footprint radius, metres. margin: interpolation margin, metres.
     """
 
-    def __init__(self, clearance: np.ndarray, origin, resolution: float, radius: float, margin: float):
+    def __init__(self, clearance: np.ndarray, origin, resolution: float, radius: float, margin: float,
+                 components: np.ndarray | None = None):
         self.clearance = np.ascontiguousarray(clearance, dtype=np.float32)
         self.origin = (float(origin[0]), float(origin[1]))
         self.resolution = float(resolution)
         self.radius = float(radius)
         self.margin = float(margin)
+        self.components = components  # [ny, nx] int32 free-component labels (1 = largest), optional
         self._args = (self.clearance, self.origin[0], self.origin[1], 1.0 / self.resolution,
                       self.radius + self.margin)
         self._f, self._ox, self._oy, self._inv, self._thr = self._args
@@ -48,7 +50,8 @@ class Costmap:
 
     @classmethod
     def from_layers(cls, layers) -> "Costmap":
-        return cls(layers.clearance, layers.origin, layers.resolution, layers.radius, layers.margin)
+        return cls(layers.clearance, layers.origin, layers.resolution, layers.radius, layers.margin,
+                   layers.components)
 
     @classmethod
     def load(cls, zarr_path: str | Path, embodiment: str) -> "Costmap":
@@ -57,7 +60,8 @@ class Costmap:
 
         g = zarr.open_group(str(zarr_path), mode="r")[embodiment]
         a = g.attrs
-        return cls(np.asarray(g["clearance"][...]), a["origin"], a["resolution"], a["radius"], a["margin"])
+        comp = np.asarray(g["components"][...]) if "components" in g else None
+        return cls(np.asarray(g["clearance"][...]), a["origin"], a["resolution"], a["radius"], a["margin"], comp)
 
     @property
     def occupancy(self) -> np.ndarray:
@@ -85,6 +89,20 @@ class Costmap:
     def clearance_at(self, xy: np.ndarray) -> np.ndarray:
         """Interpolated clearance (metres; negative outside the supported region) at [N, 2] points."""
         return K.clearance_at(self._f, self._ox, self._oy, self._inv, np.ascontiguousarray(np.asarray(xy, float)[:, :2]))
+
+    def component_at(self, xy: np.ndarray) -> np.ndarray:
+        """[N, 2] points -> [N] free-component label of their cell (0 = occupied or off the map;
+        1 = the largest component, the one samplers should use)."""
+        if self.components is None:
+            raise ValueError("this costmap was built without component labels")
+        xy = np.asarray(xy, float)[:, :2]
+        j = np.floor((xy[:, 0] - self.origin[0]) / self.resolution).astype(np.int64)
+        i = np.floor((xy[:, 1] - self.origin[1]) / self.resolution).astype(np.int64)
+        ny, nx = self.components.shape
+        ok = (i >= 0) & (i < ny) & (j >= 0) & (j < nx)
+        out = np.zeros(len(xy), np.int32)
+        out[ok] = self.components[i[ok], j[ok]]
+        return out
 
     def cell_centers(self, cells: np.ndarray) -> np.ndarray:
         """[N, 2] (row, col) -> [N, 2] (x, y) metres."""

@@ -33,7 +33,7 @@ def run(scene, cfg, catalog) -> dict:
         for emb in embodiments(cfg):
             layers, info = build_costmap(gs, emb, ccfg, vcfg, support=support, extent=extent)
             g = root.create_group(emb.name)
-            for name in ("raw", "support", "occ", "clearance"):
+            for name in ("raw", "support", "occ", "clearance", "components"):
                 arr = getattr(layers, name)
                 g.create_array(name, data=arr, chunks=arr.shape)
             g.attrs.update({"origin": list(layers.origin), "resolution": layers.resolution, "radius": emb.radius,
@@ -41,6 +41,7 @@ def run(scene, cfg, catalog) -> dict:
                             "layout": "[ny, nx], row = y; cell (i, j) centre = origin + ((j+.5) res, (i+.5) res)",
                             "info": info})
             result["embodiments"][emb.name] = {"free_area_m2": round(info["free_area_m2"], 2),
+                                               "main_component_area_m2": round(info["main_component_area_m2"], 2),
                                                "free_components": info["free_components"]}
         root.attrs["main_embodiment"] = cfg.embodiment.name
         if not np.asarray(support[0]).any():

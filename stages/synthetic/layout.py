@@ -26,6 +26,8 @@ class Part:
     instance: int  # 0 = structure (walls, floor, ceiling), >= 1 objects
     skip_bottom: bool = False  # bottom face rests on the floor: a real capture never sees it
     skip_top: bool = False  # top face of a ceiling slab: outside the rooms, never seen
+    skip_sides: bool = False  # side faces of floor / ceiling slabs: buried under walls or
+    # against the next room's slab (a capture never sees them; sampled, they poke into doorways)
 
 
 @dataclass
@@ -115,7 +117,7 @@ def _wall(parts, a, b, fixed, axis, cfg: LayoutConfig, door: tuple[float, float]
             c, size = [mid, fixed, 0.5 * (z0 + z1)], [length, t, z1 - z0]
         else:
             c, size = [fixed, mid, 0.5 * (z0 + z1)], [t, length, z1 - z0]
-        parts.append(Part("box", np.array(c), np.array(size), 0.0, 0))
+        parts.append(Part("box", np.array(c), np.array(size), 0.0, 0, skip_bottom=z0 == 0.0))
 
 
 def _furniture(category: str, rng: np.random.Generator) -> tuple[list[tuple[str, list, list]], np.ndarray, bool]:
@@ -224,10 +226,12 @@ def make_layout(rng: np.random.Generator, cfg: LayoutConfig) -> Layout:
         x0, x1, y0, y1 = xs[c], xs[c + 1], ys[r], ys[r + 1]
         lay.rooms.append((x0 + t / 2, y0 + t / 2, x1 - t / 2, y1 - t / 2))
         lay.parts.append(Part("box", np.array([(x0 + x1) / 2, (y0 + y1) / 2, -0.025]),
-                              np.array([x1 - x0 + t, y1 - y0 + t, 0.05]), 0.0, 0, skip_bottom=True))
+                              np.array([x1 - x0 + t, y1 - y0 + t, 0.05]), 0.0, 0, skip_bottom=True,
+                              skip_sides=True))
         if cfg.ceiling:
             lay.parts.append(Part("box", np.array([(x0 + x1) / 2, (y0 + y1) / 2, cfg.wall_height_m + 0.025]),
-                                  np.array([x1 - x0 + t, y1 - y0 + t, 0.05]), 0.0, 0, skip_top=True))
+                                  np.array([x1 - x0 + t, y1 - y0 + t, 0.05]), 0.0, 0, skip_top=True,
+                                  skip_sides=True))
     _place_furniture(lay, rng, cfg)
     return lay
 

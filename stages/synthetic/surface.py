@@ -62,6 +62,8 @@ def part_surface_samples(p: Part, rng: np.random.Generator, density: float):
             for sign in (-1.0, 1.0):
                 if axis == 2 and ((sign < 0 and p.skip_bottom) or (sign > 0 and p.skip_top)):
                     continue
+                if axis < 2 and p.skip_sides:
+                    continue
                 ta, tb = [k for k in range(3) if k != axis]
                 u, v, da, db = _rect_samples(rng, p.size[ta], p.size[tb], density)
                 local = np.zeros((len(u), 3))
@@ -164,7 +166,8 @@ def total_area(parts: list[Part]) -> float:
     for p in parts:
         if p.kind == "box":
             x, y, z = p.size
-            a += 2 * (x * y + y * z + x * z) - x * y * (int(p.skip_bottom) + int(p.skip_top))
+            a += 2 * x * y - x * y * (int(p.skip_bottom) + int(p.skip_top))
+            a += 0.0 if p.skip_sides else 2 * (y * z + x * z)
         elif p.kind == "cylinder":
             r = p.size[0] / 2
             a += 2 * np.pi * r * p.size[2] + np.pi * r * r * (1 if p.skip_bottom else 2)
