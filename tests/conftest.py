@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "2")
-REAL_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+# the real 3DGS samples live beside the project (../shared/data/real), never in it;
+# NAVARENA_REAL_DATA points elsewhere
+REAL_DIR = Path(os.environ.get("NAVARENA_REAL_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data" / "real")
 PROJECT = Path(__file__).resolve().parents[1]
 
 

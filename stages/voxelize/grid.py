@@ -50,7 +50,9 @@ def grid_for_points(points: np.ndarray, voxel_size, margin: float = 0.0, lo_q: f
     shape = np.maximum(np.round((hi - lo) / vs).astype(np.int64), 1)
     n = int(np.prod(shape))
     if n > max_voxels:
+        ext = " x ".join(f"{v:.2f}" for v in (hi - lo))
+        size = " x ".join(f"{v:g}" for v in vs)
         raise ValueError(
-            f"a {tuple(vs)} m voxel grid over this scene's extent {tuple(np.round(hi - lo, 2))} would need "
-            f"{n:,} voxels (limit {max_voxels:,}); are the scene units metres? use a coarser resolution")
+            f"a {size} m voxel grid over this scene's extent ({ext} m) would need {n:,} voxels "
+            f"(limit {max_voxels:,}); are the scene units metres? otherwise use a coarser resolution")
     return VoxelGrid(tuple(lo.tolist()), tuple(vs.tolist()), tuple(int(s) for s in shape))
