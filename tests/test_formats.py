@@ -177,3 +177,25 @@ def test_ascii_ply_and_not_a_ply(tmp_path):
         read_gaussians(tmp_path / "b.ply")
     with pytest.raises(SceneFormatError, match="missing.*|does not exist"):
         read_gaussians(tmp_path / "missing.ply")
+
+
+def test_transform_rotates_view_dependent_colour():
+    """Colour seen from direction d before == colour seen from R d after (SH degree 3)."""
+    from stages.gaussians.model import quat_to_rotmat
+    from stages.gaussians.sh import sh_basis
+
+    s = random_scene(n=50, deg=3)
+    q = np.array([0.8, 0.2, -0.5, 0.3])
+    q /= np.linalg.norm(q)
+    t = np.eye(4)
+    t[:3, :3] = quat_to_rotmat(q)
+    t[:3, 3] = [1.0, -2.0, 0.5]
+    r = s.transformed(t)
+    d = np.random.default_rng(1).normal(size=(50, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    before = np.einsum("nk,nkc->nc", sh_basis(d, 3), s.sh)
+    after = np.einsum("nk,nkc->nc", sh_basis(d @ t[:3, :3].T, 3), r.sh)
+    assert np.allclose(before, after, atol=1e-4)
+    assert np.array_equal(r.sh[:, 0], s.sh[:, 0])
+    # orientations turn with the scene: the local axes map by R
+    assert np.allclose(quat_to_rotmat(r.quats.astype(float)), t[:3, :3] @ quat_to_rotmat(s.quats.astype(float)), atol=1e-5)

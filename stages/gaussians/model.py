@@ -162,9 +162,10 @@ class GaussianScene:
         q_rot = rotmat_to_quat(rot)
         quats = quat_multiply(q_rot[None], self.quats.astype(np.float64))
         quats /= np.linalg.norm(quats, axis=1, keepdims=True)
-        # Colour SH of degree >= 1 are view dependent and would need a Wigner rotation; the
-        # DC term (what navigation and segmentation use) is rotation invariant.
-        return GaussianScene(means, quats, self.log_scales, self.opacity_logits, self.sh, dict(self.extras))
+        from stages.gaussians.sh import rotate_sh  # view-dependent colour turns with the scene
+
+        return GaussianScene(means, quats, self.log_scales, self.opacity_logits, rotate_sh(self.sh, rot),
+                             dict(self.extras))
 
     @staticmethod
     def from_colors(means, quats, scales, alphas, colors, extras=None) -> "GaussianScene":
