@@ -199,29 +199,19 @@ def make_layout(rng: np.random.Generator, cfg: LayoutConfig) -> Layout:
         c = rng.uniform(lo + t / 2 + 0.15 + w / 2, hi - t / 2 - 0.15 - w / 2)
         return c - w / 2, c + w / 2
 
-    # horizontal walls (along x) at ys[r] between rows r-1 and r; vertical walls along y at xs[c]
-    for r in range(4):
-        for c in range(3):
-            below, above = (r - 1, c), (r, c)
-            if below not in cellset and above not in cellset:
-                continue
-            door = None
-            pair = tuple(sorted((below, above)))
-            if pair in doors:
-                door = door_span(xs[c], xs[c + 1])
-                lay.doors.append((door[0], ys[r] - t / 2, door[1], ys[r] + t / 2))
-            _wall(lay.parts, xs[c], xs[c + 1], ys[r], "x", cfg, door)
-    for c in range(4):
-        for r in range(3):
-            left, right = (r, c - 1), (r, c)
-            if left not in cellset and right not in cellset:
-                continue
-            door = None
-            pair = tuple(sorted((left, right)))
-            if pair in doors:
-                door = door_span(ys[r], ys[r + 1])
-                lay.doors.append((xs[c] - t / 2, door[0], xs[c] + t / 2, door[1]))
-            _wall(lay.parts, ys[r], ys[r + 1], xs[c], "y", cfg, door)
+    # walls along x on the grid lines ys[a] (between rows a-1 and a), then walls along y on xs[a]
+    for axis, lines, spans in (("x", ys, xs), ("y", xs, ys)):
+        for a in range(4):
+            for b in range(3):
+                side0, side1 = ((a - 1, b), (a, b)) if axis == "x" else ((b, a - 1), (b, a))
+                if side0 not in cellset and side1 not in cellset:
+                    continue
+                door = None
+                if tuple(sorted((side0, side1))) in doors:
+                    door = door_span(spans[b], spans[b + 1])
+                    lo, hi = lines[a] - t / 2, lines[a] + t / 2
+                    lay.doors.append((door[0], lo, door[1], hi) if axis == "x" else (lo, door[0], hi, door[1]))
+                _wall(lay.parts, spans[b], spans[b + 1], lines[a], axis, cfg, door)
     for r, c in cells:
         x0, x1, y0, y1 = xs[c], xs[c + 1], ys[r], ys[r + 1]
         lay.rooms.append((x0 + t / 2, y0 + t / 2, x1 - t / 2, y1 - t / 2))
