@@ -43,7 +43,8 @@ bench: bench-spatial
 bench-spatial: $(STAMP)
 	$(BIN)/python -m benchmarks.spatial $(ARGS)
 
-# on a CUDA machine: writes data/08_reports/voxelize_gpu.json, merged by bench-spatial
+# on a CUDA machine: writes data/08_reports/voxelize_gpu.json; bench-spatial merges it (or
+# `python -m benchmarks.spatial --merge-gpu` folds it into an existing report)
 bench-spatial-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.voxelize_gpu $(ARGS)
 
