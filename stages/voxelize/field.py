@@ -16,9 +16,9 @@ from typing import Iterator
 
 import numpy as np
 
-from stages.gaussians.model import GaussianScene, quat_to_rotmat
+from stages.gaussians.model import GaussianScene
 from stages.voxelize.grid import VoxelGrid
-from stages.voxelize.kernel_cpu import accumulate_block
+from stages.voxelize.kernel_cpu import accumulate_block, gaussian_params_kernel
 
 
 @dataclass
@@ -55,34 +55,19 @@ class GaussianParams:
 
 
 def gaussian_params(scene: GaussianScene, grid: VoxelGrid, cfg: VoxelizeConfig) -> GaussianParams:
-    """Kernel parameters of the Gaussians whose truncated support meets the grid."""
-    alpha = scene.alphas
-    keep = alpha >= cfg.min_alpha
-    rot = quat_to_rotmat(scene.quats[keep].astype(np.float64))  # [G, 3, 3] local -> world
-    sig = np.exp(scene.log_scales[keep].astype(np.float64))
-    means = scene.means[keep].astype(np.float64)
-    vs = np.asarray(grid.voxel_size)
-    # half-extent of the truncated ellipsoid along world axes: t * sqrt(sum_k (R_jk sigma_k)^2)
-    ext = cfg.truncation * np.sqrt(np.einsum("gjk,gk->gj", rot ** 2, sig ** 2))
-    rt = np.ascontiguousarray(np.transpose(rot, (0, 2, 1)))
-    if cfg.sample == "max":
-        w = np.einsum("gkj,j->gk", np.abs(rt), vs / 2)
-        pad = vs / 2
-    elif cfg.sample == "center":
-        w = np.zeros_like(sig)
-        pad = np.zeros(3)
-    else:
+    """Kernel parameters of the Gaussians whose truncated support meets the grid.
+
+    The support's world-axis half-extent is truncation * sqrt(sum_k (R_jk sigma_k)^2) (the box of
+    the ellipsoid); a voxel is visited when its centre lies within it, plus half a voxel for the
+    'max' bound, whose per-local-axis slack is w_k = sum_j |R_jk| voxel_j / 2.
+    """
+    if cfg.sample not in ("max", "center"):
         raise ValueError(f"voxelize.sample must be 'max' or 'center', got {cfg.sample!r}")
-    org = np.asarray(grid.origin)
-    shape = np.asarray(grid.shape)
-    # voxel i is visited when its centre lies within ext (+ half a voxel for the bound)
-    lo = np.ceil((means - ext - pad - org) / vs - 0.5).astype(np.int64)
-    hi = np.floor((means + ext + pad - org) / vs - 0.5).astype(np.int64)
-    lo = np.maximum(lo, 0)
-    hi = np.minimum(hi, shape - 1)
-    inside = (lo <= hi).all(1)
-    return GaussianParams(means[inside], rt[inside], 1.0 / sig[inside], alpha[keep][inside], w[inside],
-                          lo[inside], hi[inside])
+    keep, means, rt, inv_sig, alpha, w, lo, hi = gaussian_params_kernel(
+        scene.means, scene.quats, scene.log_scales, scene.opacity_logits, np.asarray(grid.origin, np.float64),
+        np.asarray(grid.voxel_size, np.float64), np.asarray(grid.shape, np.int64), float(cfg.truncation),
+        cfg.sample == "max", float(cfg.min_alpha))
+    return GaussianParams(means[keep], rt[keep], inv_sig[keep], alpha[keep], w[keep], lo[keep], hi[keep])
 
 
 def _use_cuda(cfg: VoxelizeConfig) -> bool:

@@ -62,3 +62,63 @@ def accumulate_block(means, rt, inv_sig, alpha, w, lo, hi, slab_ptr, slab_idx,
                                 rho = RHO_MAX
                             out[i - x0, j, k] += np.float32(np.log1p(-rho))
     return out
+
+
+@numba.njit(parallel=True, cache=True)
+def gaussian_params_kernel(means, quats, log_scales, logits, origin, vs, shape, truncation, max_mode, min_alpha):
+    """Per-Gaussian kernel parameters for a grid (see field.gaussian_params); rows whose support
+    misses the grid or whose opacity is below min_alpha get keep = False.
+
+    Returns:
+        keep [N] bool, means [N, 3] f64, rt [N, 3, 3] (R^T), inv_sig [N, 3], alpha [N], w [N, 3],
+        lo [N, 3] int64, hi [N, 3] int64.
+    """
+    n = means.shape[0]
+    keep = np.zeros(n, dtype=np.bool_)
+    m64 = np.empty((n, 3))
+    rt = np.empty((n, 3, 3))
+    inv_sig = np.empty((n, 3))
+    alpha = np.empty(n)
+    w = np.zeros((n, 3))
+    lo = np.empty((n, 3), dtype=np.int64)
+    hi = np.empty((n, 3), dtype=np.int64)
+    for g in numba.prange(n):
+        a = 1.0 / (1.0 + np.exp(-np.float64(logits[g])))
+        alpha[g] = a
+        if a < min_alpha:
+            continue
+        qw, qx, qy, qz = np.float64(quats[g, 0]), np.float64(quats[g, 1]), np.float64(quats[g, 2]), np.float64(quats[g, 3])
+        # R (local -> world) from the unit quaternion; rt = R^T
+        r = np.empty((3, 3))
+        r[0, 0] = 1 - 2 * (qy * qy + qz * qz)
+        r[0, 1] = 2 * (qx * qy - qw * qz)
+        r[0, 2] = 2 * (qx * qz + qw * qy)
+        r[1, 0] = 2 * (qx * qy + qw * qz)
+        r[1, 1] = 1 - 2 * (qx * qx + qz * qz)
+        r[1, 2] = 2 * (qy * qz - qw * qx)
+        r[2, 0] = 2 * (qx * qz - qw * qy)
+        r[2, 1] = 2 * (qy * qz + qw * qx)
+        r[2, 2] = 1 - 2 * (qx * qx + qy * qy)
+        inside = True
+        for j in range(3):
+            ext2 = 0.0
+            for k in range(3):
+                sig = np.exp(np.float64(log_scales[g, k]))
+                ext2 += (r[j, k] * sig) ** 2
+                rt[g, k, j] = r[j, k]
+            ext = truncation * np.sqrt(ext2)
+            pad = 0.5 * vs[j] if max_mode else 0.0
+            mu = np.float64(means[g, j])
+            m64[g, j] = mu
+            l = int(np.ceil((mu - ext - pad - origin[j]) / vs[j] - 0.5))
+            h = int(np.floor((mu + ext + pad - origin[j]) / vs[j] - 0.5))
+            lo[g, j] = max(l, 0)
+            hi[g, j] = min(h, shape[j] - 1)
+            if lo[g, j] > hi[g, j]:
+                inside = False
+        for k in range(3):
+            inv_sig[g, k] = np.exp(-np.float64(log_scales[g, k]))
+            if max_mode:
+                w[g, k] = 0.5 * (abs(r[0, k]) * vs[0] + abs(r[1, k]) * vs[1] + abs(r[2, k]) * vs[2])
+        keep[g] = inside
+    return keep, m64, rt, inv_sig, alpha, w, lo, hi
