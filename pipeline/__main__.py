@@ -12,12 +12,8 @@ register_configs()
 
 @hydra.main(config_path="../conf", config_name="config", version_base="1.3")
 def _app(cfg) -> None:
-    import logging
-
     from pipeline.executor import main_cfg
 
-    for name in ("distributed", "bokeh", "tornado"):
-        logging.getLogger(name).setLevel(logging.WARNING)
     code = main_cfg(cfg)
     if code:
         sys.exit(code)

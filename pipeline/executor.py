@@ -53,11 +53,11 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
     return {**base, "status": "done", "duration_s": duration}
 
 
-def _client(ex, console: Console):
+def _client(ex):
+    import logging
+
     import dask
     from dask.distributed import Client, LocalCluster
-
-    import logging
 
     for name in list(logging.root.manager.loggerDict):
         if name.startswith(("distributed", "bokeh", "tornado")):
@@ -74,6 +74,34 @@ def _client(ex, console: Console):
                            processes=ex.processes, memory_limit=ex.memory_limit,
                            dashboard_address=":0" if ex.dashboard else None, silence_logs=40)
     return Client(cluster), cluster
+
+
+def _run_on_dask(cfg, catalog: Catalog, chain, record, console: Console) -> None:
+    from dask.distributed import as_completed
+
+    client, cluster = _client(cfg.executor)
+    try:
+        if client.dashboard_link:
+            console.print(f"Dask dashboard: {client.dashboard_link}")
+        run_id = f"{os.getpid()}-{time.time_ns()}"
+
+        def submit(st, scene, h, force, ups):
+            return client.submit(run_task, st.name, scene, cfg, catalog, h, force, *ups,
+                                 key=f"{st.name}-{scene.scene_id}-{h}-{run_id}", pure=False)
+        handles = chain(submit)
+        what = {fut.key: (name, scene) for name, scene, fut in handles}
+        for fut in as_completed([fut for _, _, fut in handles]):
+            try:
+                r = fut.result()
+            except Exception as e:  # noqa: BLE001 - a killed worker, a lost dependency
+                name, sc = what[fut.key]
+                r = {"stage": name, "scene_id": sc.scene_id, "scene": sc.name, "status": "failed",
+                     "error": f"{type(e).__name__}: {e}"}
+            record(r)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def execute(cfg, console: Console | None = None) -> dict:
@@ -95,56 +123,36 @@ def execute(cfg, console: Console | None = None) -> dict:
                   f"(shard {cfg.scenes.shard}/{cfg.scenes.num_shards}), stages {[s.name for s in stages]}, "
                   f"data in {root}")
     results: list[dict] = []
-    n_tasks = len(scenes) * len(stages)
     progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                         console=console, transient=False)
-    if cfg.executor.kind == "sync" and not cfg.executor.address:
-        with progress:
-            bar = progress.add_task("tasks", total=n_tasks)
-            for scene in scenes:
-                prev: dict[str, dict] = {}
-                for st in stages:
-                    r = run_task(st.name, scene, cfg, catalog, hashes[st.name], cfg.force and st.name in selected,
-                                 *[prev[n] for n in st.needs if n in prev])
-                    prev[st.name] = r
-                    results.append(r)
-                    progress.advance(bar)
-    else:
-        from dask.distributed import as_completed
 
-        client, cluster = _client(cfg.executor, console)
-        try:
-            if client.dashboard_link:
-                console.print(f"Dask dashboard: {client.dashboard_link}")
-            futures = []
-            what = {}
-            for scene in scenes:
-                prev = {}
-                for st in stages:
-                    fut = client.submit(run_task, st.name, scene, cfg, catalog, hashes[st.name],
-                                        cfg.force and st.name in selected, *[prev[n] for n in st.needs if n in prev],
-                                        key=f"{st.name}-{scene.scene_id}-{hashes[st.name]}-{os.getpid()}-{time.time_ns()}",
-                                        pure=False)
-                    prev[st.name] = fut
-                    futures.append(fut)
-                    what[fut.key] = (st.name, scene)
-            with progress:
-                bar = progress.add_task("tasks", total=n_tasks)
-                for fut in as_completed(futures):
-                    try:
-                        r = fut.result()
-                    except Exception as e:  # noqa: BLE001 - a killed worker, a lost dependency
-                        st_name, sc = what[fut.key]
-                        r = {"stage": st_name, "scene_id": sc.scene_id, "scene": sc.name, "status": "failed",
-                             "error": f"{type(e).__name__}: {e}"}
-                    results.append(r)
-                    if r["status"] == "failed":
-                        progress.console.print(f"[red]failed[/] {r['stage']} {r['scene_id']}: {r['error']}")
-                    progress.advance(bar)
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+    def chain(submit):
+        """Submit every (stage, scene), each after its own scene's upstream stages only."""
+        handles = []
+        for scene in scenes:
+            prev = {}
+            for st in stages:
+                prev[st.name] = submit(st, scene, hashes[st.name], cfg.force and st.name in selected,
+                                       [prev[n] for n in st.needs if n in prev])
+                handles.append((st.name, scene, prev[st.name]))
+        return handles
+
+    def record(r: dict) -> None:
+        results.append(r)
+        if r["status"] == "failed":
+            progress.console.print(f"[red]failed[/] {r['stage']} {r['scene_id']} ({r['scene']}): {r['error']}")
+        progress.advance(bar)
+
+    with progress:
+        bar = progress.add_task("tasks", total=len(scenes) * len(stages))
+        if cfg.executor.kind == "sync" and not cfg.executor.address:
+            def run_now(st, scene, h, force, ups):
+                r = run_task(st.name, scene, cfg, catalog, h, force, *ups)
+                record(r)
+                return r
+            chain(run_now)
+        else:
+            _run_on_dask(cfg, catalog, chain, record, console)
     order = {s.name: i for i, s in enumerate(stages)}
     results.sort(key=lambda r: (r["scene_id"], order[r["stage"]]))
     summary = {"started_at": started.isoformat(timespec="seconds"),

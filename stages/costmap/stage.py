@@ -1,5 +1,6 @@
 """Stage `costmap`: per embodiment, the costmap layers of the aligned scene -> 03_costmaps Zarr
-(one group per embodiment: raw, support, occ, clearance; plus the aligned support voxels)."""
+(one group per embodiment: raw, support, occ, clearance, components; the support is computed
+once and shared, as all embodiments use one grid)."""
 from __future__ import annotations
 
 import numpy as np
