@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
 
-.PHONY: setup system-deps dataset test test-all bench bench-spatial bench-spatial-gpu clean
+.PHONY: setup system-deps dataset test test-all bench bench-spatial bench-spatial-gpu submit clean
 
 # open3d needs libusb at import time; install it when missing (root or sudo).
 system-deps:
@@ -47,6 +47,12 @@ bench-spatial: $(STAMP)
 # `python -m benchmarks.spatial --merge-gpu` folds it into an existing report)
 bench-spatial-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.voxelize_gpu $(ARGS)
+
+# sharded array job on a batch cluster: make submit SHARDS=64 SCHEDULER=slurm ARGS="scenes=synthetic_large"
+SHARDS ?= 8
+SCHEDULER ?= slurm
+submit: $(STAMP)
+	$(BIN)/python -m pipeline.submit --shards $(SHARDS) --scheduler $(SCHEDULER) -- $(ARGS)
 
 clean:
 	rm -rf data/_hydra data/_runs

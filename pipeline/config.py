@@ -38,12 +38,37 @@ class ScenesConfig:
 
 
 @dataclass
+class JobqueueConfig:
+    """Batch jobs that host Dask workers (executor.kind = slurm or pbs, via dask-jobqueue)."""
+
+    jobs: int = 4
+    """Worker jobs to start."""
+    cores: int = 8
+    """Cores per job."""
+    memory: str = "32GB"
+    """Memory per job."""
+    processes: int = 2
+    """Worker processes per job (the cores are shared among them)."""
+    walltime: str = "04:00:00"
+    """Wall time per job."""
+    queue: str | None = None
+    """Partition / queue."""
+    account: str | None = None
+    """Accounting string."""
+    job_extra_directives: list[str] = field(default_factory=list)
+    """Extra #SBATCH / #PBS lines, e.g. ['--constraint=skylake']."""
+    log_directory: str | None = None
+    """Where the worker jobs write their logs."""
+
+
+@dataclass
 class ExecutorConfig:
     """Where the tasks run."""
 
     kind: str = "local"
-    """'local' (a distributed LocalCluster), 'address' (connect to executor.address) or 'sync'
-    (in this process, one task after another: debugging and tests)."""
+    """'local' (a distributed LocalCluster), 'address' (connect to executor.address), 'slurm' or
+    'pbs' (workers in batch jobs, executor.jobqueue) or 'sync' (in this process, one task after
+    another: debugging and tests)."""
     n_workers: int = 2
     """LocalCluster worker processes."""
     threads_per_worker: int = 1
@@ -56,6 +81,7 @@ class ExecutorConfig:
     """tcp://host:port of an existing scheduler; setting it implies kind=address."""
     dashboard: bool = True
     """Start the Dask dashboard of a LocalCluster."""
+    jobqueue: JobqueueConfig = field(default_factory=JobqueueConfig)
 
 
 @dataclass

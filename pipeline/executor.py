@@ -53,6 +53,17 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
     return {**base, "status": "done", "duration_s": duration}
 
 
+def jobqueue_cluster(ex):
+    """A dask-jobqueue SLURMCluster / PBSCluster from executor.jobqueue (no jobs started yet)."""
+    import dask_jobqueue
+
+    jq = ex.jobqueue
+    cls = {"slurm": dask_jobqueue.SLURMCluster, "pbs": dask_jobqueue.PBSCluster}[ex.kind]
+    return cls(cores=jq.cores, memory=jq.memory, processes=jq.processes, walltime=jq.walltime, queue=jq.queue,
+               account=jq.account, job_extra_directives=list(jq.job_extra_directives),
+               log_directory=jq.log_directory, job_name="navarena-worker")
+
+
 def _client(ex):
     import logging
 
@@ -68,6 +79,12 @@ def _client(ex):
         if not ex.address:
             raise ValueError("executor.kind=address needs executor.address=tcp://host:port")
         return Client(ex.address), None
+    if ex.kind in ("slurm", "pbs"):
+        cluster = jobqueue_cluster(ex)
+        cluster.scale(jobs=ex.jobqueue.jobs)
+        return Client(cluster), cluster
+    if ex.kind != "local":
+        raise ValueError(f"executor.kind must be local, address, slurm, pbs or sync, not {ex.kind!r}")
     # numba threads per worker: share the cores instead of oversubscribing them
     os.environ.setdefault("NUMBA_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // max(ex.n_workers, 1))))
     cluster = LocalCluster(n_workers=ex.n_workers, threads_per_worker=ex.threads_per_worker,

@@ -111,3 +111,27 @@ def test_several_embodiments_and_existing_scheduler(tmp_path):
     # a bigger body has less free space; all maps share one grid
     assert free["locobot"] > free["stretch"] > free["navarena_default"] > 0
     assert len({g[k]["occ"].shape for k in g.group_keys()}) == 1
+
+
+def test_batch_submission_scripts():
+    """The sharded array job and the dask-jobqueue worker jobs carry what the config says."""
+    from pipeline.submit import array_script
+
+    s = array_script("slurm", 16, ["scenes=synthetic_large", "costmap.resolution=0.02"], 8, "32G", "02:00:00",
+                     "cpu", None, "/venv/bin/python", PROJECT)
+    assert "#SBATCH --array=0-15" in s and "#SBATCH --partition=cpu" in s
+    assert "scenes.shard=$SLURM_ARRAY_TASK_ID scenes.num_shards=16" in s and s.rstrip().endswith(
+        "scenes=synthetic_large costmap.resolution=0.02")
+    p = array_script("pbs", 4, [], 4, "16gb", "01:00:00", None, "acct", "python", PROJECT)
+    assert "#PBS -J 0-3" in p and "$PBS_ARRAY_INDEX" in p and "#PBS -A acct" in p
+    pytest.importorskip("dask_jobqueue")
+    from pipeline.executor import jobqueue_cluster
+
+    cfg = make_cfg("/tmp/unused", "executor=slurm", "executor.jobqueue.cores=16", "executor.jobqueue.queue=gpu",
+                   "executor.jobqueue.job_extra_directives=['--constraint=skylake']")
+    cluster = jobqueue_cluster(cfg.executor)
+    try:
+        js = cluster.job_script()
+    finally:
+        cluster.close()
+    assert "#SBATCH -p gpu" in js and "--constraint=skylake" in js and "#SBATCH --cpus-per-task=16" in js

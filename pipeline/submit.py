@@ -1,0 +1,83 @@
+"""Sharded batch submission: one array job, one pipeline run per shard.
+
+    python -m pipeline.submit --shards 64 --scheduler slurm [--dry-run] [--cpus 8] [--mem 32G]
+        [--time 04:00:00] [--queue cpu] -- scenes=synthetic_large costmap.embodiments=[stretch]
+
+Array task k runs ``python -m pipeline scenes.shard=k scenes.num_shards=N executor=local ...``
+(every n-th scene in scene-id order: disjoint and deterministic). Completion markers make the
+job safe to resubmit: finished (stage, scene) pairs are skipped, failed ones are retried.
+The script is written to data/_submit/ and handed to sbatch / qsub unless --dry-run.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+
+
+def array_script(scheduler: str, shards: int, overrides: list[str], cpus: int, mem: str, walltime: str,
+                 queue: str | None, account: str | None, python: str, workdir: Path) -> str:
+    """The batch script of an array job over the shards."""
+    if shards < 1:
+        raise ValueError("--shards must be >= 1")
+    over = " ".join(shlex.quote(o) for o in overrides)
+    if scheduler == "slurm":
+        head = ["#!/bin/bash", "#SBATCH --job-name=navarena", f"#SBATCH --array=0-{shards - 1}",
+                f"#SBATCH --cpus-per-task={cpus}", f"#SBATCH --mem={mem}", f"#SBATCH --time={walltime}",
+                "#SBATCH --output=data/_submit/logs/navarena-%A_%a.out"]
+        head += [f"#SBATCH --partition={queue}"] if queue else []
+        head += [f"#SBATCH --account={account}"] if account else []
+        index = "$SLURM_ARRAY_TASK_ID"
+    elif scheduler == "pbs":
+        head = ["#!/bin/bash", "#PBS -N navarena", f"#PBS -J 0-{shards - 1}",
+                f"#PBS -l select=1:ncpus={cpus}:mem={mem}", f"#PBS -l walltime={walltime}",
+                "#PBS -o data/_submit/logs/", "#PBS -j oe"]
+        head += [f"#PBS -q {queue}"] if queue else []
+        head += [f"#PBS -A {account}"] if account else []
+        index = "$PBS_ARRAY_INDEX"
+    else:
+        raise ValueError(f"scheduler must be slurm or pbs, not {scheduler!r}")
+    body = [f"cd {shlex.quote(str(workdir))}",
+            f"{shlex.quote(python)} -m pipeline scenes.shard={index} scenes.num_shards={shards} "
+            f"executor=local executor.n_workers={cpus} executor.dashboard=false {over}".rstrip()]
+    return "\n".join(head + ["set -euo pipefail"] + body) + "\n"
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    overrides = argv[argv.index("--") + 1:] if "--" in argv else []
+    argv = argv[: argv.index("--")] if "--" in argv else argv
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--shards", type=int, required=True)
+    ap.add_argument("--scheduler", choices=["slurm", "pbs"], default="slurm")
+    ap.add_argument("--cpus", type=int, default=8)
+    ap.add_argument("--mem", default="32G")
+    ap.add_argument("--time", default="04:00:00")
+    ap.add_argument("--queue")
+    ap.add_argument("--account")
+    ap.add_argument("--dry-run", action="store_true", help="write the script, do not submit it")
+    args = ap.parse_args(argv)
+    script = array_script(args.scheduler, args.shards, overrides, args.cpus, args.mem, args.time, args.queue,
+                          args.account, sys.executable, PROJECT_ROOT)
+    out = PROJECT_ROOT / "data" / "_submit"
+    (out / "logs").mkdir(parents=True, exist_ok=True)
+    path = out / f"navarena-{args.scheduler}-{dt.datetime.now():%Y%m%dT%H%M%S}.sh"
+    path.write_text(script)
+    print(f"wrote {path}")
+    if args.dry_run:
+        return 0
+    cmd = "sbatch" if args.scheduler == "slurm" else "qsub"
+    if shutil.which(cmd) is None:
+        print(f"{cmd} is not on PATH: submit {path} yourself", file=sys.stderr)
+        return 2
+    return subprocess.run([cmd, str(path)], cwd=PROJECT_ROOT).returncode
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
