@@ -174,3 +174,38 @@ def test_free_components_are_ranked_by_size():
     assert lab[6, 5] == 1 and lab[1, 9] == 2 and lab[1, 1] == 3 and (lab[~free] == 0).all()
     cm = Costmap(np.ones((10, 12), np.float32), (0.0, 0.0), 0.1, 0.1, 0.0, lab)
     assert list(cm.component_at(np.array([[0.55, 0.65], [0.15, 0.15], [-1.0, 0.0]]))) == [1, 3, 0]
+
+
+def test_max_bound_is_conservative_and_tight_on_tall_voxels():
+    """A_v >= the true max of rho inside every voxel (dense sampling), on 1 cm x 1 cm x 5 cm
+    voxels, for a flat Gaussian tilted inside a vertical plane (the case where bounding each
+    local axis separately leaks the voxel's height into horizontal directions)."""
+    from stages.gaussians.model import quat_to_rotmat, rotmat_to_quat
+
+    ang = np.radians(40)
+    t1 = np.array([np.cos(ang), 0, np.sin(ang)])  # tangent tilted in the x-z plane
+    n = np.array([0, 1.0, 0])
+    rot = np.stack([t1, np.cross(n, t1), n], 1)
+    q = rotmat_to_quat(rot)[None]
+    sig = np.array([0.03, 0.02, 0.002])
+    g = GaussianScene(np.array([[0.003, 0.001, 0.012]]), q, np.log(sig)[None], [np.log(0.9 / 0.1)], np.zeros((1, 1, 3)))
+    grid = VoxelGrid((-0.2, -0.05, -0.2), (0.01, 0.01, 0.05), (40, 10, 8))
+    a = opacity_field(g, grid, VoxelizeConfig(sample="max", device="cpu"))
+    # dense samples inside each voxel
+    r = quat_to_rotmat(q.astype(float))[0]
+    sub = (np.arange(6) + 0.5) / 6 - 0.5
+    ox, oy, oz = np.meshgrid(sub * 0.01, sub * 0.01, sub * 0.05, indexing="ij")
+    offs = np.stack([ox.ravel(), oy.ravel(), oz.ravel()], 1)
+    cx, cy, cz = (grid.centers(k) for k in range(3))
+    centres = np.stack(np.meshgrid(cx, cy, cz, indexing="ij"), -1)
+    pts = centres[..., None, :] + offs  # [nx, ny, nz, S, 3]
+    loc = (pts - g.means[0]) @ r / sig
+    chi2 = (loc ** 2).sum(-1)
+    dense = np.where(chi2 <= 9, 0.9 * np.exp(-chi2 / 2), 0).max(-1)
+    assert (a >= dense - 1e-6).all()
+    # and tighter than bounding each local axis by the whole voxel box
+    w_box = 0.5 * np.abs(r).T @ np.array([0.01, 0.01, 0.05])
+    d = (centres - g.means[0]) @ r
+    chi_box = ((np.maximum(np.abs(d) - w_box, 0) / sig) ** 2).sum(-1)
+    box = np.where(chi_box <= 9, 0.9 * np.exp(-chi_box / 2), 0)
+    assert (a <= box + 1e-6).all() and ((box >= 0.5).sum() > (a >= 0.5).sum())

@@ -4,8 +4,9 @@ stays bounded whatever the scene size.
 rho_iv = alpha_i * exp(-chi2 / 2), chi2 the squared Mahalanobis distance of the voxel to Gaussian
 i, truncated at ``truncation`` sigma. ``sample`` selects where chi2 is taken:
 - "center": at the voxel centre x_v, exactly DESIGN.md eq. 1;
-- "max" (default): at the point of the voxel nearest to the Gaussian in each local axis, i.e. an
-  upper bound of rho over the voxel. Trained 3DGS surfaces are thin (normal sigma of millimetres),
+- "max" (default): a lower bound of chi2 over the whole voxel, i.e. an upper bound of rho over
+  it: exact over the voxel's height, and in x, y each local coordinate is reduced by what the
+  voxel's half-width can change it. Trained 3DGS surfaces are thin (normal sigma of millimetres),
   so a voxel centre 2.5 cm from a wall sees rho ~ 0 and centre sampling leaves holes in walls;
   the bound never misses a surface crossing the voxel. bench-spatial measures both.
 """
@@ -59,14 +60,15 @@ def gaussian_params(scene: GaussianScene, grid: VoxelGrid, cfg: VoxelizeConfig) 
 
     The support's world-axis half-extent is truncation * sqrt(sum_k (R_jk sigma_k)^2) (the box of
     the ellipsoid); a voxel is visited when its centre lies within it, plus half a voxel for the
-    'max' bound, whose per-local-axis slack is w_k = sum_j |R_jk| voxel_j / 2.
+    'max' bound, whose per-local-axis slack from the voxel's x, y extent is
+    w_k = sum_{j in x, y} |R_jk| voxel_j / 2 (the z extent is minimized over exactly).
     """
     if cfg.sample not in ("max", "center"):
         raise ValueError(f"voxelize.sample must be 'max' or 'center', got {cfg.sample!r}")
     keep, means, rt, inv_sig, alpha, w, lo, hi = gaussian_params_kernel(
         scene.means, scene.quats, scene.log_scales, scene.opacity_logits, np.asarray(grid.origin, np.float64),
         np.asarray(grid.voxel_size, np.float64), np.asarray(grid.shape, np.int64), float(cfg.truncation),
-        cfg.sample == "max", float(cfg.min_alpha))
+        cfg.sample == "max", float(cfg.min_alpha), cfg.sample == "max")
     return GaussianParams(means[keep], rt[keep], inv_sig[keep], alpha[keep], w[keep], lo[keep], hi[keep])
 
 
@@ -100,7 +102,8 @@ def log_transmittance_blocks(scene: GaussianScene, grid: VoxelGrid, cfg: Voxeliz
     if device != "cpu":
         from stages.voxelize.kernel_torch import TorchVoxelizer
 
-        tv = TorchVoxelizer(p, grid, cfg.truncation, device="cuda" if device == "cuda" else "cpu")
+        tv = TorchVoxelizer(p, grid, cfg.truncation, device="cuda" if device == "cuda" else "cpu",
+                            exact_z=cfg.sample == "max")
         for x0 in range(0, nx, bx):
             yield x0, tv.block(x0, min(bx, nx - x0))
         return
@@ -122,7 +125,7 @@ def log_transmittance_blocks(scene: GaussianScene, grid: VoxelGrid, cfg: Voxeliz
         slab_idx = rep_g[order]
         slab_ptr = np.concatenate([[0], np.cumsum(np.bincount(rep_s, minlength=nslab))]).astype(np.int64)
         out = accumulate_block(p.means, p.rt, p.inv_sig, p.alpha, p.w, p.lo, p.hi, slab_ptr, slab_idx,
-                               org, vs, ny, nz, x0, nslab, slab_w, trunc2)
+                               org, vs, ny, nz, x0, nslab, slab_w, trunc2, cfg.sample == "max")
         yield x0, out[: x1 - x0]
 
 
