@@ -52,11 +52,19 @@ class TorchVoxelizer:
         self.hi = torch.as_tensor(p.hi, device=self.dev)
         self.origin = f(np.asarray(grid.origin))
         self.vs = f(np.asarray(grid.voxel_size))
-        self.chunk = chunk or (1 << 24 if self.dev.type == "cuda" else 1 << 20)
+        self.chunk = chunk or self._default_chunk()
         self.exact_z = exact_z
         self.hz = 0.5 * float(grid.voxel_size[2])
         # slack of each local axis from the voxel's height, folded in by the cheap pre-test
         self.zslack = self.rt[:, :, 2].abs() * self.hz if exact_z else torch.zeros_like(self.w)
+
+    def _default_chunk(self) -> int:
+        """(Gaussian, voxel) pairs per chunk: ~600 bytes of temporaries each, so a quarter of the
+        free GPU memory (16.7 M pairs, ~10 GB, at most); 1 M pairs on the CPU."""
+        if self.dev.type != "cuda":
+            return 1 << 20
+        free, _ = torch.cuda.mem_get_info(self.dev)
+        return int(min(1 << 24, max(1 << 18, free // 4 // 600)))
 
     def block(self, x0: int, bx: int) -> np.ndarray:
         """sum_i log(1 - rho_iv) for x in [x0, x0 + bx): [bx, ny, nz] float32."""
