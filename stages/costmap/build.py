@@ -237,9 +237,7 @@ def build_costmap(scene: GaussianScene, emb: Embodiment, cfg: CostmapConfig, vcf
     c = s // 2
     # distance from a map cell centre to the nearest obstacle fine cell, minus half a fine cell
     # (the obstacle may reach the near edge of its fine cell)
-    clearance = np.maximum(dist_f[c::s, c::s] - 0.5 * res_f, 0.0).astype(np.float32)
-    clearance[fine[c::s, c::s]] = 0.0
-    clearance = np.minimum(clearance, 1e3)
+    clearance = np.clip(dist_f[c::s, c::s] - 0.5 * res_f, 0.0, 1e3).astype(np.float32)
     raw = fine.reshape(shape[0], s, shape[1], s).any(axis=(1, 3))
     sup, sinfo = support if support is not None else support_mask(scene, origin, shape, cfg, vcfg)
     clearance[~sup] = -1.0
