@@ -5,12 +5,13 @@ import sys
 
 import hydra
 
-from pipeline.config import register_configs
+from pipeline.config import CONF_DIR, register_configs
 
 register_configs()
 
 
-@hydra.main(config_path="../conf", config_name="config", version_base="1.3")
+# an absolute path: the console script and `python -m pipeline` find the same conf/
+@hydra.main(config_path=str(CONF_DIR), config_name="config", version_base="1.3")
 def _app(cfg) -> None:
     from pipeline.executor import main_cfg
 

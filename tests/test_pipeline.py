@@ -135,3 +135,23 @@ def test_batch_submission_scripts():
     finally:
         cluster.close()
     assert "#SBATCH -p gpu" in js and "--constraint=skylake" in js and "#SBATCH --cpus-per-task=16" in js
+
+
+@pytest.mark.parametrize("cmd", [["-m", "pipeline"], None])
+def test_cli_composes_the_config(cmd, tmp_path):
+    """Both entry points compose conf/ (with overrides) from any working directory."""
+    import shutil
+    import subprocess
+    import sys
+
+    if cmd is None:
+        exe = shutil.which("navarena", path=str(Path(sys.executable).parent))
+        if exe is None:
+            pytest.skip("navarena console script not installed (pip install -e .)")
+        argv = [exe]
+    else:
+        argv = [sys.executable, *cmd]
+    out = subprocess.run(argv + ["--cfg", "job", "embodiment=stretch", "costmap.resolution=0.02"],
+                         cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "name: stretch" in out.stdout and "resolution: 0.02" in out.stdout
