@@ -1,6 +1,7 @@
 """Catalogs: which scenes exist (id, group, path, format) and where each logical dataset lives.
 
-A catalog YAML has ``scenes:`` (explicit entries) and/or ``synthetic:`` (a generated range of
+A catalog YAML has ``scenes:`` (explicit entries; relative paths are relative to the catalog
+file's folder) and/or ``synthetic:`` (a generated range of
 procedural scenes), and may override entries of the shared layout (catalogs/layout.yaml) under
 ``layout:``. Stage code asks ``catalog.path("costmaps", scene)``, never builds paths itself.
 """
@@ -58,7 +59,7 @@ class Catalog:
             sid = e.get("id") or scene_id_for(group, e["name"], taken)
             path = Path(e["path"])
             if not path.is_absolute():
-                path = (self.file.parent.parent / path).resolve()  # relative to the project root
+                path = (self.file.parent / path).resolve()  # relative to the catalog file's folder
             self.scenes.append(SceneEntry(sid, e["name"], group, str(path), e["format"]))
             taken.add(sid)
         syn = spec.get("synthetic")

@@ -209,3 +209,23 @@ def test_stored_costmap_loads_into_the_same_queries(tmp_path):
     xy = cm.cell_centers(free[:: max(1, len(free) // 500)])
     assert cm.are_states_valid(xy).all()  # every free cell centre is a valid pose
     assert (cm.component_at(xy) > 0).all()
+
+
+def test_catalog_paths_ids_and_layout(tmp_path):
+    from pipeline.catalog import Catalog, scene_id_for
+
+    (tmp_path / "cats").mkdir()
+    cat = tmp_path / "cats" / "mine.yaml"
+    cat.write_text("layout:\n  costmaps: '{root}/maps/{group}/{scene_id}.zarr'\n"
+                   "scenes:\n  - {name: a, group: g, path: scenes/a.ply, format: inria_ply}\n"
+                   "  - {name: b, group: g, path: /abs/b.splat, format: splat}\n")
+    c = Catalog(cat, tmp_path / "data")
+    a, b = sorted(c.scenes, key=lambda s: s.name)
+    assert a.path == str(tmp_path / "cats" / "scenes" / "a.ply") and b.path == "/abs/b.splat"
+    import hashlib
+
+    assert a.scene_id == hashlib.sha256(b"g:a").hexdigest()[:8] == scene_id_for("g", "a")
+    assert c.path("costmaps", a) == tmp_path / "data" / "maps" / "g" / f"{a.scene_id}.zarr"
+    assert c.path("markers", a, stage="align") == tmp_path / "data" / "_markers" / "align" / f"{a.scene_id}.json"
+    real = Catalog(PROJECT / "catalogs" / "real_samples.yaml", tmp_path)
+    assert all(Path(s.path).parent == (PROJECT.parent / "shared" / "data" / "real").resolve() for s in real.scenes)
