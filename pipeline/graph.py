@@ -21,6 +21,8 @@ class Stage:
         config: config sections that determine its output (their change recomputes it).
         version: bump when the stage's code changes its output.
         only_synthetic: the stage applies to synthetic scenes only (others pass through).
+        inputs: optional "module:function" of cfg -> JSON-able data the stage also reads from
+            outside its config sections (hashed with them), e.g. embodiment files.
     """
 
     name: str
@@ -29,10 +31,15 @@ class Stage:
     config: tuple[str, ...] = ()
     version: str = "1"
     only_synthetic: bool = False
+    inputs: str | None = None
 
     def function(self) -> Callable:
-        mod, fn = self.target.split(":")
-        return getattr(importlib.import_module(mod), fn)
+        return _load(self.target)
+
+
+def _load(target: str) -> Callable:
+    mod, fn = target.split(":")
+    return getattr(importlib.import_module(mod), fn)
 
 
 STAGES: tuple[Stage, ...] = (
@@ -40,7 +47,8 @@ STAGES: tuple[Stage, ...] = (
     Stage("ingest", "stages.ingest:run", ("synthesize",), ("ingest",)),
     Stage("voxelize", "stages.voxelize.stage:run", ("ingest",), ("voxelize",)),
     Stage("align", "stages.align.stage:run", ("voxelize",), ("align",)),
-    Stage("costmap", "stages.costmap.stage:run", ("align",), ("costmap", "voxelize", "embodiment")),
+    Stage("costmap", "stages.costmap.stage:run", ("align",), ("costmap", "voxelize", "embodiment"),
+          inputs="stages.costmap.stage:hashed_inputs"),
     Stage("asset", "stages.asset:run", ("costmap",), ("asset",)),
 )
 BY_NAME = {s.name: s for s in STAGES}
@@ -67,10 +75,8 @@ def config_hashes(cfg) -> dict[str, str]:
     out: dict[str, str] = {}
     for s in STAGES:
         part = {k: OmegaConf.to_container(cfg[k], resolve=True) for k in s.config}
-        if s.name == "costmap":  # extra embodiments are part of the costmap's inputs
-            from stages.costmap.stage import embodiments
-
-            part["_embodiments"] = [vars(e) for e in embodiments(cfg)]
+        if s.inputs:
+            part["_inputs"] = _load(s.inputs)(cfg)
         blob = json.dumps({"stage": s.name, "version": s.version, "config": part,
                            "needs": [out[n] for n in s.needs]}, sort_keys=True, default=str)
         out[s.name] = hashlib.sha256(blob.encode()).hexdigest()[:16]

@@ -23,6 +23,7 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import Delaunay
 
+from stages.costmap.kernels import rasterize_triangles
 from stages.gaussians.model import GaussianScene
 from stages.voxelize import VoxelGrid, VoxelizeConfig, column_max_opacity, opacity_field
 
@@ -193,16 +194,9 @@ def support_mask(scene: GaussianScene, origin, shape, cfg: CostmapConfig, vcfg: 
         with np.errstate(divide="ignore", invalid="ignore"):
             circ = a * b * c / (2.0 * cross)
         keep = np.isfinite(circ) & (circ <= cfg.alpha_radius)
-        _rasterize_triangles(p[keep] / cfg.resolution - 0.5, sup)
+        rasterize_triangles(np.ascontiguousarray(p[keep] / cfg.resolution - 0.5), sup)
         info["alpha_triangles"] = int(keep.sum())
     return sup, info
-
-
-def _rasterize_triangles(tris: np.ndarray, out: np.ndarray) -> None:
-    """Set cells of out [ny, nx] whose centre (integer coords) lies in any triangle [T, 3, 2] (x, y)."""
-    from stages.costmap.kernels import rasterize_triangles
-
-    rasterize_triangles(np.ascontiguousarray(tris, dtype=np.float64), out)
 
 
 def free_components(free: np.ndarray) -> np.ndarray:

@@ -21,6 +21,12 @@ def embodiments(cfg) -> list:
     return [main] + extra
 
 
+def hashed_inputs(cfg) -> list[dict]:
+    """The embodiments this stage builds maps for, as read from conf/embodiment (part of its
+    config hash: editing an embodiment file recomputes the costmaps)."""
+    return [vars(e) for e in embodiments(cfg)]
+
+
 def run(scene, cfg, catalog) -> dict:
     ccfg: CostmapConfig = OmegaConf.to_object(cfg.costmap)
     vcfg = OmegaConf.to_object(cfg.voxelize)
