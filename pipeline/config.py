@@ -10,6 +10,7 @@ from omegaconf import OmegaConf
 
 from stages.align.floor import AlignConfig
 from stages.costmap.build import CostmapConfig, Embodiment
+from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.gaussians.validate import ValidationLimits
 from stages.synthetic.generate import SyntheticConfig
 from stages.voxelize.field import VoxelizeConfig
@@ -103,7 +104,8 @@ class AssetConfig:
 
 @dataclass
 class NavArenaConfig:
-    stages: list[str] = field(default_factory=lambda: ["synthesize", "ingest", "voxelize", "align", "costmap", "asset"])
+    stages: list[str] = field(default_factory=lambda: ["synthesize", "ingest", "voxelize", "align", "costmap", "asset",
+                                                       "episodes"])
     """Stages to run (their missing or stale upstream stages run too)."""
     force: bool = False
     """Recompute the selected stages even when their markers are current."""
@@ -117,6 +119,11 @@ class NavArenaConfig:
     align: AlignConfig = field(default_factory=AlignConfig)
     costmap: CostmapConfig = field(default_factory=CostmapConfig)
     asset: AssetConfig = field(default_factory=AssetConfig)
+    episodes: EpisodesConfig = field(default_factory=EpisodesConfig)
+    task: dict[str, TaskConfig] = field(default_factory=dict)
+    """Tasks to generate, by name (config group `task`, several at once: task=[pointnav,objectnav])."""
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    """Expert planner (config group `planner`)."""
     embodiment: Embodiment = field(default_factory=Embodiment)
     scenes: ScenesConfig = field(default_factory=ScenesConfig)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)

@@ -39,7 +39,8 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
         return {**base, "status": "n/a"}
     marker = catalog.path("markers", scene, stage=stage_name)
     if not force and is_done(marker, config_hash):
-        return {**base, "status": "cached"}
+        short = json.loads(marker.read_text()).get("info", {}).get("shortfall")
+        return {**base, "status": "cached", **({"shortfall": short} if short else {})}
     marker.unlink(missing_ok=True)  # outputs are about to change: the old marker must not vouch for them
     t0 = time.perf_counter()
     try:
@@ -50,7 +51,8 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
     duration = round(time.perf_counter() - t0, 3)
     write_marker(marker, {"stage": stage_name, "scene_id": scene.scene_id, "config_hash": config_hash,
                           "duration_s": duration, "info": info})
-    return {**base, "status": "done", "duration_s": duration}
+    short = {"shortfall": info["shortfall"]} if info.get("shortfall") else {}
+    return {**base, "status": "done", "duration_s": duration, **short}
 
 
 def jobqueue_cluster(ex):
@@ -176,7 +178,8 @@ def execute(cfg, console: Console | None = None) -> dict:
                "finished_at": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
                "catalog": str(cat_file), "shard": [cfg.scenes.shard, cfg.scenes.num_shards],
                "stages": [s.name for s in stages], "config_hashes": {s.name: hashes[s.name] for s in stages},
-               "counts": {}, "failures": [r for r in results if r["status"] in FAILED], "results": results}
+               "counts": {}, "failures": [r for r in results if r["status"] in FAILED],
+               "shortfalls": [r for r in results if r.get("shortfall")], "results": results}
     for r in results:
         c = summary["counts"].setdefault(r["stage"], {})
         c[r["status"]] = c.get(r["status"], 0) + 1
@@ -205,6 +208,16 @@ def _print_summary(summary: dict, console: Console) -> None:
             f.add_column(col, overflow="fold")
         for r in summary["failures"]:
             f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], r["status"], r.get("error", ""))
+        console.print(f)
+    if summary["shortfalls"]:
+        f = Table(title="scenes that could not yield the requested outputs")
+        for col in ("scene", "stage", "what", "got / asked", "rejections by reason"):
+            f.add_column(col, overflow="fold")
+        for r in summary["shortfalls"]:
+            for s in r["shortfall"]:
+                f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], s.get("task", ""),
+                          f"{s.get('episodes')} / {s.get('requested')}",
+                          ", ".join(f"{k} {v}" for k, v in s.get("rejections", {}).items()))
         console.print(f)
 
 

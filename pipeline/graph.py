@@ -50,6 +50,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("costmap", "stages.costmap.stage:run", ("align",), ("costmap", "voxelize", "embodiment"),
           inputs="stages.costmap.stage:hashed_inputs"),
     Stage("asset", "stages.asset:run", ("costmap",), ("asset",)),
+    Stage("episodes", "stages.episodes.stage:run", ("costmap",), ("episodes", "task", "planner", "embodiment")),
 )
 BY_NAME = {s.name: s for s in STAGES}
 

@@ -16,6 +16,7 @@ from PIL import Image
 from pipeline.atomic import atomic_path
 from stages.gaussians.formats import write_inria_ply, write_splat
 from stages.gaussians.store import read_scene_zarr
+from stages.instances import ground_truth_labels
 
 NORMALIZER_VERSION = "navarena-0.1"
 
@@ -91,17 +92,7 @@ def run(scene, cfg, catalog) -> dict:
             write_splat(tmp / "compressed.splat", aligned)
             files["compressed_ply"] = "compressed.splat"
         if scene.synthetic:
-            gt = catalog.path("source_synthetic", scene) / "ground_truth"
-            tf = np.asarray(json.loads((gt / "transform.json").read_text())["canonical_to_source"])
-            to_aligned = t @ tf
-            labels = json.loads((gt / "labels.json").read_text())["labels"]
-            for lab in labels:
-                lab["position"] = (to_aligned[:3, :3] @ np.asarray(lab["position"]) + to_aligned[:3, 3]).tolist()
-                box = lab.get("bounding_box")
-                if box:  # axis-aligned box of the transformed corners
-                    c = np.array(np.meshgrid(*zip(box["min"], box["max"]), indexing="ij")).reshape(3, -1).T
-                    c = c @ to_aligned[:3, :3].T + to_aligned[:3, 3]
-                    lab["bounding_box"] = {"min": c.min(0).tolist(), "max": c.max(0).tolist()}
+            labels = ground_truth_labels(scene, catalog)
             (tmp / "labels.json").write_text(json.dumps({"schema_version": "1.0", "labels": labels}, indent=1))
             files["labels"] = labels_file = "labels.json"
         now = build_time()

@@ -46,6 +46,10 @@ class Embodiment:
     """Camera pitch, degrees (negative looks down)."""
     hfov_deg: float = 90.0
     """Horizontal field of view, degrees."""
+    image_width: int = 640
+    """Camera image width, pixels."""
+    image_height: int = 480
+    """Camera image height, pixels."""
     max_linear_velocity: float = 0.45
     """m/s."""
     max_angular_velocity: float = 0.8

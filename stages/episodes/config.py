@@ -1,0 +1,110 @@
+"""Configuration of the episodes stage: one TaskConfig per task (config group `task`), the shared
+EpisodesConfig (section `episodes`) and the expert planner (config group `planner`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+TASK_TYPES = ("pointnav", "imagenav", "objectnav")
+OBJECTNAV_CATEGORIES = ["chair", "bed", "sofa", "toilet", "tv_monitor", "plant", "table", "cabinet"]
+
+
+@dataclass
+class TaskConfig:
+    """One navigation task (conf/task/{name}.yaml; several may be selected: task=[pointnav,objectnav])."""
+
+    type: str = "pointnav"
+    """pointnav, imagenav or objectnav."""
+    episodes_per_scene: int = 100
+    """Episodes to generate per scene (a scene that cannot yield them is reported with reasons)."""
+    min_geodesic: float = 1.0
+    """Shortest allowed geodesic start-goal distance, metres."""
+    max_geodesic: float = 30.0
+    """Longest allowed geodesic start-goal distance, metres."""
+    success_radius: float = 0.5
+    """Success region radius around the goal (ObjectNav: around the nearest instance centre on the
+    floor), metres. Paper defaults: PointNav 0.5, ImageNav and ObjectNav 1.0."""
+    heading_tolerance_deg: float = 30.0
+    """ImageNav: the expert ends within this heading of the goal yaw (Pose SR criterion), degrees."""
+    trivial_ratio: float = 1.1
+    """Habitat's rule against near-straight episodes: a pair with geodesic / euclidean below this is
+    kept only with probability 20 (r - 0.98)^2 (PointNav and ImageNav; 0 disables)."""
+    starts_per_goal: int = 10
+    """Episodes drawn from one goal's distance field (one Dijkstra serves them all)."""
+    categories: list[str] = field(default_factory=lambda: list(OBJECTNAV_CATEGORIES))
+    """ObjectNav: the categories that may be goals."""
+    instance_source: str = "ground_truth"
+    """ObjectNav: where instances come from: 'ground_truth' (synthetic scenes' labels) or
+    'model_predicted' (the semantics stage's instance table)."""
+    view_point_spacing: float = 0.25
+    """ObjectNav: view points are free cells on a lattice of this spacing within the success radius
+    of an instance, metres."""
+    view_point_margin: float = 0.15
+    """ObjectNav: view points lie this far inside the success radius, metres (so that an agent
+    moving in 0.25 m steps can stop inside the region, not only on its rim)."""
+    max_view_points: int = 32
+    """ObjectNav: at most this many view points per instance (spread around it)."""
+
+
+@dataclass
+class DifficultyConfig:
+    """Difficulty bins by geodesic distance and their closed-loop step budgets."""
+
+    names: list[str] = field(default_factory=lambda: ["easy", "medium", "hard"])
+    """Bin names, in order of distance."""
+    upper: list[float] = field(default_factory=lambda: [3.0, 6.0, 1e9])
+    """Upper geodesic bound of each bin, metres (a bin is [previous upper, upper))."""
+    max_steps: list[int] = field(default_factory=lambda: [500, 1000, 1500])
+    """Step budget of each bin in closed-loop evaluation."""
+    balance: bool = True
+    """Draw starts so that the bins fill evenly (round robin over the bins a goal can reach)."""
+
+
+@dataclass
+class PlannerConfig:
+    """The OMPL expert planner (conf/planner/{key}.yaml)."""
+
+    name: str = "rrtconnect"
+    """Registry key: rrtconnect (feasible, fast), rrtstar, informed_rrtstar, bitstar (asymptotically
+    optimal)."""
+    max_iterations: int = 20000
+    """Termination: planner loop iterations per query (deterministic, unlike a time budget)."""
+    range: float = 0.0
+    """Tree extension step, metres (0 = OMPL's default from the space extent)."""
+    cost_tolerance: float = 0.02
+    """Asymptotically optimal planners stop once the path is within this fraction of the geodesic."""
+    simplify: bool = True
+    """Shorten the path with OMPL's PathSimplifier (vertex reduction, rope shortcutting)."""
+    attempts: int = 3
+    """Plan up to this many times while the path is longer than retry_ratio x the geodesic; keep
+    the shortest (a feasible planner may pick a long way round an obstacle)."""
+    retry_ratio: float = 1.05
+    """See attempts."""
+
+
+@dataclass
+class EpisodesConfig:
+    """The episodes stage."""
+
+    seed: int = 0
+    """Base seed; each (scene, task) derives its own stream from it."""
+    splits: dict[str, float] = field(default_factory=lambda: {"train": 1.0})
+    """Share of each scene's episodes per split (train, val_seen, val_unseen, test), in order."""
+    components: str = "largest"
+    """Free components episodes may use: 'largest' (the main one) or 'all' (every component of at
+    least min_island_area_m2; start and goal always share one)."""
+    min_island_area_m2: float = 2.0
+    """Smallest free component that may hold episodes, m^2."""
+    geodesic_neighbourhood: int = 6
+    """Radius R (cells) of the any-angle grid graph for geodesics; R = 6 overstates a straight
+    distance by at most 0.34 % (1 = 8-connected: 8.2 %)."""
+    dt: float = 0.05
+    """Expert rollout time step, seconds (20 Hz)."""
+    forward_step: float = 0.25
+    """Discrete expert: forward step, metres."""
+    turn_angle_deg: float = 15.0
+    """Discrete expert: turn step, degrees."""
+    oracle: bool = True
+    """Also store the discrete-action expert's action sequence per episode."""
+    max_attempts_factor: int = 20
+    """A task stops sampling after episodes_per_scene times this many candidates."""
+    difficulty: DifficultyConfig = field(default_factory=DifficultyConfig)

@@ -1,0 +1,165 @@
+"""Expert planning in SE(2) with OMPL on a costmap.
+
+The state validity checker and the motion validator are the costmap's own exact disk tests (one
+call per edge instead of OMPL's sampled checks along it). Termination is by iteration count, and
+OMPL's random generator is reseeded per scene, so the same inputs give the same paths whatever
+machine or worker runs them. Planners are chosen by registry key (config group `planner`).
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+
+import numpy as np
+from ompl import base as ob
+from ompl import geometric as og
+from ompl import util as ou
+
+from stages.episodes.config import PlannerConfig
+
+
+def _planner_registry() -> dict[str, tuple]:
+    """key -> (OMPL class, asymptotically optimal). Not registered, see design.md: AORRTC (crashes in
+    these bindings) and PRM* (its solve() checks for solutions on a second thread, which deadlocks on
+    the Python validity callback)."""
+    return {
+        "rrtconnect": (og.RRTConnect, False),
+        "rrtstar": (og.RRTstar, True),
+        "informed_rrtstar": (og.InformedRRTstar, True),
+        "bitstar": (og.BITstar, True),
+    }
+
+
+PLANNERS = tuple(_planner_registry())
+
+
+@contextlib.contextmanager
+def _quiet():
+    """Silence OMPL's console output (reseeding after first use logs an error by design)."""
+    level = ou.getLogLevel()
+    ou.setLogLevel(ou.LOG_NONE)
+    try:
+        yield
+    finally:
+        ou.setLogLevel(level)
+
+
+def seed_ompl(seed: int) -> None:
+    """Reseed OMPL's seed generator; every OMPL object created afterwards draws from it."""
+    with _quiet():
+        ou.RNG.setSeed(int(seed) % (2**31 - 1) + 1)
+
+
+class _DiskMotionValidator(ob.MotionValidator):
+    def __init__(self, si, costmap):
+        super().__init__(si)
+        self._check = costmap.is_motion_valid
+
+    def checkMotion(self, a, b):  # noqa: N802 (OMPL's name)
+        return self._check(a.getX(), a.getY(), b.getX(), b.getY())
+
+
+class ScenePlanner:
+    """OMPL planning context for one costmap: space, validity, planner and simplifier.
+
+    Create it after seed_ompl(seed) for reproducible paths. Not thread-safe.
+    """
+
+    def __init__(self, costmap, cfg: PlannerConfig):
+        reg = _planner_registry()
+        if cfg.name not in reg:
+            raise ValueError(f"unknown planner {cfg.name!r}; registered: {', '.join(reg)}")
+        cls, self.optimizing = reg[cfg.name]
+        self.cfg = cfg
+        self.costmap = costmap
+        ny, nx = costmap.clearance.shape
+        self.space = ob.SE2StateSpace()
+        b = ob.RealVectorBounds(2)
+        b.setLow(0, costmap.origin[0])
+        b.setHigh(0, costmap.origin[0] + nx * costmap.resolution)
+        b.setLow(1, costmap.origin[1])
+        b.setHigh(1, costmap.origin[1] + ny * costmap.resolution)
+        self.space.setBounds(b)
+        self.si = ob.SpaceInformation(self.space)
+        valid = costmap.is_state_valid
+        self.si.setStateValidityChecker(lambda s: valid(s.getX(), s.getY()))
+        self._mv = _DiskMotionValidator(self.si, costmap)
+        self.si.setMotionValidator(self._mv)
+        self.si.setup()
+        self.planner = cls(self.si)
+        if cfg.range > 0 and hasattr(self.planner, "setRange"):
+            self.planner.setRange(cfg.range)
+        self.simplifier = og.PathSimplifier(self.si)
+        self._setup_done = False
+        self._keep = []  # keeps OMPL states alive while a problem definition refers to them
+
+    def _state(self, x: float, y: float, yaw: float):
+        s = self.space.allocState()
+        s.setX(float(x))
+        s.setY(float(y))
+        s.setYaw(float(math.atan2(math.sin(yaw), math.cos(yaw))))
+        self._keep.append(s)
+        return s
+
+    def _ptc(self, pdef, iterations: int):
+        limit = _iterations(iterations)
+        if self.optimizing:
+            return limit
+        return ob.plannerOrTerminationCondition(limit, ob.exactSolnPlannerTerminationCondition(pdef))
+
+    def plan(self, start, goals, reference_length: float | None = None) -> np.ndarray | None:
+        """Plan from a start pose to the nearest reachable of one or more goal poses.
+
+        Args:
+            start: (x, y, yaw) metres / radians.
+            goals: [G, 3] goal poses (any one ends the path).
+            reference_length: geodesic distance (metres); optimizing planners stop once within
+                cost_tolerance of it.
+        Returns:
+            [M, 3] (x, y, yaw) path vertices from start to a goal, or None if none was found.
+        """
+        self._keep = []
+        pdef = ob.ProblemDefinition(self.si)
+        pdef.addStartState(self._state(*start))
+        goals = np.asarray(goals, float).reshape(-1, 3)
+        if len(goals) == 1:
+            pdef.setGoalState(self._state(*goals[0]))
+        else:
+            gs = ob.GoalStates(self.si)
+            for g in goals:
+                gs.addState(self._state(*g))
+            self._goal_keep = gs
+            pdef.setGoal(gs)
+        obj = ob.PathLengthOptimizationObjective(self.si)
+        if self.optimizing and reference_length is not None:
+            # SE(2) path length also counts heading change (weight 0.5), so allow for it
+            obj.setCostThreshold(ob.Cost(reference_length * (1 + self.cfg.cost_tolerance) + math.pi))
+        pdef.setOptimizationObjective(obj)
+        self.planner.clear()
+        self.planner.setProblemDefinition(pdef)
+        if not self._setup_done:
+            self.planner.setup()
+            self._setup_done = True
+        with _quiet():
+            status = self.planner.solve(self._ptc(pdef, self.cfg.max_iterations))
+        if not pdef.hasExactSolution() or "Exact" not in str(status):
+            return None
+        path = pdef.getSolutionPath()
+        if self.cfg.simplify:
+            self.simplifier.reduceVertices(path)
+            self.simplifier.ropeShortcutPath(path)
+            self.simplifier.reduceVertices(path)
+            self.simplifier.collapseCloseVertices(path)
+        out = np.array([(s.getX(), s.getY(), s.getYaw()) for s in path.getStates()], float)
+        self.planner.clear()
+        return out
+
+
+def _iterations(n: int):
+    count = [0]
+
+    def done() -> bool:
+        count[0] += 1
+        return count[0] > n
+
+    return ob.PlannerTerminationCondition(done)

@@ -1,0 +1,70 @@
+"""The canonical tables of the episodes stage: one pyarrow schema each, defined here only.
+
+Stored hive-partitioned by task and scene (`task=` and `scene_id=` come from the folder names, so
+they are not columns of the files):
+    data/05_episodes/task={task}/scene_id={scene_id}/part-0.parquet      one row per episode
+    data/06_trajectories/task={task}/scene_id={scene_id}/part-0.parquet  one row per expert step
+Frame: the scene's aligned frame (z up, metres, floor z = 0); rotations are quaternions
+[qx, qy, qz, qw] of the heading (yaw about +z, counter-clockwise from +x).
+"""
+from __future__ import annotations
+
+import pyarrow as pa
+
+F64, F32, I32, I8, STR = pa.float64(), pa.float32(), pa.int32(), pa.int8(), pa.string()
+
+
+def _fields(*specs) -> list[pa.Field]:
+    return [pa.field(n, t) for n, t in specs]
+
+
+def _pose(prefix: str) -> list[tuple[str, pa.DataType]]:
+    return [(f"{prefix}position_x", F64), (f"{prefix}position_y", F64), (f"{prefix}position_z", F64),
+            (f"{prefix}rotation_qx", F64), (f"{prefix}rotation_qy", F64), (f"{prefix}rotation_qz", F64),
+            (f"{prefix}rotation_qw", F64)]
+
+
+EPISODE_SCHEMA = pa.schema(_fields(
+    ("episode_id", STR),            # "{split}_{index:06d}", unique within (task, scene)
+    ("split", STR),                 # train | val_seen | val_unseen | test
+    ("scene_path", STR),            # "{group}/{scene_id}"
+    ("task_type", STR),             # pointnav | imagenav | objectnav
+    ("embodiment", STR),
+    ("difficulty", STR),            # easy | medium | hard (by geodesic distance)
+    ("max_steps", I32),             # closed-loop step budget of the difficulty
+    *_pose("start_"), ("start_yaw", F64),
+    ("goal_type", STR),             # position | image | object
+    *_pose("goal_"), ("goal_yaw", F64),  # ObjectNav: the nearest view point of the goal set
+    ("success_radius", F32),        # metres
+    ("heading_tolerance", F32),     # radians (ImageNav Pose SR), NaN otherwise
+    ("geodesic_distance", F32),     # metres: the shortest valid path known (what SPL divides by)
+    ("euclidean_distance", F32),    # metres, start to goal position
+    ("num_steps", I32),             # rows of the expert trajectory (dt steps)
+    ("total_time", F32),            # seconds
+    ("path_length", F32),           # metres travelled by the expert
+    ("avg_speed", F32), ("max_speed", F32),  # m/s
+    ("oracle_actions", pa.list_(I8)),  # discrete expert: 0 stop, 1 forward, 2 left, 3 right
+    ("goal_image_path", STR),       # ImageNav: relative path of the goal image once rendered
+    ("goal_camera_json", STR),      # ImageNav: camera pose and intrinsics to render the goal view
+    ("goal_object_category", STR), ("goal_object_id", I32),
+    ("instruction_text", STR), ("instruction_language", STR),
+    ("goals_json", STR),            # JSON array of all goals (ObjectNav: instances + view points)
+    ("seed", pa.int64()),           # the (scene, task) stream seed
+))
+
+TRAJECTORY_SCHEMA = pa.schema(_fields(
+    ("episode_id", STR),
+    ("step", I32),                  # row k is the state at t = k dt
+    ("timestamp", F64),             # seconds
+    *_pose(""), ("yaw", F64),
+    ("action", STR),                # move_forward | turn_left | turn_right | stop (the control's kind)
+    ("action_id", I8),              # 0 stop, 1 move_forward, 2 turn_left, 3 turn_right (Habitat's ids)
+    ("linear_velocity", F32),       # v held from this row to the next, m/s (robot frame, forward)
+    ("angular_velocity", F32),      # omega held from this row to the next, rad/s (counter-clockwise)
+    ("linear_velocity_x", F32), ("linear_velocity_y", F32),  # v in the world frame, m/s
+    ("linear_acceleration", F32),   # (v_k - v_k-1) / dt, m/s^2
+    ("angular_acceleration", F32),  # (omega_k - omega_k-1) / dt, rad/s^2
+    ("curvature", F32),             # omega / v where v > 0, else 0, 1/m
+    ("dx", F32), ("dy", F32), ("dyaw", F32),  # pose change to the next row in this row's robot frame
+    ("phase", STR),                 # rotate | translate | stop
+))

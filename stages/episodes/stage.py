@@ -1,0 +1,86 @@
+"""Stage `episodes`: per scene, the configured tasks' episodes and expert trajectories ->
+hive-partitioned Parquet (05_episodes, 06_trajectories)."""
+from __future__ import annotations
+
+import shutil
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from omegaconf import OmegaConf
+
+from pipeline.atomic import atomic_path
+from stages.costmap.query import Costmap
+from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
+from stages.episodes.generate import EpisodeGenerator, stream_seed
+from stages.episodes.geodesic import NavGraph
+from stages.episodes.schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA
+from stages.instances import load_instances
+
+
+def eligible_cells(costmap: Costmap, ecfg: EpisodesConfig) -> np.ndarray:
+    """[ny, nx] bool cells episodes may use: valid states of the largest free component (or of
+    every component, components=all) whose area is at least min_island_area_m2."""
+    comp = costmap.components
+    valid = ~costmap.occupancy & (comp > 0)
+    labels, counts = np.unique(comp[valid], return_counts=True)
+    big = labels[counts * costmap.resolution ** 2 >= ecfg.min_island_area_m2]
+    if ecfg.components == "largest":
+        big = big[big == 1]
+    elif ecfg.components != "all":
+        raise ValueError(f"episodes.components must be 'largest' or 'all', got {ecfg.components!r}")
+    return valid & np.isin(comp, big)
+
+
+def write_table(rows_or_cols, schema: pa.Schema, path) -> None:
+    """Write one Parquet file atomically (zstd, no pandas metadata: same rows, same bytes)."""
+    if isinstance(rows_or_cols, list):
+        table = pa.Table.from_pylist(rows_or_cols, schema=schema)
+    else:
+        table = pa.table({f.name: pa.array(np.concatenate(rows_or_cols[f.name]) if rows_or_cols else [], type=f.type)
+                          for f in schema}, schema=schema)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd", row_group_size=1 << 20)
+
+
+def remove_scene_partitions(catalog, scene) -> None:
+    """Delete this scene's previous shards of every task (a task dropped from the config must not
+    leave stale episodes behind)."""
+    for root in ("episodes_root", "trajectories_root"):
+        for d in catalog.path(root).glob(f"task=*/scene_id={scene.scene_id}"):
+            shutil.rmtree(d, ignore_errors=True)
+
+
+def run(scene, cfg, catalog) -> dict:
+    ecfg: EpisodesConfig = OmegaConf.to_object(cfg.episodes)
+    pcfg: PlannerConfig = OmegaConf.to_object(cfg.planner)
+    emb = OmegaConf.to_object(cfg.embodiment)
+    cm = Costmap.load(catalog.path("costmaps", scene), emb.name)
+    graph = NavGraph(cm, eligible_cells(cm, ecfg), ecfg.geodesic_neighbourhood)
+    remove_scene_partitions(catalog, scene)
+    result = {"outputs": [], "tasks": {}, "graph_nodes": len(graph.cells), "graph_edges": graph.num_edges}
+    shortfalls = []
+    for name in sorted(cfg.task):
+        tcfg: TaskConfig = OmegaConf.to_object(cfg.task[name])
+        instances = None
+        if tcfg.type == "objectnav":
+            instances = load_instances(scene, catalog, tcfg.instance_source).to_pylist()
+        seed = stream_seed(ecfg.seed, scene.scene_id, name)
+        gen = EpisodeGenerator(cm, graph, tcfg, ecfg, pcfg, emb, f"{scene.group}/{scene.scene_id}", seed, instances)
+        res = gen.generate()
+        for ds, data, schema in (("episodes", res.episodes, EPISODE_SCHEMA),
+                                 ("trajectories", res.trajectories, TRAJECTORY_SCHEMA)):
+            path = catalog.path(ds, scene, task=name)
+            write_table(data, schema, path)
+            result["outputs"].append(str(path))
+        result["tasks"][name] = {
+            "episodes": len(res.episodes), "requested": res.requested,
+            "trajectory_rows": int(sum(len(a) for a in res.trajectories.get("step", []))),
+            "rejections": dict(sorted(res.rejections.items())), "cpu_s": round(res.cpu_s, 3),
+            "wall_s": round(res.wall_s, 3), "geodesic_from_expert": res.geodesic_from_expert}
+        if len(res.episodes) < res.requested:
+            shortfalls.append({"task": name, "episodes": len(res.episodes), "requested": res.requested,
+                               "rejections": dict(sorted(res.rejections.items()))})
+    if shortfalls:
+        result["shortfall"] = shortfalls
+    return result
