@@ -11,6 +11,7 @@ from omegaconf import OmegaConf
 from stages.align.floor import AlignConfig
 from stages.costmap.build import CostmapConfig, Embodiment
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
+from stages.episodes.export import ExportConfig
 from stages.gaussians.validate import ValidationLimits
 from stages.synthetic.generate import SyntheticConfig
 from stages.voxelize.field import VoxelizeConfig
@@ -105,7 +106,7 @@ class AssetConfig:
 @dataclass
 class NavArenaConfig:
     stages: list[str] = field(default_factory=lambda: ["synthesize", "ingest", "voxelize", "align", "costmap", "asset",
-                                                       "episodes"])
+                                                       "episodes", "export"])
     """Stages to run (their missing or stale upstream stages run too)."""
     force: bool = False
     """Recompute the selected stages even when their markers are current."""
@@ -124,6 +125,7 @@ class NavArenaConfig:
     """Tasks to generate, by name (config group `task`, several at once: task=[pointnav,objectnav])."""
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     """Expert planner (config group `planner`)."""
+    export: ExportConfig = field(default_factory=ExportConfig)
     embodiment: Embodiment = field(default_factory=Embodiment)
     scenes: ScenesConfig = field(default_factory=ScenesConfig)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)

@@ -20,7 +20,7 @@ from rich.table import Table
 
 from pipeline.atomic import write_text_atomic
 from pipeline.catalog import Catalog, SceneEntry
-from pipeline.graph import BY_NAME, closure, config_hashes
+from pipeline.graph import BY_NAME, _load, closure, config_hashes
 from pipeline.markers import is_done, write_marker
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
@@ -174,6 +174,7 @@ def execute(cfg, console: Console | None = None) -> dict:
             _run_on_dask(cfg, catalog, chain, record, console)
     order = {s.name: i for i, s in enumerate(stages)}
     results.sort(key=lambda r: (r["scene_id"], order[r["stage"]]))
+    results += _finalize(stages, results, cfg, catalog)
     summary = {"started_at": started.isoformat(timespec="seconds"),
                "finished_at": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
                "catalog": str(cat_file), "shard": [cfg.scenes.shard, cfg.scenes.num_shards],
@@ -191,6 +192,24 @@ def execute(cfg, console: Console | None = None) -> dict:
     _print_summary(summary, console)
     console.print(f"run summary: {runs / 'latest.json'}")
     return summary
+
+
+def _finalize(stages, results: list[dict], cfg, catalog: Catalog) -> list[dict]:
+    """Dataset-level steps of the stages that have one and finished on at least one scene."""
+    out = []
+    for st in stages:
+        if not st.finalize or not any(r["stage"] == st.name and r["status"] in ("done", "cached") for r in results):
+            continue
+        base = {"stage": f"{st.name}:finalize", "scene_id": "*", "scene": "dataset"}
+        t0 = time.perf_counter()
+        try:
+            info = _load(st.finalize)(cfg, catalog) or {}
+            out.append({**base, "status": "done", "duration_s": round(time.perf_counter() - t0, 3),
+                        "outputs": info.get("outputs", [])})
+        except Exception as e:  # noqa: BLE001 - recorded like a scene failure
+            out.append({**base, "status": "failed", "error": f"{type(e).__name__}: {e}",
+                        "traceback": traceback.format_exc(limit=6)})
+    return out
 
 
 def _print_summary(summary: dict, console: Console) -> None:

@@ -23,6 +23,9 @@ class Stage:
         only_synthetic: the stage applies to synthetic scenes only (others pass through).
         inputs: optional "module:function" of cfg -> JSON-able data the stage also reads from
             outside its config sections (hashed with them), e.g. embodiment files.
+        finalize: optional "module:function" of (cfg, catalog) -> dict, run once after all scenes
+            of the stage (dataset-level files); it must derive them from what is on disk, so that
+            shards of one dataset agree.
     """
 
     name: str
@@ -32,6 +35,7 @@ class Stage:
     version: str = "1"
     only_synthetic: bool = False
     inputs: str | None = None
+    finalize: str | None = None
 
     def function(self) -> Callable:
         return _load(self.target)
@@ -51,6 +55,8 @@ STAGES: tuple[Stage, ...] = (
           inputs="stages.costmap.stage:hashed_inputs"),
     Stage("asset", "stages.asset:run", ("costmap",), ("asset",)),
     Stage("episodes", "stages.episodes.stage:run", ("costmap",), ("episodes", "task", "planner", "embodiment")),
+    Stage("export", "stages.episodes.export:run", ("episodes", "asset"), ("export",),
+          finalize="stages.episodes.export:finalize"),
 )
 BY_NAME = {s.name: s for s in STAGES}
 
