@@ -123,9 +123,9 @@ def _run_on_dask(cfg, catalog: Catalog, chain, record, console: Console) -> None
             cluster.close()
 
 
-def execute(cfg, console: Console | None = None) -> dict:
-    """Run the configured stages over the configured scenes; returns (and writes) the run summary."""
-    console = console or Console()
+def open_catalog(cfg) -> tuple[Catalog, list[SceneEntry], Path]:
+    """The run's catalog (paths relative to the working directory or the project), its selected
+    scenes and the catalog file."""
     root = Path(cfg.data_root)
     if not root.is_absolute():
         root = Path.cwd() / root
@@ -133,7 +133,14 @@ def execute(cfg, console: Console | None = None) -> dict:
     if not cat_file.is_absolute():
         cat_file = (Path.cwd() / cat_file) if (Path.cwd() / cat_file).exists() else PROJECT_ROOT / cat_file
     catalog = Catalog(cat_file, root, cfg.scenes.count, cfg.scenes.num_gaussians)
-    scenes = catalog.select(cfg.scenes.shard, cfg.scenes.num_shards, cfg.scenes.ids, cfg.scenes.limit)
+    return catalog, catalog.select(cfg.scenes.shard, cfg.scenes.num_shards, cfg.scenes.ids, cfg.scenes.limit), cat_file
+
+
+def execute(cfg, console: Console | None = None) -> dict:
+    """Run the configured stages over the configured scenes; returns (and writes) the run summary."""
+    console = console or Console()
+    catalog, scenes, cat_file = open_catalog(cfg)
+    root = catalog.root
     stages = closure(list(cfg.stages))
     hashes = config_hashes(cfg)
     selected = set(cfg.stages)
@@ -195,10 +202,11 @@ def execute(cfg, console: Console | None = None) -> dict:
 
 
 def _finalize(stages, results: list[dict], cfg, catalog: Catalog) -> list[dict]:
-    """Dataset-level steps of the stages that have one and finished on at least one scene."""
+    """Dataset-level steps of the stages that have one and computed at least one scene in this run
+    (a fully cached stage leaves its dataset-level files as they are)."""
     out = []
     for st in stages:
-        if not st.finalize or not any(r["stage"] == st.name and r["status"] in ("done", "cached") for r in results):
+        if not st.finalize or not any(r["stage"] == st.name and r["status"] == "done" for r in results):
             continue
         base = {"stage": f"{st.name}:finalize", "scene_id": "*", "scene": "dataset"}
         t0 = time.perf_counter()

@@ -56,8 +56,7 @@ def state_valid(f, ox, oy, inv_res, thr, x, y):
     return _field(f, (x - ox) * inv_res - 0.5, (y - oy) * inv_res - 0.5) >= thr
 
 
-@numba.njit(cache=True, parallel=True)
-def states_valid(f, ox, oy, inv_res, thr, xy):
+def _states_valid(f, ox, oy, inv_res, thr, xy):
     n = xy.shape[0]
     out = np.empty(n, dtype=np.bool_)
     for k in numba.prange(n):
@@ -138,11 +137,18 @@ def motion_valid(f, ox, oy, inv_res, thr, x0, y0, x1, y1):
                    (x1 - ox) * inv_res - 0.5, (y1 - oy) * inv_res - 0.5, thr)
 
 
-@numba.njit(cache=True, parallel=True)
-def motions_valid(f, ox, oy, inv_res, thr, seg):
+def _motions_valid(f, ox, oy, inv_res, thr, seg):
     n = seg.shape[0]
     out = np.empty(n, dtype=np.bool_)
     for k in numba.prange(n):
         out[k] = _motion(f, (seg[k, 0] - ox) * inv_res - 0.5, (seg[k, 1] - oy) * inv_res - 0.5,
                          (seg[k, 2] - ox) * inv_res - 0.5, (seg[k, 3] - oy) * inv_res - 0.5, thr)
     return out
+
+
+# Batched queries in two builds: threaded for large batches, serial for small ones (waking the
+# thread pool costs up to milliseconds when it has gone idle between calls).
+states_valid = numba.njit(cache=True, parallel=True)(_states_valid)
+states_valid_serial = numba.njit(cache=True)(_states_valid)
+motions_valid = numba.njit(cache=True, parallel=True)(_motions_valid)
+motions_valid_serial = numba.njit(cache=True)(_motions_valid)

@@ -13,6 +13,9 @@ import numpy as np
 
 from stages.costmap import kernels as K
 
+PARALLEL_BATCH = 20_000
+"""Batches of at least this many queries use the threaded kernels."""
+
 
 def _entry(dispatcher, *example_args):
     """Compiled entry point of a numba function for the types of example_args."""
@@ -75,7 +78,8 @@ class Costmap:
     def are_states_valid(self, xy: np.ndarray) -> np.ndarray:
         """[N, 2+] poses (x, y[, yaw]) -> [N] bool."""
         xy = np.ascontiguousarray(np.asarray(xy, dtype=np.float64)[:, :2])
-        return K.states_valid(self._f, self._ox, self._oy, self._inv, self._thr, xy)
+        fn = K.states_valid if len(xy) >= PARALLEL_BATCH else K.states_valid_serial
+        return fn(self._f, self._ox, self._oy, self._inv, self._thr, xy)
 
     def is_motion_valid(self, x0: float, y0: float, x1: float, y1: float) -> bool:  # fast path per instance
         """Straight segment between two positions: every point of it is a valid state."""
@@ -84,7 +88,8 @@ class Costmap:
     def are_motions_valid(self, segments: np.ndarray) -> np.ndarray:
         """[N, 4] segments (x0, y0, x1, y1) -> [N] bool."""
         seg = np.ascontiguousarray(np.asarray(segments, dtype=np.float64))
-        return K.motions_valid(self._f, self._ox, self._oy, self._inv, self._thr, seg)
+        fn = K.motions_valid if len(seg) >= PARALLEL_BATCH else K.motions_valid_serial
+        return fn(self._f, self._ox, self._oy, self._inv, self._thr, seg)
 
     def clearance_at(self, xy: np.ndarray) -> np.ndarray:
         """Interpolated clearance (metres; negative outside the supported region) at [N, 2] points."""

@@ -241,35 +241,40 @@ class EpisodeGenerator:
         return row
 
     # ---- sampling loop -----------------------------------------------------------------------
-    def _draw_start(self, fld, goal: Goal, produced: int) -> tuple[int, int]:
-        """A start node for a goal's field, and its target difficulty bin (-1 when unbalanced).
-
-        Starts lie within the geodesic limits and, when balancing, in one target bin (round robin
-        over the bins this field can fill). PointNav / ImageNav draw them with Habitat's
-        near-straight keep probability as weight: the same distribution as its rejection
-        sampling, without the rejected draws. Returns (-1, -1) when no start qualifies.
-        """
+    def _start_pool(self, fld, goal: Goal) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """Start candidates of one field, per difficulty bin it can fill: (bin, nodes, cumulative
+        weights). Starts lie within the geodesic limits; PointNav / ImageNav weight them with
+        Habitat's near-straight keep probability: the same distribution as its rejection
+        sampling, without the rejected draws. Without balancing, one pool with bin -1."""
         t, dc = self.task, self.ecfg.difficulty
         d = fld.node_dist
-        ok = (d >= t.min_geodesic) & (d <= t.max_geodesic)
-        target = -1
-        if dc.balance:
-            b_of = np.searchsorted(np.asarray(dc.upper), d, side="right")
-            for k in range(len(self.bins)):
-                b = self.bins[(produced + k) % len(self.bins)]
-                if (ok & (b_of == b)).any():
-                    ok, target = ok & (b_of == b), b
-                    break
-        nodes = np.flatnonzero(ok)
-        if not len(nodes):
-            return -1, -1
+        nodes = np.flatnonzero((d >= t.min_geodesic) & (d <= t.max_geodesic))
         if goal.kind == "object" or t.trivial_ratio <= 0:
-            return int(nodes[self.rng.integers(len(nodes))]), target
-        euclid = np.hypot(*(self.cm.cell_centers(self.graph.cells[nodes]) - goal.xy).T)
-        w = habitat_keep_probability(d[nodes] / np.maximum(euclid, 1e-9), t.trivial_ratio)
-        if w.sum() <= 0:
+            w = np.ones(len(nodes))
+        else:
+            euclid = np.hypot(*(self.cm.cell_centers(self.graph.cells[nodes]) - goal.xy).T)
+            w = habitat_keep_probability(d[nodes] / np.maximum(euclid, 1e-9), t.trivial_ratio)
+        keep = w > 0
+        nodes, w = nodes[keep], w[keep]
+        if not dc.balance:
+            return [(-1, nodes, np.cumsum(w))] if len(nodes) else []
+        b_of = np.searchsorted(np.asarray(dc.upper), d[nodes], side="right")
+        return [(b, nodes[b_of == b], np.cumsum(w[b_of == b])) for b in self.bins if (b_of == b).any()]
+
+    def _draw_start(self, pool, produced: int) -> tuple[int, int]:
+        """A start node and its bin: the target bin is round robin over all bins, falling to the
+        next one this goal can fill. Returns (-1, -1) when the pool is empty."""
+        if not pool:
             return -1, -1
-        return int(nodes[np.searchsorted(np.cumsum(w), self.rng.random() * w.sum(), side="right").clip(0, len(w) - 1)]), target
+        have = {b: (nodes, cw) for b, nodes, cw in pool}
+        order = self.bins if self.ecfg.difficulty.balance else [-1]
+        for k in range(len(order)):
+            b = order[(produced + k) % len(order)]
+            if b in have:
+                nodes, cw = have[b]
+                i = int(np.searchsorted(cw, self.rng.random() * cw[-1], side="right"))
+                return int(nodes[min(i, len(nodes) - 1)]), b
+        return -1, -1
 
     def generate(self) -> TaskResult:
         t = self.task
@@ -292,8 +297,9 @@ class EpisodeGenerator:
                     break
                 goal = goal_sets[len(rows) % len(goal_sets)]
                 if goal.category not in fields:
-                    fields[goal.category] = self.graph.field(goal.sources, t.max_geodesic)
-                fld = fields[goal.category]
+                    f = self.graph.field(goal.sources, t.max_geodesic)
+                    fields[goal.category] = (f, self._start_pool(f, goal))
+                fld, pool = fields[goal.category]
                 per_goal = 1
             else:
                 node = int(self.rng.integers(len(self.graph.cells)))
@@ -302,12 +308,13 @@ class EpisodeGenerator:
                 yaw = float(self.rng.uniform(-math.pi, math.pi)) if t.type == "imagenav" else None
                 goal = Goal("image" if t.type == "imagenav" else "position", cell[None], xy=xy, yaw=yaw)
                 fld = self.graph.field(goal.sources, t.max_geodesic)
+                pool = self._start_pool(fld, goal)
                 per_goal = t.starts_per_goal
             for _ in range(per_goal):
                 if len(rows) >= n_req or attempts >= max_attempts:
                     break
                 attempts += 1
-                node, b = self._draw_start(fld, goal, len(rows))
+                node, b = self._draw_start(pool, len(rows))
                 if node < 0:
                     self.rejections["no_start_in_range"] += 1
                     break
@@ -330,6 +337,9 @@ class EpisodeGenerator:
         traj_cols = _trajectory_columns(rows, trajs, self.ecfg.dt)
         return TaskResult(rows, traj_cols, self.rejections, time.process_time() - c0, time.perf_counter() - t0,
                           n_req, from_expert)
+
+
+_ACTION_NAME_ARRAY = np.array([ACTION_NAMES[k] for k in sorted(ACTION_NAMES)], object)
 
 
 def _pose_cols(prefix: str, xy, yaw: float) -> dict:
@@ -361,7 +371,7 @@ def _trajectory_columns(rows: list[dict], trajs: list[dict], dt: float) -> dict[
             "timestamp": np.arange(n) * dt, "position_x": ro["x"], "position_y": ro["y"], "position_z": np.zeros(n),
             "rotation_qx": np.zeros(n), "rotation_qy": np.zeros(n), "rotation_qz": np.sin(yaw / 2),
             "rotation_qw": np.cos(yaw / 2), "yaw": yaw,
-            "action": np.array([ACTION_NAMES[a] for a in action], object), "action_id": action,
+            "action": _ACTION_NAME_ARRAY[action], "action_id": action,
             "linear_velocity": v, "angular_velocity": w,
             "linear_velocity_x": v * np.cos(yaw), "linear_velocity_y": v * np.sin(yaw),
             "linear_acceleration": np.diff(v, prepend=0.0) / dt, "angular_acceleration": np.diff(w, prepend=0.0) / dt,

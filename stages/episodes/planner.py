@@ -138,7 +138,8 @@ class ScenePlanner:
         self.planner.clear()
         self.planner.setProblemDefinition(pdef)
         if not self._setup_done:
-            self.planner.setup()
+            with _quiet():  # it reports the range it picked at debug level
+                self.planner.setup()
             self._setup_done = True
         with _quiet():
             status = self.planner.solve(self._ptc(pdef, self.cfg.max_iterations))

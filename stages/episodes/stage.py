@@ -3,6 +3,7 @@ hive-partitioned Parquet (05_episodes, 06_trajectories)."""
 from __future__ import annotations
 
 import shutil
+import time
 
 import numpy as np
 import pyarrow as pa
@@ -52,6 +53,7 @@ def remove_scene_partitions(catalog, scene) -> None:
 
 
 def run(scene, cfg, catalog) -> dict:
+    cpu0 = time.process_time()
     ecfg: EpisodesConfig = OmegaConf.to_object(cfg.episodes)
     pcfg: PlannerConfig = OmegaConf.to_object(cfg.planner)
     emb = OmegaConf.to_object(cfg.embodiment)
@@ -83,4 +85,5 @@ def run(scene, cfg, catalog) -> dict:
                                "rejections": dict(sorted(res.rejections.items()))})
     if shortfalls:
         result["shortfall"] = shortfalls
+    result["cpu_s"] = round(time.process_time() - cpu0, 3)  # the whole stage, all threads
     return result

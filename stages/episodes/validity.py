@@ -7,9 +7,10 @@ import numpy as np
 from stages.episodes.rollout import Limits, integrate, wrap_angle
 
 # Slack for float round-off in the checks (relative to the limits), and the pose tolerance of
-# the control-consistency check, metres / radians.
+# the control-consistency check, metres / radians (controls are stored as float32: integrating
+# them over a thousand steps drifts by ~1e-5).
 _SLACK = 1e-6
-_POSE_TOL = 1e-6
+_POSE_TOL = 1e-4
 
 REASONS = ("clearance", "collision", "goal", "heading", "speed", "acceleration", "controls")
 

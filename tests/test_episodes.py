@@ -1,0 +1,347 @@
+"""Episodes: geodesics, samplers, OMPL experts, rollouts, the validity filter, storage, exports."""
+import gzip
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from scipy import ndimage
+
+from stages.costmap.query import Costmap
+from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
+from stages.episodes.generate import EpisodeGenerator, habitat_keep_probability, split_names
+from stages.episodes.geodesic import NavGraph, max_detour
+from stages.episodes.planner import ScenePlanner, seed_ompl
+from stages.episodes.rollout import (MOVE_FORWARD, STOP, Limits, discrete_expert, integrate, relative_waypoints,
+                                     rollout, speed_profile)
+from stages.episodes.validity import check_trajectory
+from stages.costmap.build import Embodiment
+
+RES, RADIUS = 0.05, 0.1
+LIMITS = Limits(0.45, 0.8, 0.25, 0.6)
+
+
+def grid_costmap(free: np.ndarray) -> Costmap:
+    """A costmap from a free-space grid: clearance = distance to the nearest occupied cell."""
+    clearance = (ndimage.distance_transform_edt(free) * RES).astype(np.float32)
+    valid = clearance >= RADIUS
+    lab, n = ndimage.label(valid, structure=np.ones((3, 3)))
+    sizes = ndimage.sum(valid, lab, range(1, n + 1))
+    order = np.argsort(-sizes) + 1
+    comp = np.zeros_like(lab)
+    for new, old in enumerate(order, 1):
+        comp[lab == old] = new
+    return Costmap(clearance, (0.0, 0.0), RES, RADIUS, 0.0, comp.astype(np.int32))
+
+
+def room_with_door() -> Costmap:
+    """4 m x 3 m room (walls one cell thick), a wall at x = 2 m with a door for y in [2.0, 2.8]."""
+    free = np.ones((60, 80), bool)
+    free[[0, -1], :] = free[:, [0, -1]] = False
+    free[:, 40] = False
+    free[40:56, 40] = True
+    return grid_costmap(free)
+
+
+def cell_of(cm, x, y):
+    return np.array([int(y / cm.resolution), int(x / cm.resolution)])
+
+
+def test_geodesic_open_space_is_euclidean_within_the_neighbourhood_bound():
+    free = np.ones((60, 80), bool)
+    free[[0, -1], :] = free[:, [0, -1]] = False
+    cm = grid_costmap(free)
+    g = NavGraph(cm, ~cm.occupancy)
+    src = cell_of(cm, 0.5, 0.5)
+    f = g.field(src[None])
+    pts = g.cells[::37]
+    d = f.at_cells(pts)
+    e = np.hypot(*(cm.cell_centers(pts) - cm.cell_centers(src[None])).T)
+    assert (d >= e - 1e-9).all() and (d <= e * max_detour(6) + 1e-9).all()
+    # an 8-connected graph overstates diagonals (the reason for the any-angle neighbourhood)
+    d8 = NavGraph(cm, ~cm.occupancy, radius=1).field(src[None]).at_cells(pts)
+    assert (d8 / np.maximum(e, 1e-9)).max() > 1.05
+
+
+def test_geodesic_through_a_door_matches_the_lower_bound():
+    cm = room_with_door()
+    g = NavGraph(cm, ~cm.occupancy)
+    a, b = np.array([1.0, 0.5]), np.array([3.0, 0.5])
+    f = g.field(cell_of(cm, *b)[None])
+    d = f.at_cells(cell_of(cm, *a)[None])[0]
+    ca, cb = cm.cell_centers(np.array([cell_of(cm, *a), cell_of(cm, *b)]))
+    # the exact continuous answer: the wall's cells dilated by RADIUS form a convex capsule; the
+    # taut path from a to b runs tangent to the disc of its top cell (2.025, 1.975), over the arc,
+    # and tangent down to b
+    c = np.array([2.025, 1.975])
+    da, db = np.hypot(*(ca - c)), np.hypot(*(cb - c))
+    ta, tb = math.atan2(*(ca - c)[::-1]), math.atan2(*(cb - c)[::-1])
+    arc = 2 * math.pi - (tb - ta) - math.acos(RADIUS / da) - math.acos(RADIUS / db)
+    exact = math.sqrt(da**2 - RADIUS**2) + math.sqrt(db**2 - RADIUS**2) + RADIUS * arc
+    assert exact <= d <= exact * 1.01
+    # the field's path is a chain of valid straight motions whose length is the distance
+    path = f.path_xy(cell_of(cm, *a))
+    assert cm.are_motions_valid(np.concatenate([path[:-1], path[1:]], 1)).all()
+    assert np.hypot(*np.diff(path, axis=0).T).sum() == pytest.approx(d, rel=1e-9)
+    # the other room is unreachable without the door
+    free = cm.clearance > 0
+    free[:, 40] = False
+    g2 = NavGraph(grid_costmap(free), ~grid_costmap(free).occupancy)
+    assert np.isinf(g2.field(cell_of(cm, *b)[None]).at_cells(cell_of(cm, *a)[None])[0])
+
+
+def test_multi_source_field_is_the_minimum_of_single_fields():
+    cm = room_with_door()
+    g = NavGraph(cm, ~cm.occupancy)
+    srcs = np.array([cell_of(cm, 1.0, 1.0), cell_of(cm, 3.5, 2.5)])
+    multi = g.field(srcs).node_dist
+    single = np.minimum(g.field(srcs[:1]).node_dist, g.field(srcs[1:]).node_dist)
+    assert np.allclose(multi, single)
+
+
+@pytest.mark.parametrize("total", [0.01, 0.1, 0.24, 0.5, 1.0, 3.7, 12.0])
+def test_speed_profile_covers_the_distance_within_limits(total):
+    v = speed_profile(total, 0.45, 0.25, 0.05)
+    assert v.sum() * 0.05 == pytest.approx(total, rel=1e-12)
+    assert v.max() <= 0.45 + 1e-12
+    assert (np.abs(np.diff(np.concatenate([[0], v, [0]]))) <= 0.25 * 0.05 + 1e-12).all()
+    # the fewest steps: one step less cannot cover the distance
+    n = len(v) - 1
+    k = np.arange(1, n + 1)
+    assert np.minimum(0.45, 0.25 * 0.05 * np.minimum(k, n + 1 - k)).sum() * 0.05 < total
+
+
+def test_rollout_follows_the_path_and_passes_the_filter():
+    cm = room_with_door()
+    path = np.array([[1.0, 0.5], [1.85, 2.1], [2.2, 2.1], [3.0, 0.5]])
+    ro = rollout(path, 0.3, 1.0, LIMITS, 0.05)
+    assert ro["x"][-1] == pytest.approx(3.0) and ro["y"][-1] == pytest.approx(0.5)
+    assert ro["yaw"][-1] == pytest.approx(1.0)
+    # rotation and translation never mix, and (v, omega) reproduce the poses
+    assert not ((ro["v"] != 0) & (ro["w"] != 0)).any()
+    x, y, yaw = integrate(1.0, 0.5, 0.3, ro["v"][:-1], ro["w"][:-1], 0.05)
+    assert np.allclose(x, ro["x"]) and np.allclose(yaw, ro["yaw"])
+    # relative waypoints compose back into the trajectory
+    dx, dy, dyaw = relative_waypoints(ro["x"], ro["y"], ro["yaw"])
+    c, s = np.cos(ro["yaw"]), np.sin(ro["yaw"])
+    assert np.allclose(ro["x"][:-1] + (c * dx - s * dy)[:-1], ro["x"][1:])
+    goal = lambda px, py: math.hypot(px - 3.0, py - 0.5) <= 0.5  # noqa: E731
+    args = (cm, RADIUS, LIMITS, 0.05, goal)
+    assert check_trajectory(ro["x"], ro["y"], ro["yaw"], ro["v"], ro["w"], *args) is None
+    # each corruption is caught with its reason
+    bad = {k: v.copy() for k, v in ro.items()}
+    bad["x"][len(bad["x"]) // 2] += 0.03
+    assert check_trajectory(bad["x"], bad["y"], bad["yaw"], bad["v"], bad["w"], *args) in ("speed", "acceleration")
+    fast = rollout(path, 0.3, None, Limits(0.9, 0.8, 0.25, 0.6), 0.05)
+    assert check_trajectory(fast["x"], fast["y"], fast["yaw"], fast["v"], fast["w"], *args) == "speed"
+    jerk = rollout(path, 0.3, None, Limits(0.45, 0.8, 2.0, 0.6), 0.05)
+    assert check_trajectory(jerk["x"], jerk["y"], jerk["yaw"], jerk["v"], jerk["w"], *args) == "acceleration"
+    spin = rollout(path, 0.3, None, Limits(0.45, 3.0, 0.25, 20.0), 0.05)
+    assert check_trajectory(spin["x"], spin["y"], spin["yaw"], spin["v"], spin["w"], *args) == "heading"
+    through_wall = rollout(np.array([[1.0, 0.5], [3.0, 0.5]]), 0.0, None, LIMITS, 0.05)
+    assert check_trajectory(through_wall["x"], through_wall["y"], through_wall["yaw"], through_wall["v"],
+                            through_wall["w"], *args) == "clearance"
+    short = rollout(path[:3], 0.3, None, LIMITS, 0.05)
+    assert check_trajectory(short["x"], short["y"], short["yaw"], short["v"], short["w"], *args) == "goal"
+    lying = {k: v.copy() for k, v in ro.items()}
+    lying["w"][5] *= 1.5
+    assert check_trajectory(lying["x"], lying["y"], lying["yaw"], lying["v"], lying["w"], *args) == "controls"
+
+
+def test_ompl_expert_is_valid_deterministic_and_near_the_geodesic():
+    cm = room_with_door()
+    g = NavGraph(cm, ~cm.occupancy)
+    a, b = cm.cell_centers(np.array([cell_of(cm, 1.0, 0.5), cell_of(cm, 3.0, 0.5)]))
+    geo = g.field(cell_of(cm, 3.0, 0.5)[None]).at_cells(cell_of(cm, 1.0, 0.5)[None])[0]
+    paths = []
+    for name in ("rrtconnect", "rrtstar"):
+        for _ in range(2):
+            seed_ompl(7)
+            p = ScenePlanner(cm, PlannerConfig(name=name)).plan((a[0], a[1], 0.0), [(b[0], b[1], 0.0)], geo)
+            assert p is not None and np.allclose(p[0, :2], a) and np.allclose(p[-1, :2], b)
+            assert cm.are_motions_valid(np.concatenate([p[:-1, :2], p[1:, :2]], 1)).all()
+            length = np.hypot(*np.diff(p[:, :2], axis=0).T).sum()
+            assert geo / max_detour(6) <= length <= geo * 1.25
+            paths.append(p)
+        assert np.array_equal(paths[-1], paths[-2])  # same seed, same path
+    with pytest.raises(ValueError, match="unknown planner"):
+        ScenePlanner(cm, PlannerConfig(name="nope"))
+
+
+def test_discrete_expert_reaches_the_goal_through_the_door():
+    cm = room_with_door()
+    g = NavGraph(cm, ~cm.occupancy)
+    goal = np.array([3.0, 0.5])
+    f = g.field(cell_of(cm, *goal)[None])
+    acts = discrete_expert(f.grid, cm, (1.0, 0.5, 0.0), goal[None], 0.5)
+    assert acts is not None and acts[-1] == STOP and (acts[:-1] != STOP).all()
+    # replaying the actions never collides and ends inside the region
+    x, y, yaw = 1.0, 0.5, 0.0
+    for a in acts[:-1]:
+        if a == MOVE_FORWARD:
+            nx_, ny_ = x + 0.25 * math.cos(yaw), y + 0.25 * math.sin(yaw)
+            assert cm.is_motion_valid(x, y, nx_, ny_)
+            x, y = nx_, ny_
+        else:
+            yaw += math.radians(15) * (1 if a == 2 else -1)
+    assert math.hypot(x - goal[0], y - goal[1]) <= 0.5
+    # forward steps: at least the geodesic minus the radius, in 0.25 m steps, and not far more
+    d = f.at_cells(cell_of(cm, 1.0, 0.5)[None])[0]
+    n_fwd = int((acts == MOVE_FORWARD).sum())
+    assert (d - 0.5) / 0.25 <= n_fwd <= (d - 0.5) / 0.25 * 1.3 + 2
+    # ImageNav: turns to the goal heading before stopping
+    acts2 = discrete_expert(f.grid, cm, (1.0, 0.5, 0.0), goal[None], 0.5, goal_yaw=math.pi)
+    yaw = sum(math.radians(15) * (1 if a == 2 else -1 if a == 3 else 0) for a in acts2)
+    assert abs((yaw - math.pi + math.pi) % (2 * math.pi) - math.pi) <= math.radians(15) + 1e-9
+
+
+def test_sampling_rules():
+    assert habitat_keep_probability(np.array([1.0]), 1.1)[0] == pytest.approx(20 * 0.02 ** 2)
+    assert habitat_keep_probability(np.array([1.1, 1.5]), 1.1).tolist() == [1.0, 1.0]
+    assert habitat_keep_probability(np.array([1.0]), 0.0)[0] == 1.0
+    s = split_names(10, {"train": 0.8, "val_seen": 0.2})
+    assert s.count("train") == 8 and s.count("val_seen") == 2 and s[-1] == "val_seen"
+
+
+@pytest.mark.parametrize("task", ["pointnav", "imagenav", "objectnav"])
+def test_generator_yields_valid_balanced_episodes(task):
+    cm = room_with_door()
+    g = NavGraph(cm, ~cm.occupancy)
+    ecfg = EpisodesConfig()
+    ecfg.difficulty.upper = [2.0, 3.0, 1e9]
+    tcfg = TaskConfig(type=task, episodes_per_scene=24, success_radius=0.5 if task == "pointnav" else 1.0)
+    inst = [{"instance_id": 4, "category": "chair", "center_x": 3.5, "center_y": 2.5, "center_z": 0.4,
+             "min_x": 3.3, "min_y": 2.3, "min_z": 0.0, "max_x": 3.7, "max_y": 2.7, "max_z": 0.8}]
+    gen = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), Embodiment(radius=RADIUS), "t/scene", 3, inst)
+    res = gen.generate()
+    assert len(res.episodes) == 24
+    diff = [e["difficulty"] for e in res.episodes]
+    assert {diff.count(n) for n in ("easy", "medium", "hard")} == {8}
+    for e in res.episodes:
+        assert 1.0 <= e["geodesic_distance"] <= 30.0 + 1e-6
+        assert e["geodesic_distance"] <= e["path_length"] + 1e-6
+        assert e["oracle_actions"][-1] == STOP
+        if task == "objectnav":
+            assert e["goal_object_id"] == 4 and e["goal_object_category"] == "chair"
+            vp = json.loads(e["goals_json"])[0]["view_points"]
+            assert all(math.hypot(p["position"][0] - 3.5, p["position"][1] - 2.5) <= 1.0 for p in vp)
+    # same seed, same episodes
+    again = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), Embodiment(radius=RADIUS), "t/scene", 3, inst)
+    assert [e["start_position_x"] for e in again.generate().episodes] == [e["start_position_x"] for e in res.episodes]
+
+
+# ---- the stage on a generated scene: storage, re-check, determinism, exports ---------------------
+
+@pytest.fixture(scope="module")
+def episode_run(tmp_path_factory):
+    from tests.test_pipeline import make_cfg
+    from pipeline.executor import execute
+
+    root = tmp_path_factory.mktemp("episodes")
+    over = ["stages=[export]", "task.pointnav.episodes_per_scene=30", "task.imagenav.episodes_per_scene=20",
+            "task.objectnav.episodes_per_scene=20", "episodes.splits.train=0.75", "+episodes.splits.val_seen=0.25",
+            "export.chunk_size=8"]
+    summary = execute(make_cfg(root, *over))
+    assert not summary["failures"], summary["failures"]
+    return root, over, summary
+
+
+def test_stored_episodes_query_with_pandas_and_pass_the_recheck(episode_run):
+    root, _, summary = episode_run
+    eps = pd.read_parquet(root / "05_episodes")
+    assert set(eps["task"]) == {"pointnav", "imagenav", "objectnav"}
+    obj = pd.read_parquet(root / "05_episodes", filters=[("task", "==", "objectnav")])
+    assert len(obj) and (obj["goal_type"] == "object").all()
+    trajs = pd.read_parquet(root / "06_trajectories")
+    sid = obj["scene_id"].iloc[0]
+    cm = Costmap.load(root / "03_costmaps" / f"{sid}.zarr", "locobot")
+    emb = Embodiment()
+    for (task, eid), t in trajs.groupby(["task", "episode_id"], observed=True):
+        e = eps[(eps["task"] == task) & (eps["episode_id"] == eid)].iloc[0]
+        t = t.sort_values("step")
+        assert len(t) == e["num_steps"] and t["step"].tolist() == list(range(len(t)))
+        centres = np.array([[e["goal_position_x"], e["goal_position_y"]]])
+        r = float(e["success_radius"])
+        if task == "objectnav":
+            centres = np.array([g["position"][:2] for g in json.loads(e["goals_json"])])
+        success = lambda x, y: bool((np.hypot(*(centres - (x, y)).T) <= r + 1e-9).any())  # noqa: E731
+        why = check_trajectory(t["position_x"].to_numpy(), t["position_y"].to_numpy(), t["yaw"].to_numpy(),
+                               t["linear_velocity"].to_numpy(np.float64), t["angular_velocity"].to_numpy(np.float64),
+                               cm, emb.radius, Limits.of(emb), 0.05, success,
+                               e["goal_yaw"] if task == "imagenav" else None,
+                               e["heading_tolerance"] if task == "imagenav" else None)
+        assert why is None, (task, eid, why)
+        assert e["geodesic_distance"] <= e["path_length"] * (1 + 1e-6)
+    # splits by share, ids per split
+    pn = eps[eps["task"] == "pointnav"]
+    assert (pn["split"] == "train").sum() == round(0.75 * len(pn))
+    assert all(eid.startswith(f"{sp}_") for eid, sp in zip(pn["episode_id"], pn["split"]))
+    assert summary["results"][-1]["stage"] == "export:finalize"
+
+
+def test_episode_shards_are_byte_identical_on_rerun_with_workers(episode_run, tmp_path):
+    from tests.test_pipeline import make_cfg
+    from pipeline.executor import execute
+
+    root, over, _ = episode_run
+    assert not execute(make_cfg(tmp_path, *over[:-1], "stages=[episodes]", "executor=local",
+                                "executor.n_workers=2", "executor.dashboard=false"))["failures"]
+    files = sorted(p.relative_to(root) for p in (root / "05_episodes").rglob("*.parquet"))
+    files += sorted(p.relative_to(root) for p in (root / "06_trajectories").rglob("*.parquet"))
+    assert len(files) == 6
+    for f in files:
+        assert (root / f).read_bytes() == (tmp_path / f).read_bytes(), f
+
+
+def test_exports_read_back_equal_to_the_store(episode_run):
+    from stages.episodes.export import NAVARENA_EPISODE_COLUMNS, NAVARENA_TRAJECTORY_COLUMNS, habitat_position
+
+    root, _, _ = episode_run
+    eps = pd.read_parquet(root / "05_episodes")
+    trajs = pd.read_parquet(root / "06_trajectories")
+    base = next((root / "10_exports" / "navarena" / "navarena").glob("*/*"))
+    sid = base.name
+    meta = json.loads((base.parent.parent / "dataset_meta.json").read_text())
+    assert meta["scene_ids"] == [sid] and set(meta["task_types"]) == {"pointnav", "imagenav", "objectnav"}
+    for task in ("pointnav", "imagenav", "objectnav"):
+        store = eps[(eps["task"] == task)].reset_index(drop=True)
+        info = json.loads((base / task / "meta" / "info.json").read_text())
+        assert info["num_episodes"] == len(store) and info["num_chunks"] == math.ceil(len(store) / 8)
+        meta_eps = pq.read_table(base / task / "meta" / "episodes.parquet").to_pandas()
+        assert list(meta_eps.columns) == NAVARENA_EPISODE_COLUMNS
+        chunks = sorted((base / task / "data").iterdir())
+        assert len(chunks) == info["num_chunks"]
+        ep_chunks = pd.concat([pd.read_parquet(c / "episodes.parquet") for c in chunks], ignore_index=True)
+        tr_chunks = pd.concat([pd.read_parquet(c / "trajectories.parquet") for c in chunks], ignore_index=True)
+        assert list(tr_chunks.columns) == NAVARENA_TRAJECTORY_COLUMNS
+        assert (ep_chunks.groupby("chunk_index").size() <= 8).all()
+        for c in ("episode_id", "start_position_x", "goal_position_y", "geodesic_distance", "num_steps", "goals_json"):
+            assert ep_chunks[c].tolist() == store[c].tolist() == meta_eps[c].tolist()
+        st = trajs[trajs["task"] == task].reset_index(drop=True)
+        for c in ("episode_id", "step", "position_x", "rotation_qw", "action_id", "linear_velocity"):
+            assert tr_chunks[c].tolist() == st[c].tolist()
+    # Habitat: y-up positions map back to ours, per split
+    for task in ("pointnav", "objectnav"):
+        store = eps[eps["task"] == task]
+        n = 0
+        for split in store["split"].unique():
+            content = json.loads(gzip.decompress(
+                (root / "10_exports" / "habitat" / f"{task}_v1" / split / "content" / f"{sid}.json.gz").read_bytes()))
+            assert json.loads(gzip.decompress((root / "10_exports" / "habitat" / f"{task}_v1" / split /
+                                               f"{split}.json.gz").read_bytes()))["episodes"] == []
+            for he in content["episodes"]:
+                e = store[store["episode_id"] == he["episode_id"]].iloc[0]
+                assert he["start_position"] == pytest.approx(habitat_position(
+                    e["start_position_x"], e["start_position_y"], e["start_position_z"]))
+                assert he["info"]["geodesic_distance"] == pytest.approx(e["geodesic_distance"])
+                if task == "pointnav":
+                    assert he["goals"][0]["position"] == pytest.approx(habitat_position(
+                        e["goal_position_x"], e["goal_position_y"], 0.0))
+                else:
+                    goals = content["goals_by_category"][f"{sid}_{he['object_category']}"]
+                    assert he["info"]["closest_goal_object_id"] in {g["object_id"] for g in goals}
+                    assert all(g["view_points"] for g in goals)
+                n += 1
+        assert n == len(store)
