@@ -113,6 +113,34 @@ def throughput_at_density(cfg, per_task: int) -> dict:
             "episodes": n, "episodes_per_core_s": {t: round(n[t] / (cpu[t] + shared * n[t] / total), 1) for t in TASKS}}
 
 
+def compare_planners(cfg, n: int = 100) -> dict:
+    """Each registered planner on the first scene's PointNav: throughput and expert quality."""
+    from omegaconf import OmegaConf
+
+    from pipeline.executor import open_catalog
+    from stages.episodes.config import PlannerConfig, TaskConfig
+    from stages.episodes.generate import EpisodeGenerator
+    from stages.episodes.geodesic import NavGraph
+    from stages.episodes.planner import PLANNERS
+
+    catalog, scenes, _ = open_catalog(cfg)
+    ecfg = OmegaConf.to_object(cfg.episodes)
+    emb = OmegaConf.to_object(cfg.embodiment)
+    cm = Costmap.load(catalog.path("costmaps", scenes[0]), emb.name)
+    graph = NavGraph(cm, eligible_cells(cm, ecfg), ecfg.geodesic_neighbourhood)
+    tcfg: TaskConfig = OmegaConf.to_object(cfg.task["pointnav"])
+    tcfg.episodes_per_scene = n
+    out = {}
+    for name in PLANNERS:
+        res = EpisodeGenerator(cm, graph, tcfg, ecfg, PlannerConfig(name=name), emb, "bench", 1).generate()
+        ratio = np.array([e["path_length"] / e["geodesic_distance"] for e in res.episodes])
+        out[name] = {"episodes": len(res.episodes), "episodes_per_core_s": round(len(res.episodes) / res.cpu_s, 1),
+                     "expert_over_geodesic_median": round(float(np.median(ratio)), 4),
+                     "expert_over_geodesic_p95": round(float(np.quantile(ratio, 0.95)), 4),
+                     "rejections": dict(res.rejections)}
+    return out
+
+
 def run_stage(data: str, episodes: int | None) -> dict:
     from hydra import compose, initialize_config_dir
 
@@ -139,6 +167,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--density", type=int, default=1000,
                     help="episodes per scene and task of the throughput run at release density (0 = skip)")
+    ap.add_argument("--planners", type=int, default=1, help="compare the registered planners (0 = skip)")
     ap.add_argument("--geodesic-sample", type=int, default=0,
                     help="check at most this many episodes per scene and task against the reference (0 = all)")
     args = ap.parse_args(argv)
@@ -237,6 +266,7 @@ def main(argv=None) -> dict:
                                                 for t, v in per_task.items()},
         "episodes_per_core_s_generation_only": {t: round(v["episodes_per_core_s"], 1) for t, v in per_task.items()},
         "release_density_run": dense,
+        "planners": compare_planners(cfg) if args.planners else None,
         "stage_cpu_s": round(total_cpu, 2), "shared_cpu_s": round(shared, 2),
         "release_core_hours_at_pointnav_rate": round(RELEASE_EPISODES / pn_rate / 3600, 1),
         "valid_fraction": valid_n / checked, "trajectories_checked": checked, "invalid_reasons": reasons,
@@ -318,6 +348,13 @@ def _markdown(r: dict) -> str:
               f"{r['geodesic_checked']} episodes: max |relative error| {r['geodesic_max_rel_err'] * 100:.3f} %, "
               f"mean {r['geodesic_mean_rel_err'] * 100:+.3f} %; geodesic longer than the expert's path: "
               f"{r['geodesic_longer_than_expert']}.", ""]
+    if r.get("planners"):
+        lines += ["Planners (100 PointNav episodes on the first scene; `planner=<key>`):", "",
+                  "| planner | episodes / core-s | expert / geodesic median | p95 |", "|---|---|---|---|"]
+        for k, v in r["planners"].items():
+            lines.append(f"| {k} | {v['episodes_per_core_s']:.1f} | {v['expert_over_geodesic_median']:.3f} | "
+                         f"{v['expert_over_geodesic_p95']:.3f} |")
+        lines.append("")
     return "\n".join(lines)
 
 

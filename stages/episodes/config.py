@@ -74,6 +74,9 @@ class PlannerConfig:
     """Asymptotically optimal planners stop once the path is within this fraction of the geodesic."""
     simplify: bool = True
     """Shorten the path with OMPL's PathSimplifier (vertex reduction, rope shortcutting)."""
+    resample_step: float = 0.1
+    """Simplification: the shortened path is resampled at this spacing and shortened again, so that
+    its corners can move up to the obstacles, metres."""
     attempts: int = 3
     """Plan up to this many times while the path is longer than retry_ratio x the geodesic; keep
     the shortest (a feasible planner may pick a long way round an obstacle)."""

@@ -18,6 +18,10 @@ from ompl import util as ou
 from stages.episodes.config import PlannerConfig
 
 
+YAW_WEIGHT = 0.01
+"""Weight of heading (radians) against position (metres) in the SE(2) metric."""
+
+
 def _planner_registry() -> dict[str, tuple]:
     """key -> (OMPL class, asymptotically optimal). Not registered, see design.md: AORRTC (crashes in
     these bindings) and PRM* (its solve() checks for solutions on a second thread, which deadlocks on
@@ -80,6 +84,9 @@ class ScenePlanner:
         b.setLow(1, costmap.origin[1])
         b.setHigh(1, costmap.origin[1] + ny * costmap.resolution)
         self.space.setBounds(b)
+        # a disk robot: heading is free along the path (the rollout turns in place), so path
+        # cost and nearest neighbours are about position; keep a trace of heading in the metric
+        self.space.setSubspaceWeight(1, YAW_WEIGHT)
         self.si = ob.SpaceInformation(self.space)
         valid = costmap.is_state_valid
         self.si.setStateValidityChecker(lambda s: valid(s.getX(), s.getY()))
@@ -132,8 +139,8 @@ class ScenePlanner:
             pdef.setGoal(gs)
         obj = ob.PathLengthOptimizationObjective(self.si)
         if self.optimizing and reference_length is not None:
-            # SE(2) path length also counts heading change (weight 0.5), so allow for it
-            obj.setCostThreshold(ob.Cost(reference_length * (1 + self.cfg.cost_tolerance) + math.pi))
+            # SE(2) path length also counts heading change (weighted by YAW_WEIGHT): allow a turn
+            obj.setCostThreshold(ob.Cost(reference_length * (1 + self.cfg.cost_tolerance) + YAW_WEIGHT * math.pi))
         pdef.setOptimizationObjective(obj)
         self.planner.clear()
         self.planner.setProblemDefinition(pdef)
@@ -149,7 +156,12 @@ class ScenePlanner:
         if self.cfg.simplify:
             self.simplifier.reduceVertices(path)
             self.simplifier.ropeShortcutPath(path)
-            self.simplifier.reduceVertices(path)
+            # shortcuts only ever remove vertices; to let corners slide towards the obstacles
+            # (a taut path), resample the path densely and shortcut again
+            n = int(path.length() / self.cfg.resample_step) + 2
+            path.interpolate(n)
+            self.simplifier.ropeShortcutPath(path)
+            self.simplifier.reduceVertices(path, 0, 0, 0.33)
             self.simplifier.collapseCloseVertices(path)
         out = np.array([(s.getX(), s.getY(), s.getYaw()) for s in path.getStates()], float)
         self.planner.clear()
