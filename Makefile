@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
 
-.PHONY: setup system-deps dataset test test-all bench bench-spatial bench-spatial-gpu submit clean
+.PHONY: setup system-deps dataset test test-all bench bench-spatial bench-spatial-gpu bench-episodes submit clean
 
 # open3d needs libusb at import time; install it when missing (root or sudo).
 system-deps:
@@ -38,10 +38,14 @@ test: $(STAMP)
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q -m "slow or not slow" $(ARGS)
 
-bench: bench-spatial
+bench: bench-spatial bench-episodes
 
 bench-spatial: $(STAMP)
 	$(BIN)/python -m benchmarks.spatial $(ARGS)
+
+# the episode dataset of the default scenes: Table-4 style summary, throughput, re-checks
+bench-episodes: $(STAMP)
+	$(BIN)/python -m benchmarks.episodes $(ARGS)
 
 # on a CUDA machine: writes data/08_reports/voxelize_gpu.json; bench-spatial merges it (or
 # `python -m benchmarks.spatial --merge-gpu` folds it into an existing report)
