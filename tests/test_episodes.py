@@ -11,7 +11,7 @@ from scipy import ndimage
 
 from stages.costmap.query import Costmap
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
-from stages.episodes.generate import EpisodeGenerator, habitat_keep_probability, split_names
+from stages.episodes.generate import EpisodeGenerator, habitat_keep_probability, scene_split, split_names
 from stages.episodes.geodesic import NavGraph, max_detour
 from stages.episodes.planner import ScenePlanner, seed_ompl
 from stages.episodes.rollout import (MOVE_FORWARD, STOP, Limits, discrete_expert, integrate, relative_waypoints,
@@ -203,6 +203,12 @@ def test_sampling_rules():
     assert habitat_keep_probability(np.array([1.0]), 0.0)[0] == 1.0
     s = split_names(10, {"train": 0.8, "val_seen": 0.2})
     assert s.count("train") == 8 and s.count("val_seen") == 2 and s[-1] == "val_seen"
+    # whole scenes held out by share, stable per scene id
+    ids = [f"{i:08x}" for i in range(2000)]
+    held = [scene_split(i, {"val_unseen": 0.1, "test": 0.05}) for i in ids]
+    assert abs(held.count("val_unseen") / 2000 - 0.1) < 0.025 and abs(held.count("test") / 2000 - 0.05) < 0.02
+    assert held == [scene_split(i, {"val_unseen": 0.1, "test": 0.05}) for i in ids]
+    assert scene_split(ids[0], {}) is None
 
 
 @pytest.mark.parametrize("task", ["pointnav", "imagenav", "objectnav"])

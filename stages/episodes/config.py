@@ -92,6 +92,10 @@ class EpisodesConfig:
     """Base seed; each (scene, task) derives its own stream from it."""
     splits: dict[str, float] = field(default_factory=lambda: {"train": 1.0})
     """Share of each scene's episodes per split (train, val_seen, val_unseen, test), in order."""
+    scene_splits: dict[str, float] = field(default_factory=dict)
+    """Shares of whole scenes held out into one split (e.g. {val_unseen: 0.1, test: 0.1}); a scene
+    is assigned by a hash of its id (stable as the scene set grows), and all its episodes get that
+    split. Other scenes use `splits`."""
     components: str = "largest"
     """Free components episodes may use: 'largest' (the main one) or 'all' (every component of at
     least min_island_area_m2; start and goal always share one)."""

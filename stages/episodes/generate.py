@@ -47,6 +47,18 @@ def split_names(n: int, splits: dict[str, float]) -> list[str]:
     return [names[int(np.searchsorted(edges, i, side="right"))] for i in range(n)]
 
 
+def scene_split(scene_id: str, scene_splits: dict[str, float]) -> str | None:
+    """The split a whole scene is held out into, or None: a hash of the scene id in [0, 1) against
+    the cumulative shares (a scene keeps its split when others are added)."""
+    u = int.from_bytes(hashlib.sha256(f"split:{scene_id}".encode()).digest()[:8], "little") / 2**64
+    edge = 0.0
+    for name, share in scene_splits.items():
+        edge += share
+        if u < edge:
+            return name
+    return None
+
+
 @dataclass
 class Goal:
     """What an episode aims at. sources: [k, 2] cells at distance 0 of its field."""

@@ -13,7 +13,7 @@ from omegaconf import OmegaConf
 from pipeline.atomic import atomic_path
 from stages.costmap.query import Costmap
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
-from stages.episodes.generate import EpisodeGenerator, stream_seed
+from stages.episodes.generate import EpisodeGenerator, scene_split, stream_seed
 from stages.episodes.geodesic import NavGraph
 from stages.episodes.schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA
 from stages.instances import load_instances
@@ -60,7 +60,11 @@ def run(scene, cfg, catalog) -> dict:
     cm = Costmap.load(catalog.path("costmaps", scene), emb.name)
     graph = NavGraph(cm, eligible_cells(cm, ecfg), ecfg.geodesic_neighbourhood)
     remove_scene_partitions(catalog, scene)
-    result = {"outputs": [], "tasks": {}, "graph_nodes": len(graph.cells), "graph_edges": graph.num_edges}
+    held_out = scene_split(scene.scene_id, ecfg.scene_splits)
+    if held_out:
+        ecfg.splits = {held_out: 1.0}
+    result = {"outputs": [], "tasks": {}, "graph_nodes": len(graph.cells), "graph_edges": graph.num_edges,
+              "split": held_out}
     shortfalls = []
     for name in sorted(cfg.task):
         tcfg: TaskConfig = OmegaConf.to_object(cfg.task[name])
