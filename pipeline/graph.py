@@ -19,7 +19,8 @@ class Stage:
         target: "module:function" of its run(scene, cfg, catalog) -> dict.
         needs: upstream stages (per scene).
         config: config sections that determine its output (their change recomputes it).
-        version: bump when the stage's code changes its output.
+        version: bump when the stage's code changes its output (stored outputs of another
+            version are recomputed; v2 of voxelize: the bound exact over the voxel height).
         only_synthetic: the stage applies to synthetic scenes only (others pass through).
         inputs: optional "module:function" of cfg -> JSON-able data the stage also reads from
             outside its config sections (hashed with them), e.g. embodiment files.
@@ -49,7 +50,7 @@ def _load(target: str) -> Callable:
 STAGES: tuple[Stage, ...] = (
     Stage("synthesize", "stages.synthetic.stage:run", (), ("synthetic",), only_synthetic=True),
     Stage("ingest", "stages.ingest:run", ("synthesize",), ("ingest",)),
-    Stage("voxelize", "stages.voxelize.stage:run", ("ingest",), ("voxelize",)),
+    Stage("voxelize", "stages.voxelize.stage:run", ("ingest",), ("voxelize",), version="2"),
     Stage("align", "stages.align.stage:run", ("voxelize",), ("align",)),
     Stage("costmap", "stages.costmap.stage:run", ("align",), ("costmap", "voxelize", "embodiment"),
           inputs="stages.costmap.stage:hashed_inputs"),
