@@ -1,0 +1,29 @@
+"""gsplat backend (CUDA): `gsplat.rasterization` in classic mode with expected depth ("RGB+ED")."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+
+def gaussian_tensors(gs, device: str = "cuda") -> dict:
+    """A GaussianScene as gsplat's inputs on the GPU (computed once per scene)."""
+    t = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(device)  # noqa: E731
+    return {"means": t(gs.means), "quats": t(gs.quats), "scales": torch.exp(t(gs.log_scales)),
+            "opacities": torch.sigmoid(t(gs.opacity_logits)), "sh": t(gs.sh)}
+
+
+def render(g: dict, viewmats, Ks, width: int, height: int, sh_degree: int | None = None):
+    """[B] cameras -> rgb [B, H, W, 3], expected depth [B, H, W], alpha [B, H, W] (on the GPU)."""
+    from gsplat import rasterization
+
+    dev = g["means"].device
+    vm = torch.as_tensor(np.asarray(viewmats, np.float32), device=dev)
+    K = torch.as_tensor(np.asarray(Ks, np.float32), device=dev)
+    deg = int(round(math.sqrt(g["sh"].shape[1]))) - 1 if sh_degree is None else int(sh_degree)
+    with torch.no_grad():
+        out, alpha, _ = rasterization(g["means"], g["quats"], g["scales"], g["opacities"], g["sh"], vm, K,
+                                      width, height, sh_degree=deg, render_mode="RGB+ED", packed=True,
+                                      rasterize_mode="classic")
+    return out[..., :3], out[..., 3], alpha[..., 0]
