@@ -1,0 +1,120 @@
+"""Rendering: the camera convention, the CPU renderer's known answers, and gsplat agreement (GPU)."""
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from stages.gaussians.model import GaussianScene
+from stages.gaussians.sh import C0
+from stages.render import Renderer
+from stages.render.camera import camera_to_world, intrinsics, viewmats
+
+W, H, HFOV = 64, 48, 90.0
+
+
+def to_cam(pose, height, pitch, p):
+    vm = viewmats(np.array([pose]), height, pitch)[0].astype(np.float64)
+    return vm[:3, :3] @ np.asarray(p, float) + vm[:3, 3]
+
+
+def test_camera_convention():
+    # facing +x: ahead is +z, the robot's right (-y) is +x, up (+z) is -y (OpenCV axes)
+    assert np.allclose(to_cam((1, 2, 0), 0.88, 0, (2, 2, 0.88)), (0, 0, 1), atol=1e-6)
+    assert np.allclose(to_cam((1, 2, 0), 0.88, 0, (1, 1, 0.88)), (1, 0, 0), atol=1e-6)
+    assert np.allclose(to_cam((1, 2, 0), 0.88, 0, (1, 2, 1.88)), (0, -1, 0), atol=1e-6)
+    # heading +y
+    assert np.allclose(to_cam((1, 2, math.pi / 2), 0.88, 0, (1, 3, 0.88)), (0, 0, 1), atol=1e-6)
+    # pitched 30 degrees down: a floor point ahead on the optical axis
+    d = 0.88 / math.tan(math.radians(30))
+    assert np.allclose(to_cam((0, 0, 0), 0.88, -30, (d, 0, 0)), (0, 0, math.hypot(d, 0.88)), atol=1e-6)
+    m = camera_to_world(0.3, -0.2, 1.0, 0.5, 10)
+    assert np.allclose(m[:3, :3] @ m[:3, :3].T, np.eye(3)) and np.isclose(np.linalg.det(m[:3, :3]), 1)
+    k = intrinsics(640, 480, 90)
+    assert k[0, 0] == pytest.approx(320) and k[0, 2] == 320 and k[1, 2] == 240
+
+
+def scene(means, sigmas, opacities, rgbs) -> GaussianScene:
+    n = len(means)
+    sh = ((np.asarray(rgbs, float) - 0.5) / C0)[:, None, :]
+    return GaussianScene(np.asarray(means, float), np.tile([1.0, 0, 0, 0], (n, 1)),
+                         np.log(np.repeat(np.asarray(sigmas, float)[:, None], 3, 1)),
+                         np.log(np.asarray(opacities) / (1 - np.asarray(opacities))), sh)
+
+
+def render(gs, pose=(0, 0, 0), backend="cpu"):
+    vm = viewmats(np.array([pose]), 0.0)
+    k = intrinsics(W, H, HFOV)[None]
+    return Renderer(gs, backend).render(vm, k, W, H)
+
+
+def expected_alpha(opacity, sigma, z, px, py):
+    """Alpha of an isotropic Gaussian on the optical axis at the centre of pixel (px, py)."""
+    f = (W / 2) / math.tan(math.radians(HFOV / 2))
+    var = (f * sigma / z) ** 2 + 0.3
+    d2 = (px + 0.5 - W / 2) ** 2 + (py + 0.5 - H / 2) ** 2
+    return min(0.999, opacity * math.exp(-0.5 * d2 / var))
+
+
+def test_single_gaussian_known_answer():
+    gs = scene([(2.0, 0, 0)], [0.05], [0.8], [(0.2, 0.4, 0.6)])
+    out = render(gs)
+    a = expected_alpha(0.8, 0.05, 2.0, W // 2, H // 2)
+    assert out.alpha[0, H // 2, W // 2].item() == pytest.approx(a, rel=1e-5)
+    assert out.rgb[0, H // 2, W // 2].numpy() == pytest.approx(np.array([0.2, 0.4, 0.6]) * a, rel=1e-4)
+    assert out.depth[0, H // 2, W // 2].item() == pytest.approx(2.0, rel=1e-6)
+    # symmetric about the image centre, nothing far away, nothing behind the camera
+    al = out.alpha[0].numpy()
+    assert np.allclose(al, al[::-1, ::-1], atol=1e-6) and al[0, 0] == 0
+    assert render(gs, pose=(0, 0, math.pi)).alpha.max().item() == 0
+
+
+def test_compositing_order_and_expected_depth():
+    near, far = (1.5, 0, 0), (3.0, 0, 0)
+    gs = scene([far, near], [0.1, 0.05], [0.9, 0.5], [(0, 0, 1), (1, 0, 0)])
+    out = render(gs)
+    a1 = expected_alpha(0.5, 0.05, 1.5, W // 2, H // 2)
+    a2 = expected_alpha(0.9, 0.1, 3.0, W // 2, H // 2)
+    w1, w2 = a1, (1 - a1) * a2
+    px = out.rgb[0, H // 2, W // 2].numpy()
+    assert px == pytest.approx([w1, 0, w2], rel=1e-4, abs=1e-6)
+    assert out.depth[0, H // 2, W // 2].item() == pytest.approx((w1 * 1.5 + w2 * 3.0) / (w1 + w2), rel=1e-5)
+    # input order does not matter: depth decides
+    swapped = render(scene([near, far], [0.05, 0.1], [0.5, 0.9], [(1, 0, 0), (0, 0, 1)]))
+    assert torch.equal(swapped.rgb, out.rgb)
+
+
+def test_pixel_stops_when_transmittance_is_spent():
+    # ten nearly opaque layers: after three the transmittance is below 1e-4, the rest add nothing
+    xs = [1.0 + 0.1 * i for i in range(10)]
+    gs = scene([(x, 0, 0) for x in xs], [0.3] * 10, [0.99] * 10, [(1, 1, 1)] * 10)
+    out = render(gs)
+    a = [expected_alpha(0.99, 0.3, x, W // 2, H // 2) for x in xs]
+    T, acc, dsum = 1.0, 0.0, 0.0
+    for ai, x in zip(a, xs):
+        if T * (1 - ai) <= 1e-4:
+            break
+        acc, dsum, T = acc + ai * T, dsum + ai * T * x, T * (1 - ai)
+    assert out.alpha[0, H // 2, W // 2].item() == pytest.approx(acc, rel=1e-5)
+    assert out.depth[0, H // 2, W // 2].item() == pytest.approx(dsum / acc, rel=1e-5)
+    assert out.depth[0, H // 2, W // 2].item() < 1.25  # the far layers never show
+
+
+@pytest.mark.gpu
+def test_cpu_renderer_matches_gsplat(small_scene):
+    pytest.importorskip("gsplat")
+    if not torch.cuda.is_available():
+        pytest.skip("needs CUDA")
+    from stages.render.camera import embodiment_camera
+    from stages.costmap.build import Embodiment
+
+    gs = small_scene.gaussians.transformed(np.linalg.inv(small_scene.transform))
+    rooms = np.array(small_scene.layout.rooms)
+    poses = np.array([[(r[0] + r[2]) / 2, (r[1] + r[3]) / 2, a] for r in rooms for a in (0.0, 2.0)])
+    vm, k, w, h = embodiment_camera(Embodiment(), poses, 160, 120)
+    a = Renderer(gs, "gsplat").render(vm, k, w, h)
+    b = Renderer(gs, "cpu").render(vm, k, w, h)
+    mse = torch.mean((a.rgb.cpu() - b.rgb) ** 2).item()
+    assert 10 * math.log10(1 / max(mse, 1e-12)) >= 35
+    both = (a.alpha.cpu() > 0.5) & (b.alpha > 0.5)
+    assert torch.median((a.depth.cpu() - b.depth).abs()[both]).item() <= 0.01
