@@ -1,0 +1,1 @@
+"""Closed-loop evaluation: the navigation environment, metrics, agents and the evaluate stage."""

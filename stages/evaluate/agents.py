@@ -1,0 +1,121 @@
+"""Agents: an in-process interface and the baselines, chosen by registry key or "module:Class".
+
+    class MyAgent:
+        def reset(self, task: dict) -> None: ...     # task: episode_id, task_type, goal spec
+        def act(self, obs: dict):  ...               # an action of stages.evaluate.env
+
+Privileged baselines (the oracles) also define bind(env), which the in-process evaluator calls
+after each reset: they read the episode's geodesic field, never the rendered frames.
+"""
+from __future__ import annotations
+
+import importlib
+import math
+
+import numpy as np
+
+from stages.episodes.rollout import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, oracle_action
+
+AGENTS: dict[str, type] = {}
+
+
+def register_agent(name: str):
+    def deco(cls):
+        AGENTS[name] = cls
+        return cls
+    return deco
+
+
+def make_agent(spec: str, **kwargs):
+    """An agent from a registry key ("oracle") or an import path ("package.module:Class")."""
+    if ":" in spec:
+        mod, cls = spec.split(":", 1)
+        return getattr(importlib.import_module(mod), cls)(**kwargs)
+    if spec not in AGENTS:
+        raise ValueError(f"unknown agent {spec!r}; registered: {', '.join(sorted(AGENTS))} (or module:Class)")
+    return AGENTS[spec](**kwargs)
+
+
+@register_agent("random")
+class RandomAgent:
+    """Uniform over forward / left / right; never stops (seeded)."""
+
+    def __init__(self, seed: int = 0):
+        self.rng = np.random.default_rng(seed)
+
+    def reset(self, task: dict) -> None:
+        pass
+
+    def act(self, obs: dict):
+        return int(self.rng.choice([MOVE_FORWARD, TURN_LEFT, TURN_RIGHT]))
+
+
+@register_agent("oracle")
+class OracleAgent:
+    """Follows the costmap geodesic with the discrete actions (stages.episodes.rollout.oracle_action);
+    stops inside the success region (ImageNav: after turning to the goal heading)."""
+
+    def __init__(self, **_):
+        self.env = None
+
+    def reset(self, task: dict) -> None:
+        pass
+
+    def bind(self, env) -> None:
+        self.env = env
+        self._grid = env.ctx.field(env.state.ep).grid
+
+    def act(self, obs: dict):
+        env = self.env
+        s, ep, cm = env.state, env.state.ep, env.ctx.costmap
+        a = oracle_action(s.x, s.y, s.yaw, self._grid, cm.clearance, cm.origin[0], cm.origin[1], cm.resolution,
+                          cm.radius + cm.margin, np.ascontiguousarray(ep.centres, float), ep.success_radius,
+                          math.nan if ep.goal_yaw is None else ep.goal_yaw, ep.heading_tolerance / 2,
+                          env.cfg.forward_step, env.turn)
+        return STOP if a < 0 else int(a)
+
+
+@register_agent("noisy_oracle")
+class NoisyOracleAgent(OracleAgent):
+    """The oracle, but each step a uniformly random move with probability `noise` (seeded)."""
+
+    def __init__(self, noise: float = 0.2, seed: int = 0, **_):
+        super().__init__()
+        self.noise, self.rng = noise, np.random.default_rng(seed)
+
+    def act(self, obs: dict):
+        if self.rng.random() < self.noise:
+            return int(self.rng.choice([MOVE_FORWARD, TURN_LEFT, TURN_RIGHT]))
+        return super().act(obs)
+
+
+@register_agent("depth_reactive")
+class DepthReactiveAgent:
+    """PointNav from its own sensors only: the rendered depth and the goal vector. Turns towards the
+    goal, moves forward when the central band of the depth image is clear, otherwise turns to the
+    side with more free space; stops within `stop_radius` of the goal."""
+
+    def __init__(self, clearance: float = 0.45, stop_radius: float = 0.3, **_):
+        self.clearance, self.stop_radius = clearance, stop_radius
+
+    def reset(self, task: dict) -> None:
+        self.last_turn = TURN_LEFT
+
+    def act(self, obs: dict):
+        rho, phi = (float(v) for v in obs["pointgoal"])
+        if rho <= self.stop_radius:
+            return STOP
+        depth = obs.get("depth")
+        if abs(phi) > math.radians(15):
+            return TURN_LEFT if phi > 0 else TURN_RIGHT
+        if depth is None:
+            return MOVE_FORWARD
+        h, w = depth.shape
+        band = depth[h // 3: 2 * h // 3]
+        d = np.where(band > 0, band, np.inf)  # 0 = nothing hit: open
+        centre = d[:, w // 3: 2 * w // 3]
+        if np.percentile(centre, 5) > self.clearance:
+            return MOVE_FORWARD
+        left, right = np.median(d[:, : w // 3]), np.median(d[:, 2 * w // 3:])
+        self.last_turn = TURN_LEFT if left >= right else TURN_RIGHT
+        return self.last_turn

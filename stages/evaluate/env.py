@@ -1,0 +1,224 @@
+"""The navigation environment: an agent moves a disk robot through a scene's costmap and sees
+rendered RGB-D.
+
+Actions (any of):
+- discrete ids 0 STOP, 1 MOVE_FORWARD (forward_step), 2 TURN_LEFT, 3 TURN_RIGHT (turn_angle);
+- {"stop": true} (how STOP is sent in every form);
+- waypoints {"waypoints": [{"x", "y", "yaw"}, ...]}: relative moves in the robot frame (ROS: x
+  forward, y left, yaw counter-clockwise, metres / radians), applied in order within one step;
+- velocity {"v", "w", "dt"}: integrated as x = v dt forward, then yaw = w dt.
+A translation is checked as a swept disk on the costmap (its exact straight-motion test); a
+rejected move leaves the pose unchanged and counts as a collision. Turning in place never collides
+(the footprint is a disk).
+
+Protocols: "distance" (success as soon as the agent is inside the success region after a step;
+STOP only consumes a step) and "explicit_stop" (STOP ends the episode; success only when issued
+inside the region). Either way the episode ends after its step budget (max_steps).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from stages.episodes.rollout import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, wrap_angle
+from stages.evaluate.episode import Episode
+
+PROTOCOLS = ("distance", "explicit_stop")
+
+
+@dataclass
+class EnvConfig:
+    """The environment's rules and sensors."""
+
+    protocol: str = "distance"
+    """distance | explicit_stop (see the module docstring)."""
+    forward_step: float = 0.25
+    """MOVE_FORWARD distance, metres."""
+    turn_angle_deg: float = 15.0
+    """TURN_LEFT / TURN_RIGHT angle, degrees."""
+    width: int | None = None
+    """Image width, pixels (null = the embodiment's)."""
+    height: int | None = None
+    """Image height, pixels (null = the embodiment's)."""
+    render: bool = True
+    """Render RGB-D observations (false: pose and goal only, for metric-only runs)."""
+
+
+class SceneContext:
+    """What every environment of one scene shares: costmap, navigation graph, renderer, fields."""
+
+    def __init__(self, costmap, graph, emb, gaussians=None, backend: str = "auto"):
+        self.costmap, self.graph, self.emb = costmap, graph, emb
+        self.renderer = None
+        if gaussians is not None:
+            from stages.render import Renderer
+
+            self.renderer = Renderer(gaussians, backend)
+        self._fields: dict[str, object] = {}
+        self.max_fields = 256
+
+    def field(self, ep: Episode):
+        """Geodesic distance field to the episode's goal (set), cached per episode."""
+        key = (ep.task, ep.episode_id)  # episode ids repeat across tasks
+        if key not in self._fields:
+            cm = self.costmap
+            cells = np.stack([((ep.goal_sources[:, 1] - cm.origin[1]) / cm.resolution).astype(int),
+                              ((ep.goal_sources[:, 0] - cm.origin[0]) / cm.resolution).astype(int)], 1)
+            cells = cells[self.graph.index[cells[:, 0], cells[:, 1]] >= 0]
+            if len(self._fields) >= self.max_fields:  # bounded: drop the oldest
+                self._fields.pop(next(iter(self._fields)))
+            self._fields[key] = self.graph.field(cells)
+        return self._fields[key]
+
+    def render(self, poses: np.ndarray, width: int, height: int, camera: dict | None = None):
+        """RGB uint8 [B, H, W, 3] and depth float32 [B, H, W] at robot poses [B, 3]."""
+        from stages.render.camera import embodiment_camera
+
+        vm, k, w, h = embodiment_camera(self.emb, poses, width, height)
+        out = self.renderer.render(vm, k, w, h)
+        rgb = (out.rgb * 255.0 + 0.5).clamp(0, 255).to("cpu").numpy().astype(np.uint8)
+        return rgb, out.depth.to("cpu").numpy().astype(np.float32)
+
+
+class EpisodeState:
+    """Book-keeping of one running episode (what the metrics read)."""
+
+    def __init__(self, ep: Episode):
+        self.ep = ep
+        self.x, self.y, self.yaw = ep.start
+        self.steps = 0
+        self.moves = 0          # attempted translations
+        self.collisions = 0     # rejected translations
+        self.path_length = 0.0
+        self.positions = [(self.x, self.y)]
+        self.ever_in_region = ep.in_region(self.x, self.y)
+        self.stopped = False
+        self.stop_in_region = False
+        self.done = False
+        self.success = False
+        self.end_reason = ""
+
+    @property
+    def pose(self) -> np.ndarray:
+        return np.array([self.x, self.y, self.yaw], np.float32)
+
+
+class NavEnv:
+    """One episode at a time: reset(episode) -> observation; step(action) -> (observation, info)."""
+
+    def __init__(self, ctx: SceneContext, cfg: EnvConfig | None = None):
+        self.ctx, self.cfg = ctx, cfg or EnvConfig()
+        if self.cfg.protocol not in PROTOCOLS:
+            raise ValueError(f"unknown protocol {self.cfg.protocol!r}; choose one of {PROTOCOLS}")
+        self.w = int(self.cfg.width or ctx.emb.image_width)
+        self.h = int(self.cfg.height or ctx.emb.image_height)
+        self.turn = math.radians(self.cfg.turn_angle_deg)
+        self.state: EpisodeState | None = None
+        self._goal_image = None
+
+    # ---- API ---------------------------------------------------------------------------------
+    def reset(self, ep: Episode) -> dict:
+        self.state = EpisodeState(ep)
+        self._goal_image = None
+        if ep.task == "imagenav" and self.cfg.render and self.ctx.renderer is not None:
+            gy = ep.goal_yaw if ep.goal_yaw is not None else 0.0
+            self._goal_image = self.ctx.render(np.array([[ep.goal_xy[0], ep.goal_xy[1], gy]]), self.w, self.h)[0][0]
+        return self._observe()
+
+    def step(self, action) -> tuple[dict, dict]:
+        s = self.state
+        if s is None or s.done:
+            raise RuntimeError("step() after the episode ended; call reset(episode)")
+        self.apply(action)
+        obs = self._observe()
+        return obs, self.info()
+
+    # ---- pieces shared with the batched environment -------------------------------------------
+    def apply(self, action) -> None:
+        """Apply one action to the running episode (no rendering)."""
+        s = self.state
+        s.steps += 1
+        stop, moves = self._decode(action)
+        if stop:
+            s.stopped = True
+            s.stop_in_region = s.ep.in_region(s.x, s.y)
+            if self.cfg.protocol == "explicit_stop":
+                s.done, s.success, s.end_reason = True, s.stop_in_region, "stop"
+        for dx, dy, dyaw in moves:
+            self._move(dx, dy, dyaw)
+        inside = s.ep.in_region(s.x, s.y)
+        s.ever_in_region |= inside
+        if not s.done and self.cfg.protocol == "distance" and inside:
+            s.done, s.success, s.end_reason = True, True, "entered"
+        if not s.done and s.steps >= s.ep.max_steps:
+            s.done, s.end_reason = True, "budget"
+
+    def info(self) -> dict:
+        s = self.state
+        return {"episode_id": s.ep.episode_id, "steps": s.steps, "collisions": s.collisions,
+                "done": s.done, "success": s.success, "end_reason": s.end_reason,
+                "distance_to_goal": self.geodesic_to_goal(), "pose": s.pose}
+
+    def geodesic_to_goal(self) -> float:
+        """Geodesic distance from the current pose to the goal (set), metres."""
+        from stages.episodes.rollout import _potential
+
+        f = self.ctx.field(self.state.ep)
+        cm = self.ctx.costmap
+        return float(_potential(f.grid, cm.origin[0], cm.origin[1], cm.resolution, self.state.x, self.state.y))
+
+    def _decode(self, action) -> tuple[bool, list[tuple[float, float, float]]]:
+        if isinstance(action, dict):
+            if action.get("stop"):
+                return True, []
+            if "waypoints" in action:
+                return False, [(float(w.get("x", 0.0)), float(w.get("y", 0.0)), float(w.get("yaw", 0.0)))
+                               for w in action["waypoints"]]
+            if "v" in action:
+                dt = float(action.get("dt", 0.05))
+                return False, [(float(action["v"]) * dt, 0.0, float(action.get("w", 0.0)) * dt)]
+            raise ValueError(f"unknown action {action!r}: expected stop, waypoints or v/w/dt")
+        a = int(action)
+        if a == STOP:
+            return True, []
+        if a == MOVE_FORWARD:
+            return False, [(self.cfg.forward_step, 0.0, 0.0)]
+        if a in (TURN_LEFT, TURN_RIGHT):
+            return False, [(0.0, 0.0, self.turn if a == TURN_LEFT else -self.turn)]
+        raise ValueError(f"unknown discrete action {a} (0 stop, 1 forward, 2 left, 3 right)")
+
+    def _move(self, dx: float, dy: float, dyaw: float) -> None:
+        s = self.state
+        if dx or dy:
+            c, sn = math.cos(s.yaw), math.sin(s.yaw)
+            nx, ny = s.x + c * dx - sn * dy, s.y + sn * dx + c * dy
+            s.moves += 1
+            if not self.ctx.costmap.is_motion_valid(s.x, s.y, nx, ny):
+                s.collisions += 1
+                return  # rejected: the pose stays, heading change included
+            s.path_length += math.hypot(nx - s.x, ny - s.y)
+            s.x, s.y = nx, ny
+            s.positions.append((nx, ny))
+        s.yaw = float(wrap_angle(s.yaw + dyaw))
+
+    def goal_observation(self) -> dict:
+        s = self.state
+        ep = s.ep
+        if ep.task == "objectnav":
+            return {"goal_category": ep.category}
+        if ep.task == "imagenav":
+            return {"goal_image": self._goal_image} if self._goal_image is not None else {}
+        dxw, dyw = ep.goal_xy[0] - s.x, ep.goal_xy[1] - s.y
+        c, sn = math.cos(s.yaw), math.sin(s.yaw)
+        gx, gy = c * dxw + sn * dyw, -sn * dxw + c * dyw
+        return {"pointgoal": np.array([math.hypot(gx, gy), math.atan2(gy, gx)], np.float32),
+                "pointgoal_xy": np.array([gx, gy], np.float32)}
+
+    def _observe(self) -> dict:
+        obs = {"pose": self.state.pose, **self.goal_observation()}
+        if self.cfg.render and self.ctx.renderer is not None:
+            rgb, depth = self.ctx.render(self.state.pose[None].astype(np.float64), self.w, self.h)
+            obs["rgb"], obs["depth"] = rgb[0], depth[0]
+        return obs

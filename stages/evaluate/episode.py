@@ -1,0 +1,64 @@
+"""An episode as the environment needs it, read from a row of the canonical episodes table."""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Episode:
+    """One evaluation episode (aligned frame, metres, radians)."""
+
+    episode_id: str
+    task: str                        # pointnav | imagenav | objectnav
+    start: tuple[float, float, float]  # x, y, yaw
+    goal_xy: np.ndarray              # [2] the goal position (ObjectNav: nearest view point)
+    centres: np.ndarray              # [k, 2] success-region centres (ObjectNav: instance centres)
+    success_radius: float
+    geodesic: float                  # metres: the optimum SPL divides by
+    max_steps: int
+    difficulty: str = ""
+    goal_yaw: float | None = None    # ImageNav
+    heading_tolerance: float = math.radians(30)
+    category: str | None = None      # ObjectNav
+    goal_sources: np.ndarray | None = None  # [m, 2] positions at distance 0 of the goal's field
+    goal_camera: dict | None = None  # ImageNav: camera of the goal view
+    reference_path: np.ndarray | None = None  # [n, 2] expert positions (for DTW)
+    scene_id: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_row(cls, row: dict, reference_path: np.ndarray | None = None) -> "Episode":
+        """From a canonical episodes row (a dict; pandas' NaN for missing strings is accepted)."""
+        row = {k: (None if isinstance(v, float) and math.isnan(v) and k.endswith(("_json", "category")) else v)
+               for k, v in row.items()}
+        task = str(row.get("task_type") or row.get("task"))
+        goal = np.array([row["goal_position_x"], row["goal_position_y"]], float)
+        goals = json.loads(row["goals_json"]) if row.get("goals_json") else []
+        if task == "objectnav":
+            centres = np.array([g["position"][:2] for g in goals], float)
+            sources = np.array([v["position"][:2] for g in goals for v in g["view_points"]], float)
+        else:
+            centres, sources = goal[None], goal[None]
+        yaw = row.get("goal_yaw")
+        return cls(
+            episode_id=row["episode_id"], task=task,
+            start=(float(row["start_position_x"]), float(row["start_position_y"]), float(row["start_yaw"])),
+            goal_xy=goal, centres=centres, success_radius=float(row["success_radius"]),
+            geodesic=float(row["geodesic_distance"]), max_steps=int(row["max_steps"]),
+            difficulty=row.get("difficulty", ""),
+            goal_yaw=float(yaw) if task == "imagenav" and yaw is not None and not math.isnan(yaw) else None,
+            heading_tolerance=float(row["heading_tolerance"]) if task == "imagenav" else math.radians(30),
+            category=row.get("goal_object_category") if task == "objectnav" else None, goal_sources=sources,
+            goal_camera=json.loads(row["goal_camera_json"]) if row.get("goal_camera_json") else None,
+            reference_path=reference_path, scene_id=str(row.get("scene_id", "")))
+
+    def in_region(self, x: float, y: float) -> bool:
+        return bool((np.hypot(self.centres[:, 0] - x, self.centres[:, 1] - y) <= self.success_radius + 1e-9).any())
+
+    def distance_to_centres(self, x: float, y: float) -> float:
+        """Planar Euclidean distance to the nearest success-region centre (NE)."""
+        return float(np.hypot(self.centres[:, 0] - x, self.centres[:, 1] - y).min())
