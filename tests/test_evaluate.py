@@ -1,0 +1,139 @@
+"""Closed-loop evaluation: environment rules, protocols, metrics on hand-made rollouts, agents."""
+import math
+
+import numpy as np
+import pytest
+
+from stages.costmap.build import Embodiment
+from stages.episodes.geodesic import NavGraph
+from stages.episodes.rollout import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
+from stages.evaluate.agents import make_agent
+from stages.evaluate.env import EnvConfig, NavEnv, SceneContext
+from stages.evaluate.episode import Episode
+from stages.evaluate.loop import run_episode, run_episodes
+from stages.evaluate.metrics import aggregate, dtw, episode_metrics
+from tests.test_episodes import RADIUS, room_with_door
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    cm = room_with_door()
+    return SceneContext(cm, NavGraph(cm, ~cm.occupancy), Embodiment(radius=RADIUS))
+
+
+def episode(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), radius=0.5, geodesic=2.0, max_steps=50, **kw):
+    g = np.array(goal, float)
+    return Episode("e0", kw.pop("task", "pointnav"), start, g, g[None], radius, geodesic, max_steps,
+                   goal_sources=g[None], **kw)
+
+
+def test_moves_collisions_and_action_forms(ctx):
+    env = NavEnv(ctx, EnvConfig(render=False))
+    env.reset(episode(start=(1.0, 0.5, -math.pi / 2)))  # facing the wall at y = 0
+    env.step(MOVE_FORWARD)
+    assert env.state.y == pytest.approx(0.25) and env.state.collisions == 0
+    env.step(MOVE_FORWARD)  # would end at y = 0, inside the wall: rejected
+    assert env.state.y == pytest.approx(0.25) and env.state.collisions == 1 and env.state.moves == 2
+    env.step(TURN_LEFT)  # turning in place never collides
+    assert env.state.yaw == pytest.approx(-math.pi / 2 + math.radians(15))
+    env.reset(episode())
+    env.step({"waypoints": [{"x": 0.2, "y": 0.1, "yaw": 0.3}]})
+    assert (env.state.x, env.state.y, env.state.yaw) == pytest.approx((1.2, 0.6, 0.3))
+    env.step({"v": 0.5, "w": 1.0, "dt": 0.2})  # 0.1 m along the heading, then +0.2 rad
+    assert (env.state.x, env.state.y) == pytest.approx((1.2 + 0.1 * math.cos(0.3), 0.6 + 0.1 * math.sin(0.3)))
+    assert env.state.yaw == pytest.approx(0.5)
+    s = env.state
+    m = episode_metrics(s, 2.0, 2.0, "distance")
+    assert m["collision_rate"] == 0 and m["steps"] == 2
+    assert s.path_length == pytest.approx(math.hypot(0.2, 0.1) + 0.1)
+    with pytest.raises(ValueError):
+        env.step({"jump": 1})
+
+
+def test_explicit_stop_outside_the_region_fails(ctx):
+    env = NavEnv(ctx, EnvConfig(render=False, protocol="explicit_stop"))
+    env.reset(episode())
+    env.step(MOVE_FORWARD)
+    _, info = env.step(STOP)
+    assert info["done"] and not info["success"] and info["end_reason"] == "stop"
+    m = episode_metrics(env.state, 2.0, 1.75, "explicit_stop")
+    assert m["stop_sr"] == 0 and m["sr"] == 0 and m["spl"] == 0 and m["distance_sr"] == 0
+    assert m["ne"] == pytest.approx(1.75)
+    assert m["soft_spl"] == pytest.approx((1 - 1.75 / 2.0) * 2.0 / 2.0)
+    with pytest.raises(RuntimeError):
+        env.step(MOVE_FORWARD)
+
+
+def test_distance_protocol_ends_on_entry_and_stop_only_consumes_a_step(ctx):
+    env = NavEnv(ctx, EnvConfig(render=False, protocol="distance"))
+    env.reset(episode(start=(2.2, 0.5, 0.0), goal=(3.0, 0.5), geodesic=0.8))
+    _, info = env.step(STOP)
+    assert not info["done"] and info["steps"] == 1
+    env.step(MOVE_FORWARD)  # 2.45: 0.55 from the goal, outside
+    _, info = env.step(MOVE_FORWARD)  # 2.70: inside
+    assert info["done"] and info["success"] and info["end_reason"] == "entered"
+    m = episode_metrics(env.state, 0.8, 0.3, "distance")
+    assert m["sr"] == 1 and m["distance_sr"] == 1 and m["stop_sr"] == 0
+    assert m["spl"] == pytest.approx(0.8 / max(0.5, 0.8))  # walked 0.5 < geodesic 0.8: SPL 1
+    # the budget ends an episode
+    env.reset(episode(max_steps=3))
+    for a in (TURN_LEFT, TURN_RIGHT, TURN_LEFT):
+        _, info = env.step(a)
+    assert info["done"] and info["end_reason"] == "budget" and not info["success"]
+
+
+def test_pose_criterion_and_spl_by_hand(ctx):
+    env = NavEnv(ctx, EnvConfig(render=False, protocol="explicit_stop"))
+    for heading_deg, pose_ok in ((20.0, 1.0), (45.0, 0.0)):
+        ep = episode(start=(2.9, 0.5, math.radians(heading_deg)), task="imagenav", goal_yaw=0.0,
+                     heading_tolerance=math.radians(30), geodesic=0.1)
+        env.reset(ep)
+        env.step(STOP)
+        m = episode_metrics(env.state, 0.1, 0.1, "explicit_stop")
+        assert m["sr"] == 1 and m["pose_sr"] == pose_ok
+    env.reset(episode(start=(1.0, 0.5, 0.0), goal=(1.5, 0.5), radius=0.3, geodesic=0.5))
+    for _ in range(3):
+        env.step(MOVE_FORWARD)  # overshoots to 1.75, still inside (0.25 from the goal)
+    env.step(STOP)
+    m = episode_metrics(env.state, 0.5, 0.25, "explicit_stop")
+    assert env.state.path_length == pytest.approx(0.75) and m["spl"] == pytest.approx(0.5 / 0.75)
+    rows = [{"difficulty": "easy", "distance_sr": 1.0, "pose_sr": 0.5}, {"difficulty": "hard", "distance_sr": 0.5,
+                                                                          "pose_sr": 0.0}]
+    agg = aggregate(rows)
+    assert agg["overall"]["distance_sr"] == 0.75 and agg["overall"]["pose_retention"] == pytest.approx(0.25 / 0.75)
+    assert agg["easy"]["episodes"] == 1
+
+
+def test_dtw_known_answers():
+    a = np.array([[0, 0], [1, 0], [2, 0]], float)
+    b = np.array([[0, 0], [2, 0]], float)
+    assert dtw(a, b) == pytest.approx(1.0)
+    assert dtw(a, a) == 0.0
+    assert dtw(b, a) == pytest.approx(1.0)
+    # a shifted copy: every point one metre off
+    assert dtw(a, a + [0, 1]) == pytest.approx(3.0)
+
+
+def test_oracle_succeeds_random_rarely_and_a_crashing_agent_fails_its_episode(ctx):
+    ep = episode(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), geodesic=2.3, max_steps=500)
+    ep.reference_path = np.array([[1.0, 0.5], [2.0, 2.2], [3.0, 0.5]])
+    for protocol in ("distance", "explicit_stop"):
+        row = run_episode(NavEnv(ctx, EnvConfig(render=False, protocol=protocol)), make_agent("oracle"), ep)
+        assert row["sr"] == 1 and row["collision_rate"] == 0 and 0 < row["ndtw"] <= 1
+
+    class Boom:
+        def reset(self, task):
+            self.n = 0
+
+        def act(self, obs):
+            self.n += 1
+            if self.n > 3:
+                raise RuntimeError("agent crashed")
+            return MOVE_FORWARD
+
+    rows = run_episodes(ctx, [ep, ep], Boom(), EnvConfig(render=False))
+    assert [r["end_reason"] for r in rows] == ["agent_error"] * 2 and "crashed" in rows[0]["error"]
+    assert rows[0]["sr"] == 0 and rows[0]["steps"] == 3
+    with pytest.raises(ValueError, match="unknown agent"):
+        make_agent("nope")
+    assert type(make_agent("stages.evaluate.agents:RandomAgent")).__name__ == "RandomAgent"
