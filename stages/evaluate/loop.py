@@ -36,6 +36,9 @@ def run_episode(env: NavEnv, agent, ep) -> dict:
         env.state.done, env.state.success, env.state.end_reason = True, False, "agent_error"
         env.state.extra_trace = traceback.format_exc(limit=4)
     s = env.state
+    if hasattr(agent, "end"):  # remote agents: episode_end frame
+        agent.end({"episode_id": ep.episode_id, "success": bool(s.success), "steps": s.steps,
+                   "end_reason": s.end_reason})
     row = {"episode_id": ep.episode_id, "task": ep.task, "scene_id": ep.scene_id, "difficulty": ep.difficulty,
            "protocol": env.cfg.protocol, "end_reason": s.end_reason, "error": error,
            **episode_metrics(s, d0, env.geodesic_to_goal(), env.cfg.protocol),
