@@ -137,3 +137,32 @@ def test_oracle_succeeds_random_rarely_and_a_crashing_agent_fails_its_episode(ct
     with pytest.raises(ValueError, match="unknown agent"):
         make_agent("nope")
     assert type(make_agent("stages.evaluate.agents:RandomAgent")).__name__ == "RandomAgent"
+
+
+def test_batched_env_matches_single_envs_and_gym_wrapper(ctx):
+    from stages.evaluate.batch import BatchNavEnv, gym_env
+
+    eps = [episode(start=(1.0, 0.5, a), max_steps=60) for a in (0.0, 1.5, -1.0)]
+    for i, e in enumerate(eps):
+        e.episode_id = f"b{i}"
+    rng = np.random.default_rng(1)
+    acts = rng.integers(1, 4, size=(40, 3))
+    batch = BatchNavEnv(ctx, 3, EnvConfig(render=False))
+    batch.reset(eps)
+    singles = [NavEnv(ctx, EnvConfig(render=False)) for _ in eps]
+    for s, e in zip(singles, eps):
+        s.reset(e)
+    for row in acts:
+        live = [None if s.state.done else int(a) for s, a in zip(singles, row)]
+        _, infos = batch.step(live)
+        for s, a in zip(singles, live):
+            if a is not None:
+                s.step(a)
+        assert [tuple(i["pose"]) for i in infos] == [tuple(s.info()["pose"]) for s in singles]
+    env = gym_env(ctx, eps, EnvConfig(render=False, protocol="explicit_stop"))
+    from gymnasium.utils.env_checker import check_env
+
+    check_env(env, skip_render_check=True)
+    obs, _ = env.reset(options={"episode": episode(start=(2.0, 0.5, 0.0), goal=(2.4, 0.5), geodesic=0.4)})
+    _, reward, terminated, truncated, info = env.step(STOP)
+    assert terminated and not truncated and info["success"] and reward == pytest.approx(2.5 - 0.01)
