@@ -12,6 +12,7 @@ from stages.align.floor import AlignConfig
 from stages.costmap.build import CostmapConfig, Embodiment
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.export import ExportConfig
+from stages.evaluate.config import EvaluateConfig
 from stages.gaussians.validate import ValidationLimits
 from stages.synthetic.generate import SyntheticConfig
 from stages.voxelize.field import VoxelizeConfig
@@ -126,6 +127,8 @@ class NavArenaConfig:
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     """Expert planner (config group `planner`)."""
     export: ExportConfig = field(default_factory=ExportConfig)
+    evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
+    """Closed-loop evaluation (stage `evaluate`, not in the default stages: stages=[evaluate])."""
     embodiment: Embodiment = field(default_factory=Embodiment)
     scenes: ScenesConfig = field(default_factory=ScenesConfig)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)

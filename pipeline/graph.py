@@ -58,6 +58,8 @@ STAGES: tuple[Stage, ...] = (
     Stage("episodes", "stages.episodes.stage:run", ("costmap",), ("episodes", "task", "planner", "embodiment")),
     Stage("export", "stages.episodes.export:run", ("episodes", "asset"), ("export",),
           finalize="stages.episodes.export:finalize"),
+    Stage("evaluate", "stages.evaluate.stage:run", ("episodes",), ("evaluate", "episodes", "task", "embodiment"),
+          finalize="stages.evaluate.stage:finalize"),
 )
 BY_NAME = {s.name: s for s in STAGES}
 

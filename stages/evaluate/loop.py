@@ -19,10 +19,13 @@ def task_info(ep) -> dict:
     return info
 
 
-def run_episode(env: NavEnv, agent, ep) -> dict:
-    """One episode; an agent that raises fails the episode with the reason recorded."""
+def run_episode(env: NavEnv, agent, ep, frames: list | None = None) -> dict:
+    """One episode; an agent that raises fails the episode with the reason recorded. `frames`, when
+    given, collects the egocentric RGB of every step."""
     t0 = time.perf_counter()
     obs = env.reset(ep)
+    if frames is not None and "rgb" in obs:
+        frames.append(obs["rgb"])
     d0 = env.geodesic_to_goal()
     error = ""
     try:
@@ -31,6 +34,8 @@ def run_episode(env: NavEnv, agent, ep) -> dict:
             agent.bind(env)
         while not env.state.done:
             obs, _ = env.step(agent.act(obs))
+            if frames is not None and "rgb" in obs:
+                frames.append(obs["rgb"])
     except Exception as e:  # noqa: BLE001 - the run goes on; the episode fails
         error = f"{type(e).__name__}: {e}"
         env.state.done, env.state.success, env.state.end_reason = True, False, "agent_error"

@@ -1,0 +1,43 @@
+"""Configuration of the evaluate stage (section `evaluate`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class EvaluateConfig:
+    """Closed-loop evaluation of one agent on stored episodes."""
+
+    run: str = "${evaluate.agent}_${evaluate.protocol}"
+    """Run name: outputs go to data/07_eval/{run}/ (default: agent and protocol)."""
+    agent: str = "oracle"
+    """Registry key (random, oracle, noisy_oracle, depth_reactive), "module:Class", or a
+    ws://host:port agent server speaking the NavArena protocol."""
+    agent_args: dict = field(default_factory=dict)
+    """Keyword arguments of the agent's constructor."""
+    protocol: str = "distance"
+    """distance | explicit_stop."""
+    renderer: str = "auto"
+    """auto (gsplat on CUDA, else CPU) | cpu | gsplat."""
+    render: bool = True
+    """Render RGB-D observations (false for agents that do not look: oracle, random)."""
+    width: int | None = None
+    """Image width (null = the embodiment's)."""
+    height: int | None = None
+    """Image height (null = the embodiment's)."""
+    tasks: list[str] = field(default_factory=lambda: ["pointnav", "imagenav", "objectnav"])
+    """Tasks to evaluate."""
+    split: str | None = None
+    """Only this split (null = all)."""
+    difficulty: str | None = None
+    """Only this difficulty (null = all)."""
+    episodes_per_scene: int | None = None
+    """At most this many episodes per scene and task (null = all), the first by episode id."""
+    seed: int = 0
+    """Seed of stochastic agents (per scene and task, derived from it)."""
+    timeout_s: float = 30.0
+    """Remote agents: seconds to wait for each action."""
+    videos: int = 1
+    """mp4 of the egocentric view for this many episodes per scene (needs render=true)."""
+    trajectory_plots: int = 3
+    """Top-down trajectory plots per scene."""

@@ -1,0 +1,174 @@
+"""Stage `evaluate`: one agent on the stored episodes of each scene, in closed loop.
+
+Outputs under data/07_eval/{run}/: results/scene_id={id}/part-0.parquet (per episode: metrics, the
+executed trajectory, end reason, error), videos/*.mp4 (egocentric view of chosen episodes),
+plots/*.png (top-down trajectories); the dataset-level finalize step adds summary.json, tables.md
+(the layout of the paper's Tables 6 and 7) and, across runs, 07_eval/distance_sr_by_difficulty.png.
+"""
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from omegaconf import OmegaConf
+
+from pipeline.atomic import atomic_path
+from stages.costmap.query import Costmap
+from stages.episodes.generate import stream_seed
+from stages.episodes.geodesic import NavGraph
+from stages.episodes.stage import eligible_cells
+from stages.evaluate.config import EvaluateConfig
+from stages.evaluate.env import EnvConfig, NavEnv, SceneContext
+from stages.evaluate.episode import Episode
+from stages.evaluate.loop import run_episode
+from stages.evaluate.metrics import METRICS
+
+REFERENCE_STRIDE = 10  # expert rows kept for DTW (every 0.5 s)
+
+
+def run_name(ecfg: EvaluateConfig) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", ecfg.run).strip("_")
+
+
+def make_scene_agent(ecfg: EvaluateConfig, seed: int):
+    if ecfg.agent.startswith(("ws://", "wss://")):
+        from stages.evaluate.protocol import RemoteAgent
+
+        return RemoteAgent(ecfg.agent, timeout=ecfg.timeout_s, **ecfg.agent_args)
+    from stages.evaluate.agents import AGENTS, make_agent
+
+    args = dict(ecfg.agent_args)
+    if ecfg.agent in AGENTS:
+        args.setdefault("seed", seed)
+    return make_agent(ecfg.agent, **args)
+
+
+def load_episodes(catalog, scene, ecfg: EvaluateConfig) -> list[Episode]:
+    out = []
+    for task in ecfg.tasks:
+        path = catalog.path("episodes", scene, task=task)
+        if not path.exists():
+            continue
+        eps = pq.read_table(path).to_pandas()
+        if ecfg.split:
+            eps = eps[eps["split"] == ecfg.split]
+        if ecfg.difficulty:
+            eps = eps[eps["difficulty"] == ecfg.difficulty]
+        eps = eps.sort_values("episode_id")
+        if ecfg.episodes_per_scene is not None:
+            eps = eps.head(ecfg.episodes_per_scene)
+        tr = pq.read_table(catalog.path("trajectories", scene, task=task),
+                           columns=["episode_id", "step", "position_x", "position_y"]).to_pandas()
+        refs = {eid: g.sort_values("step")[["position_x", "position_y"]].to_numpy()[::REFERENCE_STRIDE]
+                for eid, g in tr.groupby("episode_id")}
+        for row in eps.to_dict("records"):
+            row["task_type"], row["scene_id"] = task, scene.scene_id
+            out.append(Episode.from_row(row, refs.get(row["episode_id"])))
+    return out
+
+
+def run(scene, cfg, catalog) -> dict:
+    ecfg: EvaluateConfig = OmegaConf.to_object(cfg.evaluate)
+    emb = OmegaConf.to_object(cfg.embodiment)
+    cm = Costmap.load(catalog.path("costmaps", scene), emb.name)
+    graph = NavGraph(cm, eligible_cells(cm, OmegaConf.to_object(cfg.episodes)), cfg.episodes.geodesic_neighbourhood)
+    gs = None
+    if ecfg.render:
+        from stages.gaussians.store import read_scene_zarr
+
+        gs, _ = read_scene_zarr(catalog.path("aligned", scene))
+    ctx = SceneContext(cm, graph, emb, gs, ecfg.renderer)
+    env = NavEnv(ctx, EnvConfig(protocol=ecfg.protocol, width=ecfg.width, height=ecfg.height, render=ecfg.render))
+    episodes = load_episodes(catalog, scene, ecfg)
+    agent = make_scene_agent(ecfg, stream_seed(ecfg.seed, scene.scene_id, "evaluate") % 2**31)
+    base = catalog.path("eval_root") / run_name(ecfg)
+    rows, videos = [], []
+    for k, ep in enumerate(episodes):
+        frames = [] if (ecfg.render and len(videos) < ecfg.videos) else None
+        row = run_episode(env, agent, ep, frames)
+        rows.append(row)
+        if frames:
+            videos.append(write_video(frames, base / "videos" / f"{scene.scene_id}_{ep.task}_{ep.episode_id}.mp4"))
+    if hasattr(agent, "close"):
+        agent.close()
+    plots = [plot_trajectory(cm, r, ep, base / "plots" / f"{scene.scene_id}_{ep.task}_{ep.episode_id}.png")
+             for r, ep in list(zip(rows, episodes))[:ecfg.trajectory_plots]]
+    out = base / "results" / f"scene_id={scene.scene_id}" / "part-0.parquet"
+    write_results(rows, out)
+    failed = [r for r in rows if r["error"]]
+    return {"outputs": [str(out), *videos, *plots], "episodes": len(rows), "agent_errors": len(failed),
+            "sr": float(np.mean([r["sr"] for r in rows])) if rows else None, "run": run_name(ecfg)}
+
+
+def write_results(rows: list[dict], path) -> None:
+    metric_cols = list(METRICS)
+    # scene_id comes from the hive partition folder
+    cols = {c: [r[c] for r in rows] for c in ("episode_id", "task", "difficulty", "protocol", "end_reason",
+                                               "error")}
+    table = pa.table({**{c: pa.array(v, pa.string()) for c, v in cols.items()},
+                      **{c: pa.array([float(r[c]) for r in rows], pa.float64()) for c in metric_cols},
+                      "geodesic": pa.array([r["geodesic"] for r in rows], pa.float64()),
+                      "path_length": pa.array([r["path_length"] for r in rows], pa.float64()),
+                      "seconds": pa.array([r["seconds"] for r in rows], pa.float64()),
+                      "trajectory_x": pa.array([r["trajectory"][:, 0].tolist() for r in rows], pa.list_(pa.float32())),
+                      "trajectory_y": pa.array([r["trajectory"][:, 1].tolist() for r in rows], pa.list_(pa.float32()))})
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+
+
+def write_video(frames: list[np.ndarray], path, fps: int = 10) -> str:
+    """Egocentric RGB frames -> mp4 (H.264 where the bundled FFmpeg has it, else MPEG-4)."""
+    import av
+
+    h, w = frames[0].shape[:2]
+    with atomic_path(path) as tmp:
+        with av.open(str(tmp), mode="w", format="mp4") as container:
+            try:
+                stream = container.add_stream("libx264", rate=fps)
+            except Exception:  # noqa: BLE001
+                stream = container.add_stream("mpeg4", rate=fps)
+            stream.width, stream.height, stream.pix_fmt = w - w % 2, h - h % 2, "yuv420p"
+            for f in frames:
+                frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(f[: h - h % 2, : w - w % 2]), format="rgb24")
+                for packet in stream.encode(frame):
+                    container.mux(packet)
+            for packet in stream.encode():
+                container.mux(packet)
+    return str(path)
+
+
+def plot_trajectory(cm: Costmap, row: dict, ep: Episode, path) -> str:
+    """Top-down: free space, the expert's path, the executed path, start and success region."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ny, nx = cm.clearance.shape
+    ext = [cm.origin[0], cm.origin[0] + nx * cm.resolution, cm.origin[1], cm.origin[1] + ny * cm.resolution]
+    fig, ax = plt.subplots(figsize=(5, 5))
+    ax.imshow(~cm.occupancy, origin="lower", extent=ext, cmap="gray", vmin=0, vmax=1)
+    if ep.reference_path is not None and len(ep.reference_path):
+        ax.plot(*ep.reference_path.T, color="tab:green", lw=1.5, label="expert")
+    tr = row["trajectory"]
+    ax.plot(tr[:, 0], tr[:, 1], color="tab:red", lw=1.2, label=f"agent ({'success' if row['sr'] else 'failure'})")
+    ax.plot(*ep.start[:2], "o", color="tab:blue", label="start")
+    for c in ep.centres:
+        ax.add_patch(plt.Circle(c, ep.success_radius, color="tab:orange", alpha=0.35))
+    ax.set_title(f"{ep.task} {ep.episode_id} ({ep.difficulty}): SPL {row['spl']:.2f}")
+    ax.legend(loc="lower right", fontsize=7)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)
+    return str(path)
+
+
+def finalize(cfg, catalog) -> dict:
+    """summary.json and tables.md of this run (all its scenes on disk), and the cross-run plot."""
+    from stages.evaluate.report import write_reports
+
+    return write_reports(catalog.path("eval_root"), run_name(OmegaConf.to_object(cfg.evaluate)))
