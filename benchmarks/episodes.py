@@ -32,8 +32,8 @@ from scipy.sparse.csgraph import dijkstra
 from stages.costmap.build import Embodiment
 from stages.costmap.query import Costmap
 from stages.episodes.config import EpisodesConfig
+from stages.episodes.geodesic import eligible_cells
 from stages.episodes.rollout import Limits
-from stages.episodes.stage import eligible_cells
 from stages.episodes.validity import check_trajectory
 
 RELEASE_EPISODES = 22.2e6
@@ -87,7 +87,7 @@ def throughput_at_density(cfg, per_task: int) -> dict:
     from pipeline.executor import open_catalog
     from stages.episodes.config import PlannerConfig, TaskConfig
     from stages.episodes.generate import EpisodeGenerator, stream_seed
-    from stages.episodes.geodesic import NavGraph
+    from stages.episodes.geodesic import NavGraph, eligible_cells
     from stages.instances import load_instances
 
     catalog, scenes, _ = open_catalog(cfg)
@@ -120,7 +120,7 @@ def compare_planners(cfg, n: int = 100) -> dict:
     from pipeline.executor import open_catalog
     from stages.episodes.config import PlannerConfig, TaskConfig
     from stages.episodes.generate import EpisodeGenerator
-    from stages.episodes.geodesic import NavGraph
+    from stages.episodes.geodesic import NavGraph, eligible_cells
     from stages.episodes.planner import PLANNERS
 
     catalog, scenes, _ = open_catalog(cfg)

@@ -12,6 +12,7 @@ from stages.align.floor import AlignConfig
 from stages.costmap.build import CostmapConfig, Embodiment
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.export import ExportConfig
+from stages.episodes.goal_images import GoalImagesConfig
 from stages.evaluate.config import EvaluateConfig
 from stages.gaussians.validate import ValidationLimits
 from stages.synthetic.generate import SyntheticConfig
@@ -107,8 +108,8 @@ class AssetConfig:
 @dataclass
 class NavArenaConfig:
     stages: list[str] = field(default_factory=lambda: ["synthesize", "ingest", "voxelize", "align", "costmap", "asset",
-                                                       "episodes", "export"])
-    """Stages to run (their missing or stale upstream stages run too)."""
+                                                       "episodes", "goal_images", "export"])
+    """Stages to run (their missing or stale upstream stages run too); evaluate is not a default."""
     force: bool = False
     """Recompute the selected stages even when their markers are current."""
     data_root: str = "data"
@@ -126,6 +127,7 @@ class NavArenaConfig:
     """Tasks to generate, by name (config group `task`, several at once: task=[pointnav,objectnav])."""
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     """Expert planner (config group `planner`)."""
+    goal_images: GoalImagesConfig = field(default_factory=GoalImagesConfig)
     export: ExportConfig = field(default_factory=ExportConfig)
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
     """Closed-loop evaluation (stage `evaluate`, not in the default stages: stages=[evaluate])."""

@@ -351,3 +351,34 @@ def test_exports_read_back_equal_to_the_store(episode_run):
                     assert all(g["view_points"] for g in goals)
                 n += 1
         assert n == len(store)
+
+
+def test_goal_images_rendered_at_the_goal_camera_and_exported(episode_run):
+    from PIL import Image
+
+    from pipeline.executor import execute
+    from stages.gaussians.store import read_scene_zarr
+    from stages.render import Renderer
+    from stages.render.camera import intrinsics, viewmats
+    from tests.test_pipeline import make_cfg
+
+    root, over, _ = episode_run
+    summary = execute(make_cfg(root, *over[:-1], "export.chunk_size=8", "goal_images.enabled=true"))
+    assert not summary["failures"], summary["failures"]
+    eps = pd.read_parquet(root / "05_episodes", filters=[("task", "==", "imagenav")])
+    sid = str(eps["scene_id"].iloc[0])
+    gi = pq.read_table(root / "05_goal_images" / "task=imagenav" / f"scene_id={sid}" / "part-0.parquet").to_pandas()
+    assert sorted(gi["episode_id"]) == sorted(eps["episode_id"])
+    base = next((root / "10_exports" / "navarena" / "navarena").glob(f"*/{sid}")) / "imagenav"
+    meta = pq.read_table(base / "meta" / "episodes.parquet").to_pandas()
+    assert (meta["goal_image_path"] == "goal_images/" + meta["episode_id"] + "_goal.jpg").all()
+    e = eps.iloc[0]
+    img = np.asarray(Image.open(base / f"goal_images/{e['episode_id']}_goal.jpg")).astype(float) / 255
+    cam = json.loads(e["goal_camera_json"])
+    gs, _ = read_scene_zarr(root / "01_scenes" / sid / "aligned.zarr")
+    ref = Renderer(gs, "cpu").render(viewmats(np.array([[*cam["position"][:2], cam["yaw"]]]), cam["position"][2],
+                                              cam["pitch_deg"]),
+                                     intrinsics(cam["width"], cam["height"], cam["hfov_deg"])[None],
+                                     cam["width"], cam["height"]).rgb[0].numpy()
+    assert img.shape == (cam["height"], cam["width"], 3)
+    assert 10 * math.log10(1 / np.mean((img - ref) ** 2)) > 30  # the JPEG of that very view

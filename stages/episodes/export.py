@@ -123,8 +123,18 @@ def _fill_navarena_scene(base, scene, catalog, ecfg: ExportConfig, created: str)
     for task in tasks:
         ep = _read(catalog, "episodes", scene, task)
         tr = _read(catalog, "trajectories", scene, task)
-        ne = navarena_episodes(ep, ecfg.chunk_size)
         tdir = base / task
+        images = catalog.path("goal_images", scene, task=task)
+        if images.exists():  # ImageNav goal views (stage goal_images): files beside the layout, paths in the table
+            gi = pq.read_table(images)
+            names = {}
+            for eid, jpeg in zip(gi["episode_id"].to_pylist(), gi["jpeg"].to_pylist()):
+                (tdir / "goal_images").mkdir(parents=True, exist_ok=True)
+                (tdir / "goal_images" / f"{eid}_goal.jpg").write_bytes(jpeg)
+                names[eid] = f"goal_images/{eid}_goal.jpg"
+            ep = ep.set_column(ep.schema.get_field_index("goal_image_path"), "goal_image_path",
+                               pa.array([names.get(e) for e in ep["episode_id"].to_pylist()], pa.string()))
+        ne = navarena_episodes(ep, ecfg.chunk_size)
         _write_parquet(ne, tdir / "meta" / "episodes.parquet")
         n_chunks = max(1, math.ceil(ep.num_rows / ecfg.chunk_size))
         for k in range(n_chunks):

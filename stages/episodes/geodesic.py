@@ -32,6 +32,20 @@ def max_detour(radius: int) -> float:
     return float(1.0 / np.cos(gaps.max() / 2))
 
 
+def eligible_cells(costmap, ecfg) -> np.ndarray:
+    """[ny, nx] bool cells episodes may use: valid states of the largest free component (or of
+    every component, components=all) whose area is at least min_island_area_m2."""
+    comp = costmap.components
+    valid = ~costmap.occupancy & (comp > 0)
+    labels, counts = np.unique(comp[valid], return_counts=True)
+    big = labels[counts * costmap.resolution ** 2 >= ecfg.min_island_area_m2]
+    if ecfg.components == "largest":
+        big = big[big == 1]
+    elif ecfg.components != "all":
+        raise ValueError(f"episodes.components must be 'largest' or 'all', got {ecfg.components!r}")
+    return valid & np.isin(comp, big)
+
+
 class NavGraph:
     """Any-angle grid graph of one costmap's valid cells (built once per scene and embodiment).
 

@@ -14,23 +14,9 @@ from pipeline.atomic import atomic_path
 from stages.costmap.query import Costmap
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.generate import EpisodeGenerator, scene_split, stream_seed
-from stages.episodes.geodesic import NavGraph
+from stages.episodes.geodesic import NavGraph, eligible_cells
 from stages.episodes.schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA
 from stages.instances import load_instances
-
-
-def eligible_cells(costmap: Costmap, ecfg: EpisodesConfig) -> np.ndarray:
-    """[ny, nx] bool cells episodes may use: valid states of the largest free component (or of
-    every component, components=all) whose area is at least min_island_area_m2."""
-    comp = costmap.components
-    valid = ~costmap.occupancy & (comp > 0)
-    labels, counts = np.unique(comp[valid], return_counts=True)
-    big = labels[counts * costmap.resolution ** 2 >= ecfg.min_island_area_m2]
-    if ecfg.components == "largest":
-        big = big[big == 1]
-    elif ecfg.components != "all":
-        raise ValueError(f"episodes.components must be 'largest' or 'all', got {ecfg.components!r}")
-    return valid & np.isin(comp, big)
 
 
 def write_table(rows_or_cols, schema: pa.Schema, path) -> None:

@@ -14,8 +14,9 @@ class BatchNavEnv:
     all of them in one call (the GPU's batch). Finished slots keep their last observation until
     reset_slot() gives them a new episode."""
 
-    def __init__(self, ctx, n: int, cfg: EnvConfig | None = None):
+    def __init__(self, ctx, n: int, cfg: EnvConfig | None = None, device_obs: bool = False):
         cfg = cfg or EnvConfig()
+        self.device_obs = device_obs  # rgb / depth stay torch tensors on the renderer's device
         self.ctx, self.cfg = ctx, cfg
         logic = EnvConfig(**{**vars(cfg), "render": False})  # the slots never render alone
         self.envs = [NavEnv(ctx, logic) for _ in range(n)]
@@ -61,7 +62,7 @@ class BatchNavEnv:
         obs = [{"pose": self.envs[i].state.pose, **self.envs[i].goal_observation()} for i in slots]
         if self.render_enabled and slots:
             poses = np.stack([self.envs[i].state.pose for i in slots]).astype(np.float64)
-            rgb, depth = self.ctx.render(poses, self.w, self.h)
+            rgb, depth = self.ctx.render(poses, self.w, self.h, self.device_obs)
             for k, o in enumerate(obs):
                 o["rgb"], o["depth"] = rgb[k], depth[k]
         for i, o in zip(slots, obs):

@@ -72,14 +72,19 @@ class SceneContext:
             self._fields[key] = self.graph.field(cells)
         return self._fields[key]
 
-    def render(self, poses: np.ndarray, width: int, height: int, camera: dict | None = None):
-        """RGB uint8 [B, H, W, 3] and depth float32 [B, H, W] at robot poses [B, 3]."""
+    def render(self, poses: np.ndarray, width: int, height: int, on_device: bool = False):
+        """RGB uint8 [B, H, W, 3] and depth float32 [B, H, W] at robot poses [B, 3]: numpy arrays,
+        or (on_device) torch tensors left on the renderer's device for GPU-side policies."""
+        import torch
+
         from stages.render.camera import embodiment_camera
 
         vm, k, w, h = embodiment_camera(self.emb, poses, width, height)
         out = self.renderer.render(vm, k, w, h)
-        rgb = (out.rgb * 255.0 + 0.5).clamp(0, 255).to("cpu").numpy().astype(np.uint8)
-        return rgb, out.depth.to("cpu").numpy().astype(np.float32)
+        rgb = (out.rgb * 255.0 + 0.5).clamp(0, 255).to(torch.uint8)
+        if on_device:
+            return rgb, out.depth
+        return rgb.cpu().numpy(), out.depth.cpu().numpy().astype(np.float32)
 
 
 class EpisodeState:

@@ -18,8 +18,7 @@ from omegaconf import OmegaConf
 from pipeline.atomic import atomic_path
 from stages.costmap.query import Costmap
 from stages.episodes.generate import stream_seed
-from stages.episodes.geodesic import NavGraph
-from stages.episodes.stage import eligible_cells
+from stages.episodes.geodesic import NavGraph, eligible_cells
 from stages.evaluate.config import EvaluateConfig
 from stages.evaluate.env import EnvConfig, NavEnv, SceneContext
 from stages.evaluate.episode import Episode
