@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
 
-.PHONY: setup system-deps dataset test test-all bench bench-spatial bench-spatial-gpu bench-episodes submit clean
+.PHONY: setup system-deps dataset test test-all bench bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu eval submit clean
 
 # open3d needs libusb at import time; install it when missing (root or sudo).
 system-deps:
@@ -38,7 +38,7 @@ test: $(STAMP)
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q -m "slow or not slow" $(ARGS)
 
-bench: bench-spatial bench-episodes
+bench: bench-spatial bench-episodes bench-eval
 
 bench-spatial: $(STAMP)
 	$(BIN)/python -m benchmarks.spatial $(ARGS)
@@ -46,6 +46,18 @@ bench-spatial: $(STAMP)
 # the episode dataset of the default scenes: Table-4 style summary, throughput, re-checks
 bench-episodes: $(STAMP)
 	$(BIN)/python -m benchmarks.episodes $(ARGS)
+
+# closed-loop figures on this machine (oracle / random on the dataset, env overhead, CPU renderer
+# steps/s); merges data/08_reports/eval_gpu.json when a CUDA run (bench-eval-gpu) left one there
+bench-eval: $(STAMP)
+	$(BIN)/python -m benchmarks.eval $(ARGS)
+
+bench-eval-gpu: $(STAMP)
+	$(BIN)/python -m benchmarks.eval --gpu $(ARGS)
+
+# evaluate an agent on the dataset, e.g. make eval ARGS="evaluate.agent=depth_reactive"
+eval: $(STAMP)
+	$(BIN)/python -m pipeline stages=[evaluate] $(ARGS)
 
 # on a CUDA machine: writes data/08_reports/voxelize_gpu.json; bench-spatial merges it (or
 # `python -m benchmarks.spatial --merge-gpu` folds it into an existing report)

@@ -58,7 +58,8 @@ def steps_per_second(ctx, width: int, height: int, n_slots: int, n_steps: int, r
     """Batched random-walk steps per second (render included), median of 3 runs."""
     from stages.evaluate.batch import BatchNavEnv
 
-    env = BatchNavEnv(ctx, n_slots, EnvConfig(width=width, height=height), device_obs=device_obs)
+    env = BatchNavEnv(ctx, n_slots, EnvConfig(width=width, height=height, protocol="explicit_stop"),
+                      device_obs=device_obs)  # random moves never end an episode: every slot steps
     rates = []
     for _ in range(3):
         env.reset(random_episodes(ctx, n_slots, rng, max_steps=10**6))
@@ -98,7 +99,7 @@ def _sync():
 def env_overhead_us(ctx, rng, n: int = 20000) -> float:
     """Per-step cost of the environment without rendering (action decoding, the swept-disk check,
     success test, goal vector), microseconds, median of 5 runs."""
-    env = NavEnv(ctx, EnvConfig(render=False))
+    env = NavEnv(ctx, EnvConfig(render=False, protocol="explicit_stop"))  # random moves never end it
     eps = random_episodes(ctx, 50, rng, max_steps=10**9)
     acts = rng.integers(1, 4, size=n)
     runs = []
