@@ -12,7 +12,7 @@ from stages.evaluate.env import EnvConfig, NavEnv, SceneContext
 from stages.evaluate.episode import Episode
 from stages.evaluate.loop import run_episode, run_episodes
 from stages.evaluate.metrics import aggregate, dtw, episode_metrics
-from tests.test_episodes import RADIUS, room_with_door
+from tests.test_episodes import RADIUS, episode_run, room_with_door  # noqa: F401 (fixture)
 
 
 @pytest.fixture(scope="module")
@@ -166,3 +166,42 @@ def test_batched_env_matches_single_envs_and_gym_wrapper(ctx):
     obs, _ = env.reset(options={"episode": episode(start=(2.0, 0.5, 0.0), goal=(2.4, 0.5), geodesic=0.4)})
     _, reward, terminated, truncated, info = env.step(STOP)
     assert terminated and not truncated and info["success"] and reward == pytest.approx(2.5 - 0.01)
+
+
+def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run):
+    import json
+
+    import av
+    import pandas as pd
+
+    from pipeline.executor import execute
+    from tests.test_pipeline import make_cfg
+
+    root, over, _ = episode_run
+    common = [*over[:-1], "export.chunk_size=8", "stages=[evaluate]", "evaluate.tasks=[pointnav,objectnav]",
+              "evaluate.episodes_per_scene=3"]
+    s = execute(make_cfg(root, *common, "evaluate.agent=oracle", "evaluate.width=32", "evaluate.height=24",
+                         "evaluate.renderer=cpu", "evaluate.videos=1", "evaluate.trajectory_plots=1",
+                         "evaluate.protocol=explicit_stop"))
+    assert not s["failures"], s["failures"]
+    assert not execute(make_cfg(root, *common, "evaluate.agent=random", "evaluate.render=false",
+                                "evaluate.difficulty=easy"))["failures"]
+    run = root / "07_eval" / "oracle_explicit_stop"
+    res = pd.read_parquet(run / "results")
+    assert len(res) == 6 and set(res["task"]) == {"pointnav", "objectnav"}
+    assert all(len(x) == len(y) >= 1 for x, y in zip(res["trajectory_x"], res["trajectory_y"]))
+    summary = json.loads((run / "summary.json").read_text())
+    assert summary["episodes"] == 6 and summary["tasks"]["pointnav"]["overall"]["sr"] == 1.0
+    assert summary["tasks"]["objectnav"]["overall"]["spl"] > 0.9
+    rnd = pd.read_parquet(root / "07_eval" / "random_distance" / "results")
+    assert (rnd["difficulty"] == "easy").all() and len(rnd) <= 6
+    tables = (root / "07_eval" / "tables.md").read_text()
+    assert "random_distance" in tables and "oracle_explicit_stop" in tables and "Table 7" in tables
+    assert (root / "07_eval" / "distance_sr_by_difficulty.png").stat().st_size > 0
+    assert len(list((run / "plots").glob("*.png"))) == 1
+    videos = list((run / "videos").glob("*.mp4"))
+    assert len(videos) == 1
+    with av.open(str(videos[0])) as c:
+        frames = [f.to_ndarray(format="rgb24") for f in c.decode(video=0)]
+    first = res[res["task"] == "pointnav"].sort_values("episode_id").iloc[0]
+    assert frames[0].shape == (24, 32, 3) and len(frames) == first["steps"] + 1  # reset + every step

@@ -11,8 +11,8 @@ import pytest
 
 from stages.evaluate.agents import make_agent
 from stages.evaluate.env import EnvConfig
-from stages.evaluate.loop import run_episodes
-from stages.evaluate.protocol import (ProtocolError, RemoteAgent, decode_value, encode_array, encode_image, pack,
+from stages.evaluate.loop import run_episodes, run_episodes_batched
+from stages.evaluate.protocol import (ProtocolError, RemoteAgent, RemoteBatchAgent, decode_value, encode_array, encode_image, pack,
                                       parse_action, unpack)
 from tests.conftest import PROJECT
 from tests.test_evaluate import ctx, episode  # noqa: F401 (fixture)
@@ -71,11 +71,15 @@ def test_remote_agent_gives_the_same_metrics_as_in_process(ctx, tmp_path):  # no
         remote_agent = RemoteAgent(f"ws://127.0.0.1:{port}", timeout=10)
         remote = run_episodes(ctx, eps, remote_agent, EnvConfig(render=False))
         remote_agent.close()
+        batch_agent = RemoteBatchAgent(f"ws://127.0.0.1:{port}", timeout=10)
+        batched = run_episodes_batched(ctx, eps, batch_agent, 2, EnvConfig(render=False))
+        batch_agent.close()
     finally:
         proc.kill()
     keys = ["sr", "spl", "soft_spl", "ne", "steps", "collision_rate", "end_reason"]
-    assert [{k: r[k] for k in keys} for r in remote] == [{k: r[k] for k in keys} for r in local]
-    assert all(np.array_equal(a["trajectory"], b["trajectory"]) for a, b in zip(local, remote))
+    for other in (remote, batched):  # single flow and batch flow (2 slots for 3 episodes)
+        assert [{k: r[k] for k in keys} for r in other] == [{k: r[k] for k in keys} for r in local]
+        assert all(np.array_equal(a["trajectory"], b["trajectory"]) for a, b in zip(local, other))
 
 
 def bad_server(behaviour: str):

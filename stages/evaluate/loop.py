@@ -44,14 +44,84 @@ def run_episode(env: NavEnv, agent, ep, frames: list | None = None) -> dict:
     if hasattr(agent, "end"):  # remote agents: episode_end frame
         agent.end({"episode_id": ep.episode_id, "success": bool(s.success), "steps": s.steps,
                    "end_reason": s.end_reason})
-    row = {"episode_id": ep.episode_id, "task": ep.task, "scene_id": ep.scene_id, "difficulty": ep.difficulty,
-           "protocol": env.cfg.protocol, "end_reason": s.end_reason, "error": error,
-           **episode_metrics(s, d0, env.geodesic_to_goal(), env.cfg.protocol),
-           "geodesic": ep.geodesic, "path_length": s.path_length, "seconds": time.perf_counter() - t0,
-           "trajectory": np.asarray(s.positions, np.float32)}
-    return row
+    return result_row(env, ep, d0, error, time.perf_counter() - t0)
+
+
+def result_row(env: NavEnv, ep, d0: float, error: str, seconds: float) -> dict:
+    """The per-episode record of a finished episode: metrics, end reason, executed trajectory."""
+    s = env.state
+    return {"episode_id": ep.episode_id, "task": ep.task, "scene_id": ep.scene_id, "difficulty": ep.difficulty,
+            "protocol": env.cfg.protocol, "end_reason": s.end_reason, "error": error,
+            **episode_metrics(s, d0, env.geodesic_to_goal(), env.cfg.protocol),
+            "geodesic": ep.geodesic, "path_length": s.path_length, "seconds": seconds,
+            "trajectory": np.asarray(s.positions, np.float32)}
 
 
 def run_episodes(ctx, episodes, agent, cfg: EnvConfig | None = None) -> list[dict]:
     env = NavEnv(ctx, cfg)
     return [run_episode(env, agent, ep) for ep in episodes]
+
+
+def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | None = None) -> list[dict]:
+    """Episodes through a batch agent (`client`: start(tasks by slot), act(observations by slot) ->
+    actions by slot, end(results by slot); e.g. protocol.RemoteBatchAgent), `slots` at a time,
+    one render call per step (BatchNavEnv). A failing client fails the episodes in flight."""
+    from stages.evaluate.batch import BatchNavEnv
+
+    benv = BatchNavEnv(ctx, slots, cfg)
+    queue = list(episodes)
+    running: dict[int, tuple] = {}
+    rows = []
+    obs = {}
+
+    def start(free):
+        new = {}
+        for i in free:
+            if queue:
+                ep = queue.pop(0)
+                obs[i] = benv.reset_slot(i, ep)
+                running[i] = (ep, benv.envs[i].geodesic_to_goal(), time.perf_counter())
+                new[i] = task_info(ep)
+        if new:
+            client.start(new)
+
+    def finish(i, error=""):
+        ep, d0, t0 = running.pop(i)
+        env = benv.envs[i]
+        if error:
+            env.state.done, env.state.success, env.state.end_reason = True, False, "agent_error"
+        rows.append(result_row(env, ep, d0, error, time.perf_counter() - t0))
+        return {"episode_id": ep.episode_id, "success": bool(env.state.success), "steps": env.state.steps}
+
+    try:
+        start(range(slots))
+    except Exception as e:  # noqa: BLE001
+        for i in list(running):
+            finish(i, f"{type(e).__name__}: {e}")
+    while running:
+        try:
+            actions = client.act({i: obs[i] for i in running})
+            acts = [actions.get(i) if i in running else None for i in range(slots)]
+            missing = [i for i in running if acts[i] is None]
+            if missing:
+                raise RuntimeError(f"batch_action has no action for slot(s) {missing}")
+            out, _ = benv.step(acts)
+        except Exception as e:  # noqa: BLE001 - the client failed: the episodes in flight fail
+            for i in list(running):
+                finish(i, f"{type(e).__name__}: {e}")
+            break
+        for i in running:
+            obs[i] = out[i]
+        done = [i for i in list(running) if benv.envs[i].state.done]
+        if done:
+            ended = {i: finish(i) for i in done}
+            try:
+                client.end(ended)
+                start(done)
+            except Exception as e:  # noqa: BLE001
+                for i in list(running):
+                    finish(i, f"{type(e).__name__}: {e}")
+                break
+    order = {ep.episode_id + ep.task: k for k, ep in enumerate(episodes)}
+    rows.sort(key=lambda r: order.get(r["episode_id"] + r["task"], 0))
+    return rows

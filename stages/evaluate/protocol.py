@@ -204,6 +204,27 @@ class RemoteAgent:
                 self.ws = None
 
 
+class RemoteBatchAgent(RemoteAgent):
+    """The batch flow of the protocol (slots keyed by string), for run_episodes_batched."""
+
+    def start(self, tasks: dict) -> None:
+        self._send("batch_episode_start", {"episodes": {str(k): {"task": t} for k, t in tasks.items()}})
+
+    def act(self, observations: dict) -> dict:
+        seq = self._send("batch_observation", {"observations": {str(k): encode_observation(o, self.image_format)
+                                                                for k, o in observations.items()}})
+        frame = self._recv()
+        if frame["type"] != "batch_action":
+            raise ProtocolError(f"expected a batch_action frame, got {frame['type']!r}")
+        if frame["seq"] != seq:
+            raise ProtocolError(f"batch_action answers observation {frame['seq']}, not {seq}")
+        acts = decode_value(frame["payload"]).get("actions", {})
+        return {int(k): parse_action(v) for k, v in acts.items()}
+
+    def end(self, results: dict) -> None:
+        self._send("batch_episode_end", {"episodes": {str(k): r for k, r in results.items()}})
+
+
 # ---- server side --------------------------------------------------------------------------------
 def serve_agent(agent_factory, host: str = "127.0.0.1", port: int = 8000, ready=None) -> None:
     """Serve in-process agents over the protocol (one agent per connection), single and batch flows.
