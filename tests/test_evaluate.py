@@ -185,7 +185,7 @@ def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run):
                          "evaluate.protocol=explicit_stop"))
     assert not s["failures"], s["failures"]
     assert not execute(make_cfg(root, *common, "evaluate.agent=random", "evaluate.render=false",
-                                "evaluate.difficulty=easy"))["failures"]
+                                "evaluate.difficulty=easy", "evaluate.batch_slots=2"))["failures"]
     run = root / "07_eval" / "oracle_explicit_stop"
     res = pd.read_parquet(run / "results")
     assert len(res) == 6 and set(res["task"]) == {"pointnav", "objectnav"}
@@ -205,3 +205,17 @@ def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run):
         frames = [f.to_ndarray(format="rgb24") for f in c.decode(video=0)]
     first = res[res["task"] == "pointnav"].sort_values("episode_id").iloc[0]
     assert frames[0].shape == (24, 32, 3) and len(frames) == first["steps"] + 1  # reset + every step
+
+
+def test_batched_loop_equals_the_single_loop_for_in_process_agents(ctx):
+    from stages.evaluate.loop import InProcessBatch, run_episodes_batched
+
+    eps = [episode(start=(1.0, 0.5, a), goal=g, geodesic=2.3, max_steps=300)
+           for a, g in ((0.0, (3.0, 0.5)), (1.0, (3.5, 2.5)), (-2.0, (1.5, 2.5)), (2.5, (3.0, 1.5)))]
+    for i, e in enumerate(eps):
+        e.episode_id = f"q{i}"
+    single = run_episodes(ctx, eps, make_agent("oracle"), EnvConfig(render=False))
+    batched = run_episodes_batched(ctx, eps, InProcessBatch(lambda: make_agent("oracle")), 3, EnvConfig(render=False))
+    assert [r["episode_id"] for r in batched] == [e.episode_id for e in eps]
+    for a, b in zip(single, batched):
+        assert (a["sr"], a["steps"], a["spl"]) == (b["sr"], b["steps"], b["spl"]) and a["sr"] == 1

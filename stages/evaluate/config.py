@@ -35,6 +35,9 @@ class EvaluateConfig:
     """At most this many episodes per scene and task (null = all), the first by episode id."""
     seed: int = 0
     """Seed of stochastic agents (per scene and task, derived from it)."""
+    batch_slots: int = 1
+    """Episodes stepped together (one render call per step for all). Above 1: the batch flow of the
+    agent-server protocol for ws:// agents; in-process agents get one instance per slot."""
     timeout_s: float = 30.0
     """Remote agents: seconds to wait for each action."""
     videos: int = 1

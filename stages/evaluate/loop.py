@@ -62,6 +62,27 @@ def run_episodes(ctx, episodes, agent, cfg: EnvConfig | None = None) -> list[dic
     return [run_episode(env, agent, ep) for ep in episodes]
 
 
+class InProcessBatch:
+    """In-process agents behind the batch interface of run_episodes_batched: one agent per slot
+    (privileged ones are bound to their slot's environment)."""
+
+    def __init__(self, factory):
+        self.factory, self.agents, self.benv = factory, {}, None
+
+    def start(self, tasks: dict) -> None:
+        for slot, task in tasks.items():
+            self.agents[slot] = self.factory()
+            self.agents[slot].reset(task)
+            if hasattr(self.agents[slot], "bind") and self.benv is not None:
+                self.agents[slot].bind(self.benv.envs[slot])
+
+    def act(self, observations: dict) -> dict:
+        return {slot: self.agents[slot].act(o) for slot, o in observations.items()}
+
+    def end(self, results: dict) -> None:
+        pass
+
+
 def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | None = None) -> list[dict]:
     """Episodes through a batch agent (`client`: start(tasks by slot), act(observations by slot) ->
     actions by slot, end(results by slot); e.g. protocol.RemoteBatchAgent), `slots` at a time,
@@ -69,6 +90,8 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
     from stages.evaluate.batch import BatchNavEnv
 
     benv = BatchNavEnv(ctx, slots, cfg)
+    if isinstance(client, InProcessBatch):
+        client.benv = benv
     queue = list(episodes)
     running: dict[int, tuple] = {}
     rows = []

@@ -85,6 +85,26 @@ def run(scene, cfg, catalog) -> dict:
     agent = make_scene_agent(ecfg, stream_seed(ecfg.seed, scene.scene_id, "evaluate") % 2**31)
     base = catalog.path("eval_root") / run_name(ecfg)
     rows, videos = [], []
+    if ecfg.batch_slots > 1:  # batched: no videos (frames of many slots interleave)
+        from stages.evaluate.loop import InProcessBatch, run_episodes_batched
+
+        seed = stream_seed(ecfg.seed, scene.scene_id, "evaluate") % 2**31
+        client = InProcessBatch(lambda: make_scene_agent(ecfg, seed))
+        if ecfg.agent.startswith(("ws://", "wss://")):
+            from stages.evaluate.protocol import RemoteBatchAgent
+
+            client = RemoteBatchAgent(ecfg.agent, timeout=ecfg.timeout_s, **ecfg.agent_args)
+        cfg_env = EnvConfig(protocol=ecfg.protocol, width=ecfg.width, height=ecfg.height, render=ecfg.render)
+        rows = run_episodes_batched(ctx, episodes, client, ecfg.batch_slots, cfg_env)
+        episodes_by = {(e.task, e.episode_id): e for e in episodes}
+        plots = [plot_trajectory(cm, r, episodes_by[(r["task"], r["episode_id"])],
+                                 base / "plots" / f"{scene.scene_id}_{r['task']}_{r['episode_id']}.png")
+                 for r in rows[:ecfg.trajectory_plots]]
+        out = base / "results" / f"scene_id={scene.scene_id}" / "part-0.parquet"
+        write_results(rows, out)
+        return {"outputs": [str(out), *plots], "episodes": len(rows), "run": run_name(ecfg),
+                "agent_errors": sum(bool(r["error"]) for r in rows),
+                "sr": float(np.mean([r["sr"] for r in rows])) if rows else None}
     for k, ep in enumerate(episodes):
         frames = [] if (ecfg.render and len(videos) < ecfg.videos) else None
         row = run_episode(env, agent, ep, frames)
