@@ -1,0 +1,1 @@
+"""Semantic layer: ObjectNav goal candidates lifted from multi-view masks."""

@@ -1,0 +1,147 @@
+"""Lifting per-frame category masks to 3D instance candidates (the paper's procedure).
+
+Per frame: erode each mask, back-project its pixels that have a valid depth, voxel-downsample the
+frame's labelled cloud (delta_down). Pooled over frames: vote on a coarser grid (delta_vote),
+drop cells with too little support, give each cell its majority label and drop ties; transfer
+the cell labels to the Gaussian centres inside; DBSCAN per category; drop small clusters; each
+cluster's centroid is an instance candidate. Pure functions of arrays (no IO).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+
+@dataclass
+class LiftingConfig:
+    """Parameters of the lifting (metres unless said)."""
+
+    erosion_px: int = 2
+    """Erode each mask by this many pixels (0 = off): boundary pixels are the least reliable."""
+    max_depth: float = 8.0
+    """Ignore pixels farther than this."""
+    delta_down: float = 0.02
+    """Per-frame voxel downsampling of the labelled points."""
+    delta_vote: float = 0.05
+    """Voting grid cell size."""
+    min_support: int = 3
+    """Cells with fewer labelled points (over all frames) are dropped."""
+    exclude_ties: bool = True
+    """Drop cells whose two most voted categories tie."""
+    voting: bool = True
+    """Majority voting per cell (off = every point keeps its own label: the naive baseline)."""
+    dbscan_eps: float = 0.1
+    """DBSCAN radius on labelled Gaussian centres."""
+    dbscan_min_samples: int = 5
+    """DBSCAN core-point threshold."""
+    min_cluster: int = 30
+    """Clusters with fewer Gaussians are dropped."""
+
+
+def back_project(depth: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """World points [M, 3] of pixels [M, 2] (row, col) with their depth (camera z, OpenCV axes)."""
+    z = depth[pixels[:, 0], pixels[:, 1]]
+    u, v = pixels[:, 1] + 0.5, pixels[:, 0] + 0.5
+    x = (u - K[0, 2]) / K[0, 0] * z
+    y = (v - K[1, 2]) / K[1, 1] * z
+    pc = np.stack([x, y, z], 1)
+    return pc @ cam_to_world[:3, :3].T + cam_to_world[:3, 3]
+
+
+def voxel_keys(points: np.ndarray, size: float) -> np.ndarray:
+    """[M, 3] int64 voxel indices."""
+    return np.floor(points / size).astype(np.int64)
+
+
+def frame_points(depth: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray, masks: dict[int, np.ndarray],
+                 cfg: LiftingConfig) -> tuple[np.ndarray, np.ndarray]:
+    """One frame's labelled, downsampled points: (points [M, 3], labels [M] int)."""
+    pts, labs = [], []
+    valid = (depth > 0) & (depth <= cfg.max_depth)
+    for label, mask in masks.items():
+        m = mask
+        if cfg.erosion_px > 0:
+            m = ndimage.binary_erosion(m, iterations=cfg.erosion_px, border_value=0)
+        pix = np.argwhere(m & valid)
+        if not len(pix):
+            continue
+        p = back_project(depth, K, cam_to_world, pix)
+        _, first = np.unique(voxel_keys(p, cfg.delta_down), axis=0, return_index=True)  # one point per voxel
+        p = p[np.sort(first)]
+        pts.append(p)
+        labs.append(np.full(len(p), label, np.int64))
+    if not pts:
+        return np.zeros((0, 3)), np.zeros(0, np.int64)
+    return np.concatenate(pts), np.concatenate(labs)
+
+
+def vote(points: np.ndarray, labels: np.ndarray, cfg: LiftingConfig) -> dict[tuple, tuple[int, int, float]]:
+    """Pooled points -> {cell: (label, support, confidence)} on the delta_vote grid (majority label,
+    cells under min_support dropped, ties dropped when exclude_ties)."""
+    if not len(points):
+        return {}
+    keys = voxel_keys(points, cfg.delta_vote)
+    cells, inv = np.unique(keys, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    cats = np.unique(labels)
+    counts = np.zeros((len(cells), len(cats)), np.int64)
+    np.add.at(counts, (inv, np.searchsorted(cats, labels)), 1)
+    total = counts.sum(1)
+    order = np.sort(counts, 1)
+    best = counts.argmax(1)
+    keep = total >= cfg.min_support
+    if cfg.exclude_ties and counts.shape[1] > 1:
+        keep &= order[:, -1] > order[:, -2]
+    return {tuple(c): (int(cats[b]), int(t), float(counts[i, b] / t))
+            for i, (c, b, t) in enumerate(zip(cells, best, total)) if keep[i]}
+
+
+def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
+    """Instance candidates from frames.
+
+    Args:
+        frames: iterable of (depth [H, W] m, K [3, 3], cam_to_world [4, 4], masks {label: bool [H, W]}).
+        gaussian_means: [N, 3] scene Gaussian centres (the labels are transferred to them).
+    Returns:
+        list of {label, center [3], min [3], max [3], support (Gaussians), confidence}.
+    """
+    from sklearn.cluster import DBSCAN
+
+    pts, labs = [], []
+    for depth, K, c2w, masks in frames:
+        p, lab = frame_points(depth, K, c2w, masks, cfg)
+        pts.append(p)
+        labs.append(lab)
+    points = np.concatenate(pts) if pts else np.zeros((0, 3))
+    labels = np.concatenate(labs) if labs else np.zeros(0, np.int64)
+    gkeys = voxel_keys(gaussian_means, cfg.delta_vote)
+    if cfg.voting:
+        cells = vote(points, labels, cfg)
+        g_label = np.full(len(gaussian_means), -1, np.int64)
+        g_conf = np.zeros(len(gaussian_means))
+        for i, k in enumerate(map(tuple, gkeys)):
+            if k in cells:
+                g_label[i], _, g_conf[i] = cells[k]
+        members = [(lab, np.flatnonzero(g_label == lab)) for lab in np.unique(g_label[g_label >= 0])]
+        cloud = lambda idx: gaussian_means[idx]  # noqa: E731
+    else:  # the naive baseline: cluster the back-projected points themselves
+        g_conf = None
+        members = [(lab, np.flatnonzero(labels == lab)) for lab in np.unique(labels)]
+        cloud = lambda idx: points[idx]  # noqa: E731
+    out = []
+    for lab, idx in members:
+        xyz = cloud(idx)
+        if len(xyz) < cfg.min_cluster:
+            continue
+        cl = DBSCAN(eps=cfg.dbscan_eps, min_samples=cfg.dbscan_min_samples).fit_predict(xyz)
+        for c in np.unique(cl[cl >= 0]):
+            sel = cl == c
+            if sel.sum() < cfg.min_cluster:
+                continue
+            p = xyz[sel]
+            conf = float(g_conf[idx[sel]].mean()) if g_conf is not None else 1.0
+            out.append({"label": int(lab), "center": p.mean(0), "min": p.min(0), "max": p.max(0),
+                        "support": int(sel.sum()), "confidence": conf})
+    return out
