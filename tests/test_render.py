@@ -118,3 +118,18 @@ def test_cpu_renderer_matches_gsplat(small_scene):
     assert 10 * math.log10(1 / max(mse, 1e-12)) >= 35
     both = (a.alpha.cpu() > 0.5) & (b.alpha > 0.5)
     assert torch.median((a.depth.cpu() - b.depth).abs()[both]).item() <= 0.01
+
+
+def test_feature_rendering_gives_label_weights():
+    # two Gaussians side by side with one-hot labels: each half of the image takes its own label
+    gs = scene([(2.0, 0.3, 0), (2.0, -0.3, 0)], [0.15, 0.15], [0.95, 0.95], [(0.5, 0.5, 0.5)] * 2)
+    feats = np.array([[1.0, 0.0], [0.0, 1.0]], np.float32)
+    vm = viewmats(np.array([[0, 0, 0]]), 0.0)
+    out = Renderer(gs, "cpu").render(vm, intrinsics(W, H, HFOV)[None], W, H, features=feats)
+    lab = out.rgb[0].numpy()
+    assert lab.shape == (H, W, 2)
+    # +y (left in the image: OpenCV x is the robot's right) holds label 0
+    left, right = W // 2 - 5, W // 2 + 5  # the Gaussians' centres project to u = 32 -+ 4.8
+    assert lab[H // 2, left, 0] > 0.5 > lab[H // 2, left, 1]
+    assert lab[H // 2, right, 1] > 0.5 > lab[H // 2, right, 0]
+    assert np.allclose(lab.sum(-1), out.alpha[0].numpy(), atol=1e-5)  # weights add up to the coverage

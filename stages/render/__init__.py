@@ -64,11 +64,13 @@ class Renderer:
 
             self._g = gaussian_tensors(gs, device or "cuda")
 
-    def render(self, viewmats: np.ndarray, Ks: np.ndarray, width: int, height: int) -> RenderOutput:
-        """viewmats [B, 4, 4] world -> camera, Ks [B, 3, 3]; returns tensors on the backend's device."""
+    def render(self, viewmats: np.ndarray, Ks: np.ndarray, width: int, height: int, features=None) -> RenderOutput:
+        """viewmats [B, 4, 4] world -> camera, Ks [B, 3, 3]; returns tensors on the backend's device.
+        features: optional [N, C] per-Gaussian values composited instead of colour (rgb is then the
+        [B, H, W, C] composite, unclamped): e.g. one-hot labels for label masks."""
         if self.backend == "cpu":
             from stages.render.cpu import render
         else:
             from stages.render.gsplat_backend import render
-        rgb, depth, alpha = render(self._g, viewmats, Ks, width, height, self.sh_degree)
-        return RenderOutput(rgb.clamp(0.0, 1.0), depth, alpha)
+        rgb, depth, alpha = render(self._g, viewmats, Ks, width, height, self.sh_degree, features=features)
+        return RenderOutput(rgb if features is not None else rgb.clamp(0.0, 1.0), depth, alpha)

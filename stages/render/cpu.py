@@ -158,7 +158,7 @@ def rasterize(means2d, conics, colors, opacities, depths, radii, width: int, hei
 
 
 def render(gs_tensors: dict, viewmats: np.ndarray, Ks: np.ndarray, width: int, height: int,
-           sh_degree: int | None = None, near: float = 0.01, far: float = 1e10):
+           sh_degree: int | None = None, near: float = 0.01, far: float = 1e10, features=None):
     """Render a batch of cameras.
 
     Args:
@@ -166,6 +166,8 @@ def render(gs_tensors: dict, viewmats: np.ndarray, Ks: np.ndarray, width: int, h
             scales [N, 3], opacities [N], sh [N, K, 3].
         viewmats: [B, 4, 4] world -> camera (OpenCV axes). Ks: [B, 3, 3]. width, height: pixels.
         sh_degree: SH degree to evaluate (default: all the scene has).
+        features: optional [N, C] per-Gaussian features composited instead of the SH colour (e.g.
+            one-hot labels: the rendered channel sums are label weights); rgb is then [B, H, W, C].
     Returns:
         rgb [B, H, W, 3] float32 in [0, 1] (clamped), depth [B, H, W] expected depth (m, 0 where
         empty), alpha [B, H, W].
@@ -181,7 +183,9 @@ def render(gs_tensors: dict, viewmats: np.ndarray, Ks: np.ndarray, width: int, h
                                                      K_t, width, height, near, far)
             vis = radii[:, 0] > 0
             colors = torch.zeros(len(depths), 3)
-            if vis.any():
+            if features is not None:
+                colors = torch.as_tensor(features, dtype=torch.float32)
+            elif vis.any():
                 campos = -vm_t[:3, :3].T @ vm_t[:3, 3]
                 d = g["means"][vis] - campos
                 d = d / d.norm(dim=1, keepdim=True).clamp(min=1e-12)

@@ -14,16 +14,20 @@ def gaussian_tensors(gs, device: str = "cuda") -> dict:
             "opacities": torch.sigmoid(t(gs.opacity_logits)), "sh": t(gs.sh)}
 
 
-def render(g: dict, viewmats, Ks, width: int, height: int, sh_degree: int | None = None):
-    """[B] cameras -> rgb [B, H, W, 3], expected depth [B, H, W], alpha [B, H, W] (on the GPU)."""
+def render(g: dict, viewmats, Ks, width: int, height: int, sh_degree: int | None = None, features=None):
+    """[B] cameras -> rgb [B, H, W, 3] (or the composited features [B, H, W, C]), expected depth
+    [B, H, W], alpha [B, H, W] (on the GPU)."""
     from gsplat import rasterization
 
     dev = g["means"].device
     vm = torch.as_tensor(np.asarray(viewmats, np.float32), device=dev)
     K = torch.as_tensor(np.asarray(Ks, np.float32), device=dev)
     deg = int(round(math.sqrt(g["sh"].shape[1]))) - 1 if sh_degree is None else int(sh_degree)
+    colors, deg_arg = g["sh"], deg
+    if features is not None:
+        colors, deg_arg = torch.as_tensor(features, dtype=torch.float32, device=dev), None
     with torch.no_grad():
-        out, alpha, _ = rasterization(g["means"], g["quats"], g["scales"], g["opacities"], g["sh"], vm, K,
-                                      width, height, sh_degree=deg, render_mode="RGB+ED", packed=True,
+        out, alpha, _ = rasterization(g["means"], g["quats"], g["scales"], g["opacities"], colors, vm, K,
+                                      width, height, sh_degree=deg_arg, render_mode="RGB+ED", packed=True,
                                       rasterize_mode="classic")
-    return out[..., :3], out[..., 3], alpha[..., 0]
+    return out[..., :-1], out[..., -1], alpha[..., 0]
