@@ -82,3 +82,53 @@ def test_lifting_finds_each_object_once_at_its_centre():
     assert np.hypot(*(by[1][0]["center"][:2] - (2.0, 0.0))) < 0.2
     assert np.hypot(*(by[2][0]["center"][:2] - (2.5, 1.5))) < 0.25
     assert all(0.5 < f["confidence"] <= 1.0 for f in found)
+
+
+def test_corruption_model_rates_and_effects():
+    from stages.semantics.segmenters import Corruption, corrupt
+
+    imap = np.zeros((60, 80), int)
+    imap[10:30, 10:30] = 1
+    imap[35:55, 40:70] = 2
+    cats = {1: "chair", 2: "table"}
+    prompts = ["chair", "table", "bed"]
+    rng = np.random.default_rng(0)
+    clean = corrupt(imap, cats, prompts, Corruption(), rng)
+    assert np.array_equal(clean["chair"][0][0], imap == 1) and clean["bed"] == []
+    n, missed, confused, grown = 2000, 0, 0, 0
+    for _ in range(n):
+        m = corrupt(imap, cats, prompts, Corruption(bleed_px=3, miss_rate=0.2, confusion_rate=0.1), rng)
+        masks = [(p, mk) for p, lst in m.items() for mk, _ in lst]
+        chair = [(p, mk) for p, mk in masks if mk[20, 20]]
+        missed += not chair
+        confused += bool(chair) and chair[0][0] != "chair"
+        grown += bool(chair) and chair[0][1].sum() != (imap == 1).sum()
+    assert abs(missed / n - 0.2) < 0.03 and abs(confused / (n - missed) - 0.1) < 0.03 and grown == n - missed
+    blobs = [len(corrupt(np.zeros((60, 80), int), cats, prompts, Corruption(fp_blobs=1.5), rng)["bed"])
+             for _ in range(600)]
+    assert abs(np.mean(blobs) - 1.5 / 3) < 0.1  # Poisson(1.5) blobs spread over 3 prompts
+
+
+def test_oracle_segmenter_masks_follow_instance_labels():
+    from stages.gaussians.model import GaussianScene
+    from stages.gaussians.sh import C0
+    from stages.render import Renderer
+    from stages.render.camera import viewmats
+    from stages.semantics.segmenters import OracleSegmenter
+
+    rng = np.random.default_rng(1)
+    a = box_points((2.0, 0.6, 0.6), (0.4, 0.4, 0.4), 3000, rng)
+    b = box_points((2.0, -0.6, 0.6), (0.4, 0.4, 0.4), 3000, rng)
+    means = np.concatenate([a, b])
+    n = len(means)
+    gs = GaussianScene(means, np.tile([1.0, 0, 0, 0], (n, 1)), np.full((n, 3), np.log(0.02)),
+                       np.full(n, 3.0), np.full((n, 1, 3), 0.2 / C0))
+    ids = np.concatenate([np.full(3000, 5), np.full(3000, 9)])
+    seg = OracleSegmenter(Renderer(gs, "cpu"), ids, {5: "chair", 9: "table"})
+    vm = viewmats(np.array([[0.0, 0.0, 0.0]]), 0.6)[0]
+    K = intrinsics(W, H, 90)
+    out = seg.segment(np.zeros((H, W, 3), np.uint8), ["chair", "table"], {"viewmat": vm, "K": K})
+    chair, table = out["chair"][0][0], out["table"][0][0]
+    # the chair (+y) is on the image's left, the table on its right; they do not overlap
+    cols = np.arange(W)
+    assert cols[chair.any(0)].mean() < W / 2 < cols[table.any(0)].mean() and not (chair & table).any()

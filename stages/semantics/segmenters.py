@@ -1,0 +1,110 @@
+"""Segmenters: an RGB frame and category prompts -> per-category masks with scores.
+
+    seg.segment(rgb, prompts, context) -> {prompt: [(mask bool [H, W], score), ...]}
+
+`context` carries what a privileged segmenter may use (the oracle: the camera of the frame).
+Implementations by registry key; `oracle` renders the ground-truth per-Gaussian instance labels of
+synthetic scenes with the scene renderer and passes them through a corruption model that imitates
+a real segmenter (documented in `Corruption`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+SEGMENTERS: dict[str, type] = {}
+
+
+def register_segmenter(name: str):
+    def deco(cls):
+        SEGMENTERS[name] = cls
+        return cls
+    return deco
+
+
+@dataclass
+class Corruption:
+    """How the oracle's masks are spoiled, per (object, frame), seeded.
+
+    bleed_px: boundary bleeding: each mask is dilated or eroded (sign at random) by up to this many
+        pixels. miss_rate: probability that an object is not detected in a frame. confusion_rate:
+        probability that a detected object is reported under another category. fp_blobs: mean number
+        (Poisson) of false-positive blobs per frame, discs of fp_radius_px pixels (at random in
+        [fp_radius_px / 2, fp_radius_px]) under a random category.
+    """
+
+    bleed_px: int = 0
+    miss_rate: float = 0.0
+    confusion_rate: float = 0.0
+    fp_blobs: float = 0.0
+    fp_radius_px: int = 12
+
+
+CORRUPTION_LEVELS = {
+    "none": Corruption(),
+    "moderate": Corruption(bleed_px=3, miss_rate=0.15, confusion_rate=0.05, fp_blobs=0.3),
+    "heavy": Corruption(bleed_px=6, miss_rate=0.3, confusion_rate=0.15, fp_blobs=1.0),
+}
+
+
+def corrupt(instance_map: np.ndarray, categories: dict[int, str], prompts: list[str], c: Corruption,
+            rng: np.random.Generator) -> dict[str, list[tuple[np.ndarray, float]]]:
+    """Per-category masks from an instance-id image [H, W] (0 = none), spoiled by `c`."""
+    out: dict[str, list] = {p: [] for p in prompts}
+    h, w = instance_map.shape
+    for iid in np.unique(instance_map[instance_map > 0]):
+        cat = categories.get(int(iid))
+        if cat not in out or rng.random() < c.miss_rate:
+            continue
+        mask = instance_map == iid
+        if c.bleed_px > 0:
+            k = int(rng.integers(1, c.bleed_px + 1))
+            mask = (ndimage.binary_dilation(mask, iterations=k) if rng.random() < 0.5
+                    else ndimage.binary_erosion(mask, iterations=k))
+        if rng.random() < c.confusion_rate and len(prompts) > 1:
+            cat = str(rng.choice([p for p in prompts if p != cat]))
+        if mask.any():
+            out[cat].append((mask, float(rng.uniform(0.6, 1.0))))
+    for _ in range(rng.poisson(c.fp_blobs) if c.fp_blobs > 0 else 0):
+        r = rng.uniform(c.fp_radius_px / 2, c.fp_radius_px)
+        cy, cx = rng.uniform(0, h), rng.uniform(0, w)
+        yy, xx = np.mgrid[:h, :w]
+        blob = (yy + 0.5 - cy) ** 2 + (xx + 0.5 - cx) ** 2 <= r * r
+        out[str(rng.choice(prompts))].append((blob, float(rng.uniform(0.3, 0.8))))
+    return out
+
+
+@register_segmenter("oracle")
+class OracleSegmenter:
+    """Ground-truth masks rendered from per-Gaussian instance ids, then corrupted.
+
+    Args:
+        renderer: stages.render.Renderer of the scene. instance_ids: [N] int per Gaussian (0 = none).
+        categories: {instance id: category}. corruption: a Corruption or a level name. seed: rng seed.
+    """
+
+    def __init__(self, renderer, instance_ids: np.ndarray, categories: dict[int, str],
+                 corruption: Corruption | str = "none", seed: int = 0, min_weight: float = 0.5):
+        self.renderer, self.categories = renderer, categories
+        self.c = CORRUPTION_LEVELS[corruption] if isinstance(corruption, str) else corruption
+        self.rng = np.random.default_rng(seed)
+        ids = np.asarray(instance_ids)
+        self.ids = np.unique(ids[ids > 0])
+        onehot = np.zeros((len(ids), len(self.ids)), np.float32)
+        rows = np.flatnonzero(ids > 0)
+        onehot[rows, np.searchsorted(self.ids, ids[rows])] = 1.0
+        self.features, self.min_weight = onehot, min_weight
+
+    def instance_map(self, viewmat: np.ndarray, K: np.ndarray, width: int, height: int) -> np.ndarray:
+        """[H, W] instance id of each pixel (the label whose composited weight dominates, >= min_weight)."""
+        w = self.renderer.render(viewmat[None], K[None], width, height, features=self.features).rgb[0]
+        w = w.to("cpu").numpy()
+        best = w.argmax(-1)
+        return np.where(w.max(-1) >= self.min_weight, self.ids[best], 0)
+
+    def segment(self, rgb, prompts: list[str], context: dict) -> dict[str, list[tuple[np.ndarray, float]]]:
+        h, w = rgb.shape[:2]
+        imap = self.instance_map(context["viewmat"], context["K"], w, h)
+        return corrupt(imap, self.categories, prompts, self.c, self.rng)
