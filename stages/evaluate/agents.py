@@ -9,31 +9,16 @@ after each reset: they read the episode's geodesic field, never the rendered fra
 """
 from __future__ import annotations
 
-import importlib
 import math
 
 import numpy as np
 
 from stages.episodes.rollout import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, oracle_action
+from stages.registry import Registry
 
-AGENTS: dict[str, type] = {}
-
-
-def register_agent(name: str):
-    def deco(cls):
-        AGENTS[name] = cls
-        return cls
-    return deco
-
-
-def make_agent(spec: str, **kwargs):
-    """An agent from a registry key ("oracle") or an import path ("package.module:Class")."""
-    if ":" in spec:
-        mod, cls = spec.split(":", 1)
-        return getattr(importlib.import_module(mod), cls)(**kwargs)
-    if spec not in AGENTS:
-        raise ValueError(f"unknown agent {spec!r}; registered: {', '.join(sorted(AGENTS))} (or module:Class)")
-    return AGENTS[spec](**kwargs)
+AGENTS = Registry("agent")
+register_agent = AGENTS.register
+make_agent = AGENTS.make
 
 
 @register_agent("random")

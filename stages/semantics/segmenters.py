@@ -14,14 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-SEGMENTERS: dict[str, type] = {}
+from stages.registry import Registry
 
-
-def register_segmenter(name: str):
-    def deco(cls):
-        SEGMENTERS[name] = cls
-        return cls
-    return deco
+SEGMENTERS = Registry("segmenter")
+register_segmenter = SEGMENTERS.register
 
 
 @dataclass
