@@ -132,3 +132,22 @@ def test_oracle_segmenter_masks_follow_instance_labels():
     # the chair (+y) is on the image's left, the table on its right; they do not overlap
     cols = np.arange(W)
     assert cols[chair.any(0)].mean() < W / 2 < cols[table.any(0)].mean() and not (chair & table).any()
+
+
+def test_free_space_poses_cover_the_free_cells():
+    from stages.semantics.poses import free_space_poses, yaw_coverage
+    from tests.test_episodes import room_with_door
+
+    cm = room_with_door()
+    valid = ~cm.occupancy
+    poses = free_space_poses(cm, valid, spacing=1.0, yaw_step_deg=45)
+    pts = np.unique(poses[:, :2], axis=0)
+    assert cm.are_states_valid(pts).all()
+    assert len(poses) == 8 * len(pts) and yaw_coverage(poses[:8]) == pytest.approx(math.pi / 4)
+    # every valid cell is within ~a block diagonal of a pose, and no two poses are closer than 0.5 m
+    cells = cm.cell_centers(np.argwhere(valid))
+    nearest = np.min(np.hypot(cells[:, None, 0] - pts[None, :, 0], cells[:, None, 1] - pts[None, :, 1]), 1)
+    assert nearest.max() <= 1.5
+    d = np.hypot(pts[:, None, 0] - pts[None, :, 0], pts[:, None, 1] - pts[None, :, 1]) + np.eye(len(pts)) * 9
+    assert d.min() >= 0.5
+    assert np.array_equal(poses, free_space_poses(cm, valid, spacing=1.0, yaw_step_deg=45))
