@@ -33,7 +33,7 @@ from stages.costmap.build import Embodiment
 from stages.costmap.query import Costmap
 from stages.episodes.config import EpisodesConfig
 from stages.episodes.geodesic import eligible_cells
-from stages.episodes.rollout import Limits
+from stages.episodes.rollout import Limits, in_region
 from stages.episodes.validity import check_trajectory
 
 RELEASE_EPISODES = 22.2e6
@@ -220,15 +220,15 @@ def main(argv=None) -> dict:
             for e in te.itertuples():
                 t = groups[(task, e.episode_id)].sort_values("step")
                 if task == "objectnav":
-                    centres = np.array([g["position"][:2] for g in json.loads(e.goals_json)])
+                    centres = np.array([g["position"][:2] for g in json.loads(e.goals_json)], np.float64)
                 else:
-                    centres = np.array([[e.goal_position_x, e.goal_position_y]])
+                    centres = np.array([[e.goal_position_x, e.goal_position_y]], np.float64)
                 r = float(e.success_radius)
                 why = check_trajectory(
                     t["position_x"].to_numpy(), t["position_y"].to_numpy(), t["yaw"].to_numpy(),
                     t["linear_velocity"].to_numpy(np.float64), t["angular_velocity"].to_numpy(np.float64), cm,
                     emb.radius, Limits.of(emb), ecfg.dt,
-                    lambda x, y: bool((np.hypot(*(centres - (x, y)).T) <= r + 1e-9).any()),
+                    lambda x, y: bool(in_region(x, y, centres, r)),
                     e.goal_yaw if task == "imagenav" else None, e.heading_tolerance if task == "imagenav" else None)
                 checked += 1
                 valid_n += why is None

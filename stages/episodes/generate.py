@@ -13,7 +13,8 @@ import numpy as np
 
 from stages.episodes.config import DifficultyConfig, EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.planner import ScenePlanner, seed_ompl
-from stages.episodes.rollout import ACTION_NAMES, Limits, discrete_expert, relative_waypoints, rollout
+from stages.episodes.rollout import (ACTION_NAMES, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, Limits,
+                                     discrete_expert, in_region, relative_waypoints, rollout)
 from stages.episodes.validity import check_trajectory
 
 
@@ -148,14 +149,6 @@ class EpisodeGenerator:
         return goals
 
     # ---- one episode -------------------------------------------------------------------------
-    def _success(self, goal: Goal):
-        r = self.task.success_radius
-        if goal.kind == "object":
-            centres = np.array([v["centre"] for v in goal.instances])
-            return lambda x, y: bool((np.hypot(centres[:, 0] - x, centres[:, 1] - y) <= r + 1e-9).any())
-        gx, gy = float(goal.xy[0]), float(goal.xy[1])
-        return lambda x, y: math.hypot(x - gx, y - gy) <= r + 1e-9
-
     def _episode(self, goal: Goal, fld, node: int, difficulty_budget: int):
         """Plan, roll out and check one start; returns (episode dict, trajectory arrays) or None."""
         t, cm = self.task, self.cm
@@ -163,7 +156,6 @@ class EpisodeGenerator:
         start_yaw = float(self.rng.uniform(-math.pi, math.pi))
         geo = float(fld.node_dist[node])
         path_cells = fld.path_cells(self.graph.cells[node])
-        end_xy = cm.cell_centers(path_cells[-1:])[0]
         if goal.kind == "object":
             # the goal instance is the one whose view point ends the geodesic
             inst = next(v for v in goal.instances if (v["cells"] == path_cells[-1]).all(1).any())
@@ -193,7 +185,10 @@ class EpisodeGenerator:
         path, length = best
         final_yaw = goal_yaw if goal.kind in ("image", "object") else None
         ro = rollout(path[:, :2], start_yaw, final_yaw, self.limits, self.ecfg.dt)
-        success = self._success(goal)
+        # success-region centres: the goal, or every instance of the ObjectNav category
+        centres = np.ascontiguousarray(
+            [v["centre"] for v in goal.instances] if goal.kind == "object" else goal.xy[None], np.float64)
+        success = lambda x, y: bool(in_region(x, y, centres, t.success_radius))  # noqa: E731
         tol = math.radians(t.heading_tolerance_deg) if goal.kind == "image" else None
         why = check_trajectory(ro["x"], ro["y"], ro["yaw"], ro["v"], ro["w"], cm, self.emb.radius, self.limits,
                                self.ecfg.dt, success, goal_yaw if goal.kind == "image" else None, tol)
@@ -205,7 +200,6 @@ class EpisodeGenerator:
         geo = min(geo, travelled)  # the expert found a shorter valid path than the grid metric
         oracle = None
         if self.ecfg.oracle:
-            centres = (np.array([v["centre"] for v in goal.instances]) if goal.kind == "object" else goal.xy[None])
             oracle = discrete_expert(fld.grid, cm, (start_xy[0], start_xy[1], start_yaw), centres, t.success_radius,
                                      goal_yaw if goal.kind == "image" else None,
                                      math.radians(t.heading_tolerance_deg), self.ecfg.forward_step,
@@ -376,7 +370,8 @@ def _trajectory_columns(rows: list[dict], trajs: list[dict], dt: float) -> dict[
     for row, ro in zip(rows, trajs):
         n = len(ro["x"])
         v, w, yaw = ro["v"], ro["w"], ro["yaw"]
-        action = np.where(ro["phase"] == 1, 1, np.where(ro["phase"] == 2, np.where(w > 0, 2, 3), 0)).astype(np.int8)
+        action = np.where(ro["phase"] == 1, MOVE_FORWARD,
+                          np.where(ro["phase"] == 2, np.where(w > 0, TURN_LEFT, TURN_RIGHT), STOP)).astype(np.int8)
         dx, dy, dyaw = relative_waypoints(ro["x"], ro["y"], yaw)
         part = {
             "episode_id": np.full(n, row["episode_id"], object), "step": np.arange(n, dtype=np.int32),

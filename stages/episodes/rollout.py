@@ -143,7 +143,8 @@ def _potential(dist, ox, oy, res, x, y):
 
 
 @numba.njit(cache=True)
-def _in_region(x, y, centres, radius):
+def in_region(x, y, centres, radius):
+    """Whether (x, y) lies within `radius` (+1e-9) of any of the success-region centres [k, 2]."""
     for k in range(centres.shape[0]):
         if math.hypot(x - centres[k, 0], y - centres[k, 1]) <= radius + 1e-9:
             return True
@@ -161,7 +162,7 @@ def oracle_action(x, y, yaw, dist, clearance, ox, oy, res, thr, centres, radius,
     STOP (ImageNav: first turn to within yaw_tol of goal_yaw; goal_yaw NaN = no heading goal).
     Returns an action id, or -1 when no move makes progress (stuck).
     """
-    if _in_region(x, y, centres, radius):
+    if in_region(x, y, centres, radius):
         if goal_yaw != goal_yaw:  # NaN
             return STOP
         e = (goal_yaw - yaw + math.pi) % (2 * math.pi) - math.pi
@@ -206,24 +207,42 @@ def _oracle_rollout(x, y, yaw, dist, clearance, ox, oy, res, thr, centres, radiu
     return out[:0]
 
 
-def discrete_expert(dist_grid: np.ndarray, costmap, start, centres: np.ndarray, radius: float,
-                    goal_yaw: float | None = None, heading_tolerance: float = math.radians(30),
-                    forward: float = 0.25, turn: float = math.radians(15), max_steps: int = 1500) -> np.ndarray | None:
-    """The discrete-action oracle's whole episode (see oracle_action).
+class DiscreteOracle:
+    """The discrete-action oracle of one episode (see oracle_action): the stored expert's action
+    sequence and the closed-loop oracle agent both go through it.
 
     Args:
         dist_grid: [ny, nx] geodesic distance to the goal (set), metres, inf where unreachable.
-        costmap: Costmap (moves are its swept-disk motions). start: (x, y, yaw).
+        costmap: Costmap (moves are its swept-disk motions).
         centres: [k, 2] success-region centres (PointNav / ImageNav: the goal; ObjectNav: the
             category's instance centres), radius: their radius, metres.
         goal_yaw: ImageNav: turn to within heading_tolerance / 2 of it before stopping.
-        forward: metres per MOVE_FORWARD. turn: radians per TURN_*. max_steps: step budget.
-    Returns:
-        [n] int8 action ids ending with STOP, or None when stuck or over budget.
+        forward: metres per MOVE_FORWARD. turn: radians per TURN_*.
     """
-    acts = _oracle_rollout(float(start[0]), float(start[1]), float(start[2]), dist_grid, costmap.clearance,
-                           costmap.origin[0], costmap.origin[1], costmap.resolution,
-                           costmap.radius + costmap.margin, np.ascontiguousarray(centres, np.float64).reshape(-1, 2),
-                           float(radius), math.nan if goal_yaw is None else float(goal_yaw),
-                           heading_tolerance / 2, float(forward), float(turn), int(max_steps))
-    return acts if len(acts) else None
+
+    def __init__(self, dist_grid: np.ndarray, costmap, centres: np.ndarray, radius: float,
+                 goal_yaw: float | None = None, heading_tolerance: float = math.radians(30),
+                 forward: float = 0.25, turn: float = math.radians(15)):
+        self._args = (dist_grid, costmap.clearance, costmap.origin[0], costmap.origin[1], costmap.resolution,
+                      costmap.radius + costmap.margin, np.ascontiguousarray(centres, np.float64).reshape(-1, 2),
+                      float(radius), math.nan if goal_yaw is None else float(goal_yaw), heading_tolerance / 2,
+                      float(forward), float(turn))
+
+    def action(self, x: float, y: float, yaw: float) -> int:
+        """The next action id from a pose, or -1 when no move makes progress."""
+        return int(oracle_action(float(x), float(y), float(yaw), *self._args))
+
+    def episode(self, start, max_steps: int = 1500) -> np.ndarray | None:
+        """[n] int8 action ids from `start` (x, y, yaw) ending with STOP, or None when stuck or
+        over budget."""
+        acts = _oracle_rollout(float(start[0]), float(start[1]), float(start[2]), *self._args, int(max_steps))
+        return acts if len(acts) else None
+
+
+def discrete_expert(dist_grid: np.ndarray, costmap, start, centres: np.ndarray, radius: float,
+                    goal_yaw: float | None = None, heading_tolerance: float = math.radians(30),
+                    forward: float = 0.25, turn: float = math.radians(15), max_steps: int = 1500) -> np.ndarray | None:
+    """The discrete-action oracle's whole episode from `start` (x, y, yaw): [n] int8 action ids
+    ending with STOP, or None when stuck or over budget (see DiscreteOracle for the arguments)."""
+    return DiscreteOracle(dist_grid, costmap, centres, radius, goal_yaw, heading_tolerance, forward,
+                          turn).episode(start, max_steps)

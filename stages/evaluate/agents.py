@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from stages.episodes.rollout import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, oracle_action
+from stages.episodes.rollout import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, DiscreteOracle
 from stages.registry import Registry
 
 AGENTS = Registry("agent")
@@ -37,7 +37,7 @@ class RandomAgent:
 
 @register_agent("oracle")
 class OracleAgent:
-    """Follows the costmap geodesic with the discrete actions (stages.episodes.rollout.oracle_action);
+    """Follows the costmap geodesic with the discrete actions (stages.episodes.rollout.DiscreteOracle);
     stops inside the success region (ImageNav: after turning to the goal heading)."""
 
     def __init__(self, **_):
@@ -48,16 +48,14 @@ class OracleAgent:
 
     def bind(self, env) -> None:
         self.env = env
-        self._grid = env.ctx.field(env.state.ep).grid
+        ep = env.state.ep
+        self.oracle = DiscreteOracle(env.ctx.field(ep).grid, env.ctx.costmap, ep.centres, ep.success_radius,
+                                     ep.goal_yaw, ep.heading_tolerance, env.cfg.forward_step, env.turn)
 
     def act(self, obs: dict):
-        env = self.env
-        s, ep, cm = env.state, env.state.ep, env.ctx.costmap
-        a = oracle_action(s.x, s.y, s.yaw, self._grid, cm.clearance, cm.origin[0], cm.origin[1], cm.resolution,
-                          cm.radius + cm.margin, np.ascontiguousarray(ep.centres, float), ep.success_radius,
-                          math.nan if ep.goal_yaw is None else ep.goal_yaw, ep.heading_tolerance / 2,
-                          env.cfg.forward_step, env.turn)
-        return STOP if a < 0 else int(a)
+        s = self.env.state
+        a = self.oracle.action(s.x, s.y, s.yaw)
+        return STOP if a < 0 else a
 
 
 @register_agent("noisy_oracle")

@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from stages.episodes.rollout import in_region
+
 
 @dataclass
 class Episode:
@@ -29,6 +31,9 @@ class Episode:
     reference_path: np.ndarray | None = None  # [n, 2] expert positions (for DTW)
     scene_id: str = ""
     extra: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.centres = np.ascontiguousarray(self.centres, np.float64).reshape(-1, 2)  # as in_region takes them
 
     @classmethod
     def from_row(cls, row: dict, reference_path: np.ndarray | None = None) -> "Episode":
@@ -57,7 +62,7 @@ class Episode:
             reference_path=reference_path, scene_id=str(row.get("scene_id", "")))
 
     def in_region(self, x: float, y: float) -> bool:
-        return bool((np.hypot(self.centres[:, 0] - x, self.centres[:, 1] - y) <= self.success_radius + 1e-9).any())
+        return bool(in_region(float(x), float(y), self.centres, self.success_radius))
 
     def distance_to_centres(self, x: float, y: float) -> float:
         """Planar Euclidean distance to the nearest success-region centre (NE)."""
