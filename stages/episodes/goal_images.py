@@ -37,19 +37,26 @@ class GoalImagesConfig:
 
 
 def render_goal_images(gs, cameras: list[dict], backend: str = "auto", batch: int = 16):
-    """Goal cameras (episodes' goal_camera_json) -> list of HxWx3 uint8 images."""
+    """Goal cameras (episodes' goal_camera_json) -> list of HxWx3 uint8 images, `batch` views per
+    render call (consecutive cameras of one image size and field of view share a call)."""
     from stages.render import Renderer
     from stages.render.camera import intrinsics, viewmats
 
     r = Renderer(gs, backend)
     out = []
-    for k in range(0, len(cameras), batch):
-        cams = cameras[k:k + batch]
-        for c in cams:  # one size per call
-            vm = viewmats(np.array([[c["position"][0], c["position"][1], c["yaw"]]]), c["position"][2], c["pitch_deg"])
-            kk = intrinsics(c["width"], c["height"], c["hfov_deg"])[None]
-            img = r.render(vm, kk, c["width"], c["height"]).rgb[0]
-            out.append((img.clamp(0, 1) * 255 + 0.5).to("cpu").numpy().astype(np.uint8))
+    k = 0
+    while k < len(cameras):
+        size = lambda c: (c["width"], c["height"], c["hfov_deg"])  # noqa: E731
+        group = [cameras[k]]
+        while len(group) < batch and k + len(group) < len(cameras) and size(cameras[k + len(group)]) == size(group[0]):
+            group.append(cameras[k + len(group)])
+        vm = np.concatenate([viewmats(np.array([[c["position"][0], c["position"][1], c["yaw"]]]), c["position"][2],
+                                      c["pitch_deg"]) for c in group])
+        w, h, hfov = size(group[0])
+        kk = np.repeat(intrinsics(w, h, hfov)[None], len(group), 0)
+        rgb = r.render(vm, kk, w, h).rgb
+        out += list((rgb.clamp(0, 1) * 255 + 0.5).to("cpu").numpy().astype(np.uint8))
+        k += len(group)
     return out
 
 

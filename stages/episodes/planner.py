@@ -98,7 +98,7 @@ class ScenePlanner:
             self.planner.setRange(cfg.range)
         self.simplifier = og.PathSimplifier(self.si)
         self._setup_done = False
-        self._keep = []  # keeps OMPL states alive while a problem definition refers to them
+        self._keep = []  # keeps OMPL states and goals alive while a problem definition refers to them
 
     def _state(self, x: float, y: float, yaw: float):
         s = self.space.allocState()
@@ -135,7 +135,7 @@ class ScenePlanner:
             gs = ob.GoalStates(self.si)
             for g in goals:
                 gs.addState(self._state(*g))
-            self._goal_keep = gs
+            self._keep.append(gs)
             pdef.setGoal(gs)
         obj = ob.PathLengthOptimizationObjective(self.si)
         if self.optimizing and reference_length is not None:
@@ -163,9 +163,7 @@ class ScenePlanner:
             self.simplifier.ropeShortcutPath(path)
             self.simplifier.reduceVertices(path, 0, 0, 0.33)
             self.simplifier.collapseCloseVertices(path)
-        out = np.array([(s.getX(), s.getY(), s.getYaw()) for s in path.getStates()], float)
-        self.planner.clear()
-        return out
+        return np.array([(s.getX(), s.getY(), s.getYaw()) for s in path.getStates()], float)
 
 
 def _iterations(n: int):

@@ -109,6 +109,10 @@ class EpisodeState:
     def pose(self) -> np.ndarray:
         return np.array([self.x, self.y, self.yaw], np.float32)
 
+    def fail(self) -> None:
+        """End the episode as a failure of the agent (it raised, timed out or broke the protocol)."""
+        self.done, self.success, self.end_reason = True, False, "agent_error"
+
 
 class NavEnv:
     """One episode at a time: reset(episode) -> observation; step(action) -> (observation, info)."""

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import time
-import traceback
 
 import numpy as np
 
@@ -38,8 +37,7 @@ def run_episode(env: NavEnv, agent, ep, frames: list | None = None) -> dict:
                 frames.append(obs["rgb"])
     except Exception as e:  # noqa: BLE001 - the run goes on; the episode fails
         error = f"{type(e).__name__}: {e}"
-        env.state.done, env.state.success, env.state.end_reason = True, False, "agent_error"
-        env.state.extra_trace = traceback.format_exc(limit=4)
+        env.state.fail()
     s = env.state
     if hasattr(agent, "end"):  # remote agents: episode_end frame
         agent.end({"episode_id": ep.episode_id, "success": bool(s.success), "steps": s.steps,
@@ -112,7 +110,7 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
         ep, d0, t0 = running.pop(i)
         env = benv.envs[i]
         if error:
-            env.state.done, env.state.success, env.state.end_reason = True, False, "agent_error"
+            env.state.fail()
         rows.append(result_row(env, ep, d0, error, time.perf_counter() - t0))
         return {"episode_id": ep.episode_id, "success": bool(env.state.success), "steps": env.state.steps}
 

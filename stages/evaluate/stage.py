@@ -80,45 +80,40 @@ def run(scene, cfg, catalog) -> dict:
 
         gs, _ = read_scene_zarr(catalog.path("aligned", scene))
     ctx = SceneContext(cm, graph, emb, gs, ecfg.renderer)
-    env = NavEnv(ctx, EnvConfig(protocol=ecfg.protocol, width=ecfg.width, height=ecfg.height, render=ecfg.render))
+    env_cfg = EnvConfig(protocol=ecfg.protocol, width=ecfg.width, height=ecfg.height, render=ecfg.render)
     episodes = load_episodes(catalog, scene, ecfg)
-    agent = make_scene_agent(ecfg, stream_seed(ecfg.seed, scene.scene_id, "evaluate") % 2**31)
+    seed = stream_seed(ecfg.seed, scene.scene_id, "evaluate") % 2**31
+    remote = ecfg.agent.startswith(("ws://", "wss://"))
     base = catalog.path("eval_root") / run_name(ecfg)
-    rows, videos = [], []
+    videos = []
     if ecfg.batch_slots > 1:  # batched: no videos (frames of many slots interleave)
         from stages.evaluate.loop import InProcessBatch, run_episodes_batched
 
-        seed = stream_seed(ecfg.seed, scene.scene_id, "evaluate") % 2**31
-        client = InProcessBatch(lambda: make_scene_agent(ecfg, seed))
-        if ecfg.agent.startswith(("ws://", "wss://")):
+        if remote:
             from stages.evaluate.protocol import RemoteBatchAgent
 
             client = RemoteBatchAgent(ecfg.agent, timeout=ecfg.timeout_s, **ecfg.agent_args)
-        cfg_env = EnvConfig(protocol=ecfg.protocol, width=ecfg.width, height=ecfg.height, render=ecfg.render)
-        rows = run_episodes_batched(ctx, episodes, client, ecfg.batch_slots, cfg_env)
-        episodes_by = {(e.task, e.episode_id): e for e in episodes}
-        plots = [plot_trajectory(cm, r, episodes_by[(r["task"], r["episode_id"])],
-                                 base / "plots" / f"{scene.scene_id}_{r['task']}_{r['episode_id']}.png")
-                 for r in rows[:ecfg.trajectory_plots]]
-        out = base / "results" / f"scene_id={scene.scene_id}" / "part-0.parquet"
-        write_results(rows, out)
-        return {"outputs": [str(out), *plots], "episodes": len(rows), "run": run_name(ecfg),
-                "agent_errors": sum(bool(r["error"]) for r in rows),
-                "sr": float(np.mean([r["sr"] for r in rows])) if rows else None}
-    for k, ep in enumerate(episodes):
-        frames = [] if (ecfg.render and len(videos) < ecfg.videos) else None
-        row = run_episode(env, agent, ep, frames)
-        rows.append(row)
-        if frames:
-            videos.append(write_video(frames, base / "videos" / f"{scene.scene_id}_{ep.task}_{ep.episode_id}.mp4"))
-    if hasattr(agent, "close"):
-        agent.close()
-    plots = [plot_trajectory(cm, r, ep, base / "plots" / f"{scene.scene_id}_{ep.task}_{ep.episode_id}.png")
-             for r, ep in list(zip(rows, episodes))[:ecfg.trajectory_plots]]
+        else:
+            client = InProcessBatch(lambda: make_scene_agent(ecfg, seed))
+        rows = run_episodes_batched(ctx, episodes, client, ecfg.batch_slots, env_cfg)
+    else:
+        env, agent, rows = NavEnv(ctx, env_cfg), make_scene_agent(ecfg, seed), []
+        for ep in episodes:
+            frames = [] if (ecfg.render and len(videos) < ecfg.videos) else None
+            rows.append(run_episode(env, agent, ep, frames))
+            if frames:
+                videos.append(write_video(frames, base / "videos" / f"{scene.scene_id}_{ep.task}_{ep.episode_id}.mp4"))
+        client = agent
+    if hasattr(client, "close"):
+        client.close()
+    episode_of = {(e.task, e.episode_id): e for e in episodes}
+    plots = [plot_trajectory(cm, r, episode_of[(r["task"], r["episode_id"])],
+                             base / "plots" / f"{scene.scene_id}_{r['task']}_{r['episode_id']}.png")
+             for r in rows[:ecfg.trajectory_plots]]
     out = base / "results" / f"scene_id={scene.scene_id}" / "part-0.parquet"
     write_results(rows, out)
-    failed = [r for r in rows if r["error"]]
-    return {"outputs": [str(out), *videos, *plots], "episodes": len(rows), "agent_errors": len(failed),
+    return {"outputs": [str(out), *videos, *plots], "episodes": len(rows),
+            "agent_errors": sum(bool(r["error"]) for r in rows),
             "sr": float(np.mean([r["sr"] for r in rows])) if rows else None, "run": run_name(ecfg)}
 
 
