@@ -100,14 +100,19 @@ class Costmap:
         1 = the largest component, the one samplers should use)."""
         if self.components is None:
             raise ValueError("this costmap was built without component labels")
-        xy = np.asarray(xy, float)[:, :2]
-        j = np.floor((xy[:, 0] - self.origin[0]) / self.resolution).astype(np.int64)
-        i = np.floor((xy[:, 1] - self.origin[1]) / self.resolution).astype(np.int64)
+        i, j = self.cells_of(xy).T
         ny, nx = self.components.shape
         ok = (i >= 0) & (i < ny) & (j >= 0) & (j < nx)
         out = np.zeros(len(xy), np.int32)
         out[ok] = self.components[i[ok], j[ok]]
         return out
+
+    def cells_of(self, xy: np.ndarray) -> np.ndarray:
+        """[N, 2+] points (x, y, ...) -> [N, 2] int64 (row, col) of the cells holding them (not
+        bounds-checked)."""
+        xy = np.asarray(xy, float)[:, :2]
+        return np.stack([np.floor((xy[:, 1] - self.origin[1]) / self.resolution),
+                         np.floor((xy[:, 0] - self.origin[0]) / self.resolution)], 1).astype(np.int64)
 
     def cell_centers(self, cells: np.ndarray) -> np.ndarray:
         """[N, 2] (row, col) -> [N, 2] (x, y) metres."""

@@ -63,9 +63,7 @@ class SceneContext:
         """Geodesic distance field to the episode's goal (set), cached per episode."""
         key = (ep.task, ep.episode_id)  # episode ids repeat across tasks
         if key not in self._fields:
-            cm = self.costmap
-            cells = np.stack([((ep.goal_sources[:, 1] - cm.origin[1]) / cm.resolution).astype(int),
-                              ((ep.goal_sources[:, 0] - cm.origin[0]) / cm.resolution).astype(int)], 1)
+            cells = self.costmap.cells_of(ep.goal_sources)
             cells = cells[self.graph.index[cells[:, 0], cells[:, 1]] >= 0]
             if len(self._fields) >= self.max_fields:  # bounded: drop the oldest
                 self._fields.pop(next(iter(self._fields)))
@@ -132,8 +130,7 @@ class NavEnv:
         self.state = EpisodeState(ep)
         self._goal_image = None
         if ep.task == "imagenav" and self.cfg.render and self.ctx.renderer is not None:
-            gy = ep.goal_yaw if ep.goal_yaw is not None else 0.0
-            self._goal_image = self.ctx.render(np.array([[ep.goal_xy[0], ep.goal_xy[1], gy]]), self.w, self.h)[0][0]
+            self._goal_image = self.ctx.render(ep.goal_pose[None], self.w, self.h)[0][0]
         return self._observe()
 
     def step(self, action) -> tuple[dict, dict]:

@@ -61,6 +61,11 @@ class Episode:
             goal_camera=json.loads(row["goal_camera_json"]) if row.get("goal_camera_json") else None,
             reference_path=reference_path, scene_id=str(row.get("scene_id", "")))
 
+    @property
+    def goal_pose(self) -> np.ndarray:
+        """[3] (x, y, yaw) of the goal view (heading 0 when the goal has none)."""
+        return np.array([self.goal_xy[0], self.goal_xy[1], self.goal_yaw or 0.0], float)
+
     def in_region(self, x: float, y: float) -> bool:
         return bool(in_region(float(x), float(y), self.centres, self.success_radius))
 
