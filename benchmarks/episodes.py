@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +29,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from benchmarks import machine
 from stages.costmap.build import Embodiment
 from stages.costmap.query import Costmap
 from stages.episodes.config import EpisodesConfig
@@ -266,7 +267,7 @@ def main(argv=None) -> dict:
     pn_rate = (dense or {}).get("episodes_per_core_s", {}).get(
         "pointnav", per_task["pointnav"]["episodes_per_core_s_with_shared"])
     result = {
-        "machine": _machine(), "scenes": len(scenes), "planner": cfg.planner.name,
+        "machine": machine(), "scenes": len(scenes), "planner": cfg.planner.name,
         "episodes_per_core_s": (dense or {}).get("episodes_per_core_s") or
         {t: round(v["episodes_per_core_s_with_shared"], 1) for t, v in per_task.items()},
         "episodes_per_core_s_default_dataset": {t: round(v["episodes_per_core_s_with_shared"], 1)
@@ -284,27 +285,13 @@ def main(argv=None) -> dict:
         "mean_path_m": {t: round(v["mean_path_m"], 3) for t, v in table.items()},
         "mean_steps": {t: round(v["mean_steps"], 1) for t, v in table.items()},
         "table": table,
-        "rejections": {t: _sum_counts(m["info"]["tasks"][t]["rejections"] for m in markers) for t in TASKS},
+        "rejections": {t: dict(sum((Counter(m["info"]["tasks"][t]["rejections"]) for m in markers), Counter()))
+                       for t in TASKS},
     }
     (out / "bench_episodes.json").write_text(json.dumps(result, indent=1))
     (out / "bench_episodes.md").write_text(_markdown(result))
     print(_markdown(result))
     return result
-
-
-def _sum_counts(dicts) -> dict:
-    out: dict[str, int] = {}
-    for d in dicts:
-        for k, v in d.items():
-            out[k] = out.get(k, 0) + v
-    return out
-
-
-def _machine() -> str:
-    import os
-    import platform
-
-    return f"{platform.machine()}, {os.cpu_count()} cores, {platform.processor() or platform.system()}"
 
 
 def _histogram(eps: pd.DataFrame, cfg, path: Path) -> None:

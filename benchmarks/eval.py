@@ -16,12 +16,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
 
+from benchmarks import machine
 from stages.costmap.build import CostmapConfig, Embodiment, build_costmap
 from stages.costmap.query import Costmap
 from stages.episodes.config import EpisodesConfig
@@ -175,7 +175,7 @@ def main(argv=None) -> dict:
     else:
         rng = np.random.default_rng(0)
         ctx, _ = bench_scene(4, 100_000, backend="cpu")
-        result = {"machine": f"{platform.machine()}, {__import__('os').cpu_count()} cores",
+        result = {"machine": machine(),
                   "env_overhead_us": env_overhead_us(ctx, rng)}
         for w, h in ((160, 120), (640, 480)):
             s = steps_per_second(ctx, w, h, 4, 6 if w > 200 else 21, rng)

@@ -7,7 +7,6 @@ plots/*.png (top-down trajectories); the dataset-level finalize step adds summar
 """
 from __future__ import annotations
 
-import json
 import re
 
 import numpy as np
