@@ -13,6 +13,7 @@ from stages.costmap.build import CostmapConfig, Embodiment
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.export import ExportConfig
 from stages.episodes.goal_images import GoalImagesConfig
+from stages.semantics.config import SemanticsConfig
 from stages.evaluate.config import EvaluateConfig
 from stages.gaussians.validate import ValidationLimits
 from stages.synthetic.generate import SyntheticConfig
@@ -103,12 +104,15 @@ class AssetConfig:
     """Also write compressed.splat (32 bytes a Gaussian)."""
     write_source_ply: bool = True
     """Write source.ply (INRIA layout of the ingested scene)."""
+    labels: str = "model_predicted"
+    """labels.json from: model_predicted (the semantics stage's instances) | ground_truth (synthetic
+    scenes) | none."""
 
 
 @dataclass
 class NavArenaConfig:
-    stages: list[str] = field(default_factory=lambda: ["synthesize", "ingest", "voxelize", "align", "costmap", "asset",
-                                                       "episodes", "goal_images", "export"])
+    stages: list[str] = field(default_factory=lambda: ["synthesize", "ingest", "voxelize", "align", "costmap", "semantics",
+                                                       "asset", "episodes", "goal_images", "export"])
     """Stages to run (their missing or stale upstream stages run too); evaluate is not a default."""
     force: bool = False
     """Recompute the selected stages even when their markers are current."""
@@ -121,6 +125,8 @@ class NavArenaConfig:
     voxelize: VoxelizeConfig = field(default_factory=VoxelizeConfig)
     align: AlignConfig = field(default_factory=AlignConfig)
     costmap: CostmapConfig = field(default_factory=CostmapConfig)
+    semantics: SemanticsConfig = field(default_factory=SemanticsConfig)
+    """ObjectNav goal candidates lifted from multi-view masks (stage `semantics`)."""
     asset: AssetConfig = field(default_factory=AssetConfig)
     episodes: EpisodesConfig = field(default_factory=EpisodesConfig)
     task: dict[str, TaskConfig] = field(default_factory=dict)

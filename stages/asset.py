@@ -1,7 +1,7 @@
 """Stage `asset`: the NavArena V1 scene asset directory (NAVARENA_FORMATS.md section 1) of the
 main embodiment: manifest.json, source.ply, aligned.ply, nav_map.pgm + nav_map.yaml (ROS
-map_server), nav_mask.png, labels.json (synthetic ground truth, aligned frame),
-compressed.splat and costmap_topdown.png."""
+map_server), nav_mask.png, labels.json (the semantics stage's predicted instances, or the ground
+truth of synthetic scenes: asset.labels; aligned frame), compressed.splat and costmap_topdown.png."""
 from __future__ import annotations
 
 import datetime as dt
@@ -16,7 +16,7 @@ from PIL import Image
 from pipeline.atomic import atomic_path
 from stages.gaussians.formats import write_inria_ply, write_splat
 from stages.gaussians.store import read_scene_zarr
-from stages.instances import ground_truth_labels
+from stages.instances import ground_truth_labels, load_instances, table_to_labels
 
 NORMALIZER_VERSION = "navarena-0.1"
 
@@ -57,6 +57,18 @@ def topdown_image(raw, support, occ, components=None) -> np.ndarray:
     return img[::-1]
 
 
+def asset_labels(scene, cfg, catalog) -> list[dict] | None:
+    """labels.json entries of the asset (None: no labels.json)."""
+    src = cfg.asset.labels
+    if src == "model_predicted":
+        return table_to_labels(load_instances(scene, catalog, src)) if cfg.semantics.enabled else None
+    if src == "ground_truth":
+        return ground_truth_labels(scene, catalog) if scene.synthetic else None
+    if src == "none":
+        return None
+    raise ValueError(f"asset.labels={src!r}; choose model_predicted | ground_truth | none")
+
+
 def run(scene, cfg, catalog) -> dict:
     out = catalog.path("asset", scene)
     src, _ = read_scene_zarr(catalog.path("scene", scene))
@@ -91,8 +103,8 @@ def run(scene, cfg, catalog) -> dict:
         if cfg.asset.write_compressed_splat:
             write_splat(tmp / "compressed.splat", aligned)
             files["compressed_ply"] = "compressed.splat"
-        if scene.synthetic:
-            labels = ground_truth_labels(scene, catalog)
+        labels = asset_labels(scene, cfg, catalog)
+        if labels is not None:
             (tmp / "labels.json").write_text(json.dumps({"schema_version": "1.0", "labels": labels}, indent=1))
             files["labels"] = labels_file = "labels.json"
         now = build_time()

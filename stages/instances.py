@@ -71,6 +71,18 @@ def labels_to_table(labels: list[dict], support: dict[int, int] | None = None) -
     return pa.table(cols, schema=INSTANCE_SCHEMA)
 
 
+def table_to_labels(table: pa.Table) -> list[dict]:
+    """An INSTANCE_SCHEMA table -> labels.json entries (inverse of labels_to_table; NaN box = null)."""
+    out = []
+    for r in table.to_pylist():
+        lo, hi = [r[f"min_{k}"] for k in "xyz"], [r[f"max_{k}"] for k in "xyz"]
+        box = None if any(np.isnan(lo + hi)) else {"min": lo, "max": hi}
+        out.append({"instance_id": r["instance_id"], "category": r["category"],
+                    "position": [r[f"center_{k}"] for k in "xyz"], "bounding_box": box,
+                    "confidence": r["confidence"], "source": r["source"]})
+    return out
+
+
 def ground_truth_instances(scene, catalog) -> pa.Table:
     """The instance table of a synthetic scene from its ground truth (support = its Gaussians)."""
     gt = catalog.path("source_synthetic", scene) / "ground_truth"

@@ -17,11 +17,15 @@ class Registry(dict):
             return cls
         return deco
 
-    def make(self, spec: str, **kwargs):
-        """An instance from a registry key or an import path "package.module:Class"."""
+    def get_class(self, spec: str):
+        """The class of a registry key or of an import path "package.module:Class"."""
         if ":" in spec:
             mod, cls = spec.split(":", 1)
-            return getattr(importlib.import_module(mod), cls)(**kwargs)
+            return getattr(importlib.import_module(mod), cls)
         if spec not in self:
             raise ValueError(f"unknown {self.kind} {spec!r}; registered: {', '.join(sorted(self))} (or module:Class)")
-        return self[spec](**kwargs)
+        return self[spec]
+
+    def make(self, spec: str, **kwargs):
+        """An instance from a registry key or an import path "package.module:Class"."""
+        return self.get_class(spec)(**kwargs)

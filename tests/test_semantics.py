@@ -20,14 +20,21 @@ def test_back_projection_known_answer():
 
 
 def test_voting_majority_support_and_ties():
-    cfg = LiftingConfig(delta_vote=1.0, min_support=3)
+    cfg = LiftingConfig(delta_vote=1.0, min_support=3, support="points")
     pts = np.array([[0.1, 0.1, 0.1]] * 5 + [[1.5, 0.1, 0.1]] * 4 + [[2.5, 0.1, 0.1]] * 2, float)
     labs = np.array([1, 1, 1, 2, 2] + [1, 1, 2, 2] + [3, 3])
     cells = vote(pts, labs, cfg)
     assert cells[(0, 0, 0)] == (1, 5, pytest.approx(0.6))
     assert (1, 0, 0) not in cells  # a tie
     assert (2, 0, 0) not in cells  # too little support
-    assert (1, 0, 0) in vote(pts, labs, LiftingConfig(delta_vote=1.0, min_support=3, exclude_ties=False))
+    assert (1, 0, 0) in vote(pts, labs, LiftingConfig(delta_vote=1.0, min_support=3, exclude_ties=False,
+                                                      support="points"))
+    # votes per view: one frame's many points are one vote; the majority of frames wins
+    frames = np.array([0, 0, 0, 1, 2] + [0, 0, 1, 2] + [4, 5])
+    views = vote(pts, labs, LiftingConfig(delta_vote=1.0, min_support=3), frames)
+    assert views[(0, 0, 0)] == (2, 3, pytest.approx(2 / 3))  # label 1 from frame 0 only, label 2 from 1 and 2
+    assert views[(1, 0, 0)] == (2, 3, pytest.approx(2 / 3))  # a tie in points, not in views
+    assert (2, 0, 0) not in views  # two views
 
 
 def box_points(centre, size, n, rng):
@@ -73,7 +80,7 @@ def test_lifting_finds_each_object_once_at_its_centre():
     K = intrinsics(W, H, 90)
     # around the objects, so that every side face is seen and links the front and back faces
     poses = [(0.0, 0.5, a) for a in np.linspace(-0.6, 0.9, 6)] + [(4.5, 0.5, math.pi + a) for a in (-0.4, 0.0, 0.4)]
-    poses += [(2.0, -1.6, math.pi / 2 + a) for a in (-0.4, 0.0, 0.4)] + [(2.5, 3.2, -math.pi / 2)]
+    poses += [(2.0, -1.6, math.pi / 2 + a) for a in (-0.4, 0.0, 0.4)] + [(2.5, 3.2, -math.pi / 2 + a) for a in (-0.3, 0.0, 0.3)]
     found = lift(synthetic_frames(means, labels, poses, K), means, LiftingConfig())
     by = {}
     for f in found:

@@ -32,9 +32,9 @@ class TaskConfig:
     """Episodes drawn from one goal's distance field (one Dijkstra serves them all)."""
     categories: list[str] = field(default_factory=lambda: list(OBJECTNAV_CATEGORIES))
     """ObjectNav: the categories that may be goals."""
-    instance_source: str = "ground_truth"
-    """ObjectNav: where instances come from: 'ground_truth' (synthetic scenes' labels) or
-    'model_predicted' (the semantics stage's instance table)."""
+    instance_source: str = "model_predicted"
+    """ObjectNav: where instances come from: 'model_predicted' (the semantics stage's instance
+    table, the default) or 'ground_truth' (synthetic scenes' labels)."""
     view_point_spacing: float = 0.25
     """ObjectNav: view points are free cells on a lattice of this spacing within the success radius
     of an instance, metres."""

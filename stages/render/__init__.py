@@ -24,6 +24,7 @@ class RenderOutput:
     rgb: torch.Tensor    # [B, H, W, 3] float32, [0, 1]
     depth: torch.Tensor  # [B, H, W] float32, metres (expected depth)
     alpha: torch.Tensor  # [B, H, W] float32
+    extra: torch.Tensor | None = None  # [B, H, W, C] composited extra features (render(extra=...))
 
 
 def gsplat_available() -> bool:
@@ -55,6 +56,7 @@ class Renderer:
             raise RuntimeError("renderer backend 'gsplat' needs CUDA and the gsplat package; use backend='cpu'")
         self.backend = backend
         self.sh_degree = sh_degree
+        self.num_gaussians = len(gs.means)
         if backend == "cpu":
             from stages.render.cpu import gaussian_tensors
 
@@ -64,13 +66,19 @@ class Renderer:
 
             self._g = gaussian_tensors(gs, device or "cuda")
 
-    def render(self, viewmats: np.ndarray, Ks: np.ndarray, width: int, height: int, features=None) -> RenderOutput:
+    def render(self, viewmats: np.ndarray, Ks: np.ndarray, width: int, height: int, features=None,
+               extra=None) -> RenderOutput:
         """viewmats [B, 4, 4] world -> camera, Ks [B, 3, 3]; returns tensors on the backend's device.
         features: optional [N, C] per-Gaussian values composited instead of colour (rgb is then the
-        [B, H, W, C] composite, unclamped): e.g. one-hot labels for label masks."""
+        [B, H, W, C] composite, unclamped): e.g. one-hot labels for label masks.
+        extra: optional [N, C] per-Gaussian values composited in the same pass as the colour
+        (out.extra [B, H, W, C]): pixel-aligned labels at the cost of a few more channels."""
         if self.backend == "cpu":
             from stages.render.cpu import render
         else:
             from stages.render.gsplat_backend import render
-        rgb, depth, alpha = render(self._g, viewmats, Ks, width, height, self.sh_degree, features=features)
-        return RenderOutput(rgb if features is not None else rgb.clamp(0.0, 1.0), depth, alpha)
+        rgb, depth, alpha = render(self._g, viewmats, Ks, width, height, self.sh_degree, features=features,
+                                   extra=extra)
+        if features is not None:
+            return RenderOutput(rgb, depth, alpha)
+        return RenderOutput(rgb[..., :3].clamp(0.0, 1.0), depth, alpha, rgb[..., 3:] if extra is not None else None)

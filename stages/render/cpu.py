@@ -158,7 +158,7 @@ def rasterize(means2d, conics, colors, opacities, depths, radii, width: int, hei
 
 
 def render(gs_tensors: dict, viewmats: np.ndarray, Ks: np.ndarray, width: int, height: int,
-           sh_degree: int | None = None, near: float = 0.01, far: float = 1e10, features=None):
+           sh_degree: int | None = None, near: float = 0.01, far: float = 1e10, features=None, extra=None):
     """Render a batch of cameras.
 
     Args:
@@ -168,6 +168,8 @@ def render(gs_tensors: dict, viewmats: np.ndarray, Ks: np.ndarray, width: int, h
         sh_degree: SH degree to evaluate (default: all the scene has).
         features: optional [N, C] per-Gaussian features composited instead of the SH colour (e.g.
             one-hot labels: the rendered channel sums are label weights); rgb is then [B, H, W, C].
+        extra: optional [N, C] features composited with the colour in the same pass (rgb is then
+            [B, H, W, 3 + C], colour first).
     Returns:
         rgb [B, H, W, 3] float32 in [0, 1] (clamped), depth [B, H, W] expected depth (m, 0 where
         empty), alpha [B, H, W].
@@ -191,6 +193,8 @@ def render(gs_tensors: dict, viewmats: np.ndarray, Ks: np.ndarray, width: int, h
                 d = d / d.norm(dim=1, keepdim=True).clamp(min=1e-12)
                 basis = torch.from_numpy(sh_basis(d.numpy().astype(np.float64), deg).astype(np.float32))
                 colors[vis] = torch.clamp((basis[:, :, None] * g["sh"][vis, :(deg + 1) ** 2]).sum(1) + 0.5, min=0.0)
+            if extra is not None and features is None:
+                colors = torch.cat([colors, torch.as_tensor(extra, dtype=torch.float32)], 1)
             rgb, dsum, alpha = rasterize(means2d, conics, colors, g["opacities"], depths, radii, width, height)
             rgbs.append(rgb)
             deps.append(dsum / alpha.clamp(min=1e-10))

@@ -14,10 +14,12 @@ def gaussian_tensors(gs, device: str = "cuda") -> dict:
             "opacities": torch.sigmoid(t(gs.opacity_logits)), "sh": t(gs.sh)}
 
 
-def render(g: dict, viewmats, Ks, width: int, height: int, sh_degree: int | None = None, features=None):
-    """[B] cameras -> rgb [B, H, W, 3] (or the composited features [B, H, W, C]), expected depth
+def render(g: dict, viewmats, Ks, width: int, height: int, sh_degree: int | None = None, features=None,
+           extra=None):
+    """[B] cameras -> rgb [B, H, W, 3] (or the composited features [B, H, W, C]; with `extra`
+    [N, C] the colour and the extra features [B, H, W, 3 + C] in one pass), expected depth
     [B, H, W], alpha [B, H, W] (on the GPU)."""
-    from gsplat import rasterization
+    from gsplat import rasterization, spherical_harmonics
 
     dev = g["means"].device
     vm = torch.as_tensor(np.asarray(viewmats, np.float32), device=dev)
@@ -26,6 +28,12 @@ def render(g: dict, viewmats, Ks, width: int, height: int, sh_degree: int | None
     colors, deg_arg = g["sh"], deg
     if features is not None:
         colors, deg_arg = torch.as_tensor(features, dtype=torch.float32, device=dev), None
+    elif extra is not None:  # evaluate the SH colour per camera as rasterization would, then append
+        campos = torch.linalg.inv(vm)[:, :3, 3]
+        sh = g["sh"][:, :(deg + 1) ** 2]
+        rgb = torch.stack([torch.clamp_min(spherical_harmonics(deg, g["means"] - c, sh) + 0.5, 0.0) for c in campos])
+        ex = torch.as_tensor(extra, dtype=torch.float32, device=dev)
+        colors, deg_arg = torch.cat([rgb, ex[None].expand(len(vm), -1, -1)], -1), None
     with torch.no_grad():
         out, alpha, _ = rasterization(g["means"], g["quats"], g["scales"], g["opacities"], colors, vm, K,
                                       width, height, sh_degree=deg_arg, render_mode="RGB+ED", packed=True,

@@ -24,16 +24,23 @@ class LiftingConfig:
     """Ignore pixels farther than this."""
     delta_down: float = 0.02
     """Per-frame voxel downsampling of the labelled points."""
-    delta_vote: float = 0.05
+    delta_vote: float = 0.1
     """Voting grid cell size."""
     min_support: int = 3
-    """Cells with fewer labelled points (over all frames) are dropped."""
+    """Cells with less support (over all frames) are dropped."""
+    support: str = "views"
+    """What a vote is: "views" (each frame casts one vote per cell and label: a cell seen in one
+    frame cannot outvote a cell seen in many, however many of its pixels fall in it) or "points"
+    (every downsampled point votes)."""
     exclude_ties: bool = True
     """Drop cells whose two most voted categories tie."""
     voting: bool = True
     """Majority voting per cell (off = every point keeps its own label: the naive baseline)."""
-    dbscan_eps: float = 0.1
-    """DBSCAN radius on labelled Gaussian centres."""
+    dbscan_eps: float = 0.2
+    """DBSCAN radius on labelled Gaussian centres (the least one used, see dbscan_eps_spacing)."""
+    dbscan_eps_spacing: float = 2.5
+    """The radius is at least this many times the median nearest-neighbour spacing of the labelled
+    centres of a category (sparser scenes get a proportionally larger radius; 0 = fixed radius)."""
     dbscan_min_samples: int = 5
     """DBSCAN core-point threshold."""
     min_cluster: int = 30
@@ -55,15 +62,19 @@ def voxel_keys(points: np.ndarray, size: float) -> np.ndarray:
     return np.floor(points / size).astype(np.int64)
 
 
-def frame_points(depth: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray, masks: dict[int, np.ndarray],
+def frame_points(depth: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray, masks: dict,
                  cfg: LiftingConfig) -> tuple[np.ndarray, np.ndarray]:
-    """One frame's labelled, downsampled points: (points [M, 3], labels [M] int)."""
+    """One frame's labelled, downsampled points: (points [M, 3], labels [M] int).
+
+    masks: {label: bool [H, W] or a list of them (one per detection; each is eroded on its own, so
+    that two touching detections of one category do not shield each other's boundary)}."""
     pts, labs = [], []
     valid = (depth > 0) & (depth <= cfg.max_depth)
     for label, mask in masks.items():
-        m = mask
+        dets = [mask] if isinstance(mask, np.ndarray) else list(mask)
         if cfg.erosion_px > 0:
-            m = ndimage.binary_erosion(m, iterations=cfg.erosion_px, border_value=0)
+            dets = [ndimage.binary_erosion(d, iterations=cfg.erosion_px, border_value=0) for d in dets]
+        m = np.logical_or.reduce(dets) if len(dets) > 1 else dets[0]
         pix = np.argwhere(m & valid)
         if not len(pix):
             continue
@@ -77,12 +88,21 @@ def frame_points(depth: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray, mas
     return np.concatenate(pts), np.concatenate(labs)
 
 
-def vote(points: np.ndarray, labels: np.ndarray, cfg: LiftingConfig) -> dict[tuple, tuple[int, int, float]]:
+def vote(points: np.ndarray, labels: np.ndarray, cfg: LiftingConfig, frames: np.ndarray | None = None
+         ) -> dict[tuple, tuple[int, int, float]]:
     """Pooled points -> {cell: (label, support, confidence)} on the delta_vote grid (majority label,
-    cells under min_support dropped, ties dropped when exclude_ties)."""
+    cells under min_support dropped, ties dropped when exclude_ties). `frames` [M]: the frame of
+    each point (cfg.support == "views": one vote per frame, cell and label)."""
     if not len(points):
         return {}
     keys = voxel_keys(points, cfg.delta_vote)
+    if cfg.support == "views":
+        if frames is None:
+            raise ValueError("support='views' needs the frame of each point")
+        _, first = np.unique(np.column_stack([keys, labels, frames]), axis=0, return_index=True)
+        keys, labels = keys[first], labels[first]
+    elif cfg.support != "points":
+        raise ValueError(f"lifting.support={cfg.support!r}; choose views | points")
     cells, inv = np.unique(keys, axis=0, return_inverse=True)
     inv = inv.reshape(-1)
     cats = np.unique(labels)
@@ -98,27 +118,39 @@ def vote(points: np.ndarray, labels: np.ndarray, cfg: LiftingConfig) -> dict[tup
             for i, (c, b, t) in enumerate(zip(cells, best, total)) if keep[i]}
 
 
+def dbscan_radius(xyz: np.ndarray, cfg: LiftingConfig) -> float:
+    """cfg.dbscan_eps, or dbscan_eps_spacing x the median nearest-neighbour spacing if larger."""
+    if cfg.dbscan_eps_spacing <= 0 or len(xyz) < 2:
+        return cfg.dbscan_eps
+    from scipy.spatial import cKDTree
+
+    d, _ = cKDTree(xyz).query(xyz, k=2)
+    return max(cfg.dbscan_eps, cfg.dbscan_eps_spacing * float(np.median(d[:, 1])))
+
+
 def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
     """Instance candidates from frames.
 
     Args:
-        frames: iterable of (depth [H, W] m, K [3, 3], cam_to_world [4, 4], masks {label: bool [H, W]}).
+        frames: iterable of (depth [H, W] m, K [3, 3], cam_to_world [4, 4], masks {label: bool [H, W] or
+            a list of them}).
         gaussian_means: [N, 3] scene Gaussian centres (the labels are transferred to them).
     Returns:
         list of {label, center [3], min [3], max [3], support (Gaussians), confidence}.
     """
     from sklearn.cluster import DBSCAN
 
-    pts, labs = [], []
-    for depth, K, c2w, masks in frames:
+    pts, labs, fids = [], [], []
+    for f, (depth, K, c2w, masks) in enumerate(frames):
         p, lab = frame_points(depth, K, c2w, masks, cfg)
         pts.append(p)
         labs.append(lab)
+        fids.append(np.full(len(p), f, np.int64))
     points = np.concatenate(pts) if pts else np.zeros((0, 3))
     labels = np.concatenate(labs) if labs else np.zeros(0, np.int64)
     gkeys = voxel_keys(gaussian_means, cfg.delta_vote)
     if cfg.voting:
-        cells = vote(points, labels, cfg)
+        cells = vote(points, labels, cfg, np.concatenate(fids) if fids else np.zeros(0, np.int64))
         g_label = np.full(len(gaussian_means), -1, np.int64)
         g_conf = np.zeros(len(gaussian_means))
         for i, k in enumerate(map(tuple, gkeys)):
@@ -135,7 +167,7 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
         xyz = cloud(idx)
         if len(xyz) < cfg.min_cluster:
             continue
-        cl = DBSCAN(eps=cfg.dbscan_eps, min_samples=cfg.dbscan_min_samples).fit_predict(xyz)
+        cl = DBSCAN(eps=dbscan_radius(xyz, cfg), min_samples=cfg.dbscan_min_samples).fit_predict(xyz)
         for c in np.unique(cl[cl >= 0]):
             sel = cl == c
             if sel.sum() < cfg.min_cluster:

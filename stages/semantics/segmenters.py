@@ -1,11 +1,16 @@
 """Segmenters: an RGB frame and category prompts -> per-category masks with scores.
 
     seg.segment(rgb, prompts, context) -> {prompt: [(mask bool [H, W], score), ...]}
+    seg.segment_batch(rgbs, prompts, contexts) -> one such dict per frame (batched models override it)
 
-`context` carries what a privileged segmenter may use (the oracle: the camera of the frame).
-Implementations by registry key; `oracle` renders the ground-truth per-Gaussian instance labels of
-synthetic scenes with the scene renderer and passes them through a corruption model that imitates
-a real segmenter (documented in `Corruption`).
+`rgb` is [H, W, 3] uint8. `context` carries what a privileged segmenter may use: the frame's
+camera (viewmat, K) and, when the segmenter declares per-Gaussian `gaussian_features`, their
+composite rendered in the same pass as the frame (`extra`, [H, W, C]).
+
+Implementations by registry key (or "module:Class"), each built by `from_scene(scene, ...)`:
+`oracle` renders the ground-truth per-Gaussian instance labels of synthetic scenes with the scene
+renderer and passes them through a corruption model that imitates a real segmenter (documented in
+`Corruption`); `sam3` is SAM3 concept segmentation (stages/semantics/sam3.py).
 """
 from __future__ import annotations
 
@@ -72,8 +77,26 @@ def corrupt(instance_map: np.ndarray, categories: dict[int, str], prompts: list[
     return out
 
 
+class Segmenter:
+    """Interface of a segmenter (see the module doc)."""
+
+    gaussian_features: np.ndarray | None = None
+    """[N, C] per-Gaussian features to composite with each frame (context["extra"]); None: none."""
+
+    @classmethod
+    def from_scene(cls, scene, catalog, renderer, cfg, seed: int) -> "Segmenter":
+        """The segmenter of one scene from the semantics config (`cfg`, SemanticsConfig)."""
+        raise NotImplementedError
+
+    def segment(self, rgb: np.ndarray, prompts: list[str], context: dict) -> dict[str, list[tuple[np.ndarray, float]]]:
+        raise NotImplementedError
+
+    def segment_batch(self, rgbs, prompts: list[str], contexts: list[dict]) -> list[dict]:
+        return [self.segment(r, prompts, c) for r, c in zip(rgbs, contexts)]
+
+
 @register_segmenter("oracle")
-class OracleSegmenter:
+class OracleSegmenter(Segmenter):
     """Ground-truth masks rendered from per-Gaussian instance ids, then corrupted.
 
     Args:
@@ -91,16 +114,37 @@ class OracleSegmenter:
         onehot = np.zeros((len(ids), len(self.ids)), np.float32)
         rows = np.flatnonzero(ids > 0)
         onehot[rows, np.searchsorted(self.ids, ids[rows])] = 1.0
-        self.features, self.min_weight = onehot, min_weight
+        self.gaussian_features, self.min_weight = onehot, min_weight
 
-    def instance_map(self, viewmat: np.ndarray, K: np.ndarray, width: int, height: int) -> np.ndarray:
-        """[H, W] instance id of each pixel (the label whose composited weight dominates, >= min_weight)."""
-        w = self.renderer.render(viewmat[None], K[None], width, height, features=self.features).rgb[0]
-        w = w.to("cpu").numpy()
-        best = w.argmax(-1)
-        return np.where(w.max(-1) >= self.min_weight, self.ids[best], 0)
+    @classmethod
+    def from_scene(cls, scene, catalog, renderer, cfg, seed: int) -> "OracleSegmenter":
+        """Ground truth of a synthetic scene (its per-Gaussian instance ids and labels.json); the
+        corruption of `cfg.oracle`."""
+        import json
+
+        gt = catalog.path("source_synthetic", scene) / "ground_truth" if scene.synthetic else None
+        if gt is None or not (gt / "instance_ids.npy").exists():
+            raise ValueError(f"scene {scene.scene_id!r} ({scene.name}): the oracle segmenter needs the per-Gaussian "
+                             "ground truth of a synthetic scene; use semantics.segmenter=sam3 for this scene")
+        ids = np.load(gt / "instance_ids.npy")
+        if len(ids) != renderer.num_gaussians:
+            raise ValueError(f"scene {scene.scene_id!r}: {gt / 'instance_ids.npy'} labels {len(ids)} Gaussians, the "
+                             f"scene has {renderer.num_gaussians} (ingest dropped some); the oracle cannot align them")
+        labels = json.loads((gt / "labels.json").read_text())["labels"]
+        return cls(renderer, ids, {int(lab["instance_id"]): cfg.prompt(lab["category"]) for lab in labels},
+                   cfg.oracle.corruption(), seed, cfg.oracle.min_weight)
+
+    def instance_map(self, viewmat: np.ndarray, K: np.ndarray, width: int, height: int,
+                     weights: np.ndarray | None = None) -> np.ndarray:
+        """[H, W] instance id of each pixel: the label whose composited weight dominates, if >= min_weight
+        (`weights` [H, W, C]: the composite when the frame's render pass made it; else rendered here)."""
+        if weights is None:
+            weights = self.renderer.render(viewmat[None], K[None], width, height,
+                                           features=self.gaussian_features).rgb[0].to("cpu").numpy()
+        best = weights.argmax(-1)
+        return np.where(weights.max(-1) >= self.min_weight, self.ids[best], 0)
 
     def segment(self, rgb, prompts: list[str], context: dict) -> dict[str, list[tuple[np.ndarray, float]]]:
         h, w = rgb.shape[:2]
-        imap = self.instance_map(context["viewmat"], context["K"], w, h)
+        imap = self.instance_map(context["viewmat"], context["K"], w, h, context.get("extra"))
         return corrupt(imap, self.categories, prompts, self.c, self.rng)

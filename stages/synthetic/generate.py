@@ -155,6 +155,17 @@ def generate_scene(seed: int, cfg: SyntheticConfig) -> SyntheticScene:
     return SyntheticScene(canonical.transformed(transform), all_inst, lay, transform, cameras)
 
 
+def object_records(layout: Layout) -> list[dict]:
+    """objects.json entries of a layout's objects (canonical frame): oriented box (centre, size, yaw
+    about z) and its axis-aligned bounds."""
+    out = []
+    for o in layout.objects:
+        lo, hi = o.aabb()
+        out.append({"instance_id": o.instance_id, "category": o.category, "center": o.center.tolist(),
+                    "size": o.size.tolist(), "yaw": float(o.yaw), "aabb_min": lo.tolist(), "aabb_max": hi.tolist()})
+    return out
+
+
 def write_synthetic(out_dir: str | Path, s: SyntheticScene, name: str) -> None:
     """Write the source file and the ground truth into out_dir (the caller makes it atomic)."""
     out = Path(out_dir)
@@ -165,11 +176,7 @@ def write_synthetic(out_dir: str | Path, s: SyntheticScene, name: str) -> None:
     mesh, face_inst = layout_mesh(s.layout.parts)
     mesh.export(gt / "mesh.ply")
     np.save(gt / "face_instance.npy", face_inst)
-    objects = []
-    for o in s.layout.objects:
-        lo, hi = o.aabb()
-        objects.append({"instance_id": o.instance_id, "category": o.category, "center": o.center.tolist(),
-                        "size": o.size.tolist(), "yaw": float(o.yaw), "aabb_min": lo.tolist(), "aabb_max": hi.tolist()})
+    objects = object_records(s.layout)
     (gt / "objects.json").write_text(json.dumps({"frame": "canonical", "categories": list(CATEGORIES),
                                                  "objects": objects}, indent=1))
     labels = [{"instance_id": o["instance_id"], "category": o["category"], "position": o["center"],

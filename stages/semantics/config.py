@@ -1,0 +1,90 @@
+"""Config of the semantics stage (section `semantics`)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Optional
+
+from stages.episodes.config import OBJECTNAV_CATEGORIES
+from stages.semantics.lifting import LiftingConfig
+from stages.semantics.segmenters import CORRUPTION_LEVELS, Corruption
+
+
+@dataclass
+class OracleConfig:
+    """The `oracle` segmenter: ground-truth masks of synthetic scenes, corrupted (segmenters.Corruption).
+
+    `level` picks a preset (none | moderate | heavy, CORRUPTION_LEVELS); a rate set here overrides
+    the preset's, e.g. semantics.oracle.miss_rate=0.25."""
+
+    level: str = "moderate"
+    bleed_px: Optional[int] = None
+    miss_rate: Optional[float] = None
+    confusion_rate: Optional[float] = None
+    fp_blobs: Optional[float] = None
+    fp_radius_px: Optional[int] = None
+    min_weight: float = 0.5
+    """A pixel belongs to the instance whose composited label weight is largest, if at least this."""
+
+    def corruption(self) -> Corruption:
+        if self.level not in CORRUPTION_LEVELS:
+            raise ValueError(f"semantics.oracle.level={self.level!r}; choose one of {sorted(CORRUPTION_LEVELS)}")
+        base = CORRUPTION_LEVELS[self.level]
+        return Corruption(**{f.name: getattr(self, f.name) if getattr(self, f.name) is not None
+                             else getattr(base, f.name) for f in fields(Corruption)})
+
+
+@dataclass
+class Sam3Config:
+    """The `sam3` segmenter (optional extra: pip install -e '.[sam3]'; weights: README)."""
+
+    checkpoint: Optional[str] = None
+    """Local path of sam3.pt (never downloaded at run time)."""
+    bpe_path: Optional[str] = None
+    """CLIP BPE vocabulary (bpe_simple_vocab_16e6.txt.gz); default: next to the checkpoint."""
+    device: str = "cuda"
+    confidence: float = 0.5
+    """Detections whose score (presence x box probability) is below this are dropped."""
+    resolution: int = 1008
+    """Input resolution of the model (frames are resized to it)."""
+    batch: int = 8
+    """Frames per forward pass of the image encoder."""
+
+
+@dataclass
+class SemanticsConfig:
+    """Stage `semantics`: ObjectNav goal candidates lifted from multi-view masks (stages/semantics)."""
+
+    enabled: bool = True
+    """Off: the stage writes no instance table (ObjectNav then needs instance_source=ground_truth)."""
+    segmenter: str = "oracle"
+    """Registry key (oracle | sam3) or "module:Class"."""
+    categories: list[str] = field(default_factory=lambda: list(OBJECTNAV_CATEGORIES))
+    """Categories to find (the instance table's category names)."""
+    prompts: dict[str, str] = field(default_factory=dict)
+    """Open-vocabulary prompt per category (default: the category, '_' read as a space)."""
+    poses: str = "auto"
+    """Covering poses: source (the scene's capture cameras) | free_space (on free costmap cells at the
+    embodiment's camera height, all around) | auto (source when the scene has cameras)."""
+    spacing: float = 1.0
+    """free_space: one position per spacing x spacing metres of free space."""
+    yaw_step_deg: float = 45.0
+    """free_space: headings every this many degrees (full circle)."""
+    max_views: int = 0
+    """Keep at most this many views (evenly spread over the list; 0 = all)."""
+    width: int = 320
+    height: int = 240
+    """Render size of the views (source cameras keep their field of view)."""
+    renderer: str = "auto"
+    """auto (gsplat on CUDA, else the CPU renderer) | cpu | gsplat."""
+    batch: int = 16
+    """Views per render call."""
+    min_alpha: float = 0.5
+    """Pixels whose accumulated opacity is below this have no valid depth."""
+    seed: int = 0
+    """Seed of the oracle's corruption (stream per scene)."""
+    lifting: LiftingConfig = field(default_factory=LiftingConfig)
+    oracle: OracleConfig = field(default_factory=OracleConfig)
+    sam3: Sam3Config = field(default_factory=Sam3Config)
+
+    def prompt(self, category: str) -> str:
+        return self.prompts.get(category, category.replace("_", " "))

@@ -1,0 +1,205 @@
+"""Stage `semantics`: ObjectNav goal candidates lifted from multi-view open-vocabulary masks.
+
+Per scene: covering cameras (the source's capture cameras, or poses on free costmap cells at the
+embodiment's camera height looking all around), RGB-D rendered there with the scene renderer,
+per-category masks from the configured segmenter (registry key: oracle | sam3), the paper's lifting
+(lifting.py) -> the instance table data/04_semantics/{scene_id}/instances.parquet (INSTANCE_SCHEMA,
+source "model_predicted"), which the episodes stage's ObjectNav and the asset's labels.json read.
+"""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import torch
+from omegaconf import OmegaConf
+
+from pipeline.atomic import atomic_path
+from stages.instances import labels_to_table
+from stages.render.camera import camera_to_world, intrinsics
+from stages.semantics.config import SemanticsConfig
+from stages.semantics.lifting import lift
+from stages.semantics.poses import free_space_poses
+from stages.semantics.segmenters import SEGMENTERS
+
+CAMERA_FILE = "cameras.json"
+
+
+def quat_wxyz_to_rotmat(q) -> np.ndarray:
+    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def read_cameras(path: Path, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """A scene's cameras.json -> cameras_from_json."""
+    try:
+        return cameras_from_json(json.loads(Path(path).read_text()), width, height)
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"{path}: not a camera list this stage reads ({type(e).__name__}: {e})") from None
+
+
+def cameras_from_json(data, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Capture cameras -> (camera -> world [M, 4, 4] in the source frame, OpenCV axes; intrinsics
+    [M, 3, 3] for a width x height render of the same field of view).
+
+    Two layouts: ours (synthetic scenes: {hfov_deg, poses: [{position, quat_wxyz}]}) and the INRIA
+    3DGS training output's cameras.json ([{width, height, position, rotation (camera -> world,
+    3x3), fx, fy}, ...])."""
+    c2w, ks = [], []
+    if isinstance(data, dict):
+        k = intrinsics(width, height, data["hfov_deg"])
+        for p in data["poses"]:
+            m = np.eye(4)
+            m[:3, :3], m[:3, 3] = quat_wxyz_to_rotmat(p["quat_wxyz"]), p["position"]
+            c2w.append(m)
+            ks.append(k)
+    else:
+        for c in data:
+            m = np.eye(4)
+            m[:3, :3], m[:3, 3] = np.asarray(c["rotation"], float), c["position"]
+            c2w.append(m)
+            ks.append(np.array([[c["fx"] * width / c["width"], 0, width / 2],
+                                [0, c["fy"] * height / c["height"], height / 2], [0, 0, 1]], np.float32))
+    if not c2w:
+        raise ValueError("no cameras")
+    return np.stack(c2w), np.stack(ks).astype(np.float32)
+
+
+def camera_file(scene, catalog) -> Path | None:
+    """The scene's capture cameras: ground_truth/cameras.json of synthetic scenes; for others a
+    cameras.json next to the source file or up to two folders above it (INRIA output layout:
+    model/cameras.json, model/point_cloud/iteration_N/point_cloud.ply)."""
+    if scene.synthetic:
+        p = catalog.path("source_synthetic", scene) / "ground_truth" / CAMERA_FILE
+        return p if p.exists() else None
+    src = Path(scene.path)
+    for d in [src if src.is_dir() else src.parent, *list(src.parents)[:3]]:
+        if (d / CAMERA_FILE).exists():
+            return d / CAMERA_FILE
+    return None
+
+
+def spread(n: int, k: int) -> np.ndarray:
+    """Indices of k of n items spread evenly (all when k is 0 or >= n)."""
+    if k <= 0 or k >= n:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, k).round().astype(int))
+
+
+def covering_cameras(scene, catalog, scfg: SemanticsConfig, emb, to_aligned: np.ndarray, costmap=None):
+    """(camera -> world [M, 4, 4] in the aligned frame, Ks [M, 3, 3], "source" | "free_space")."""
+    cams = camera_file(scene, catalog) if scfg.poses in ("auto", "source") else None
+    if scfg.poses == "source" and cams is None:
+        raise FileNotFoundError(f"scene {scene.scene_id!r} ({scene.name}): semantics.poses=source but the scene has "
+                                f"no {CAMERA_FILE}; use poses=auto or free_space")
+    if scfg.poses not in ("auto", "source", "free_space"):
+        raise ValueError(f"semantics.poses={scfg.poses!r}; choose auto | source | free_space")
+    if cams is not None:
+        c2w, ks = read_cameras(cams, scfg.width, scfg.height)
+        c2w, kind = to_aligned @ c2w, "source"
+    else:
+        valid = ~costmap.occupancy & (costmap.clearance >= 0)
+        poses = free_space_poses(costmap, valid, scfg.spacing, scfg.yaw_step_deg)
+        c2w = np.stack([camera_to_world(x, y, yaw, emb.camera_height, emb.camera_pitch_deg) for x, y, yaw in poses]) \
+            if len(poses) else np.zeros((0, 4, 4))
+        ks, kind = np.repeat(intrinsics(scfg.width, scfg.height, emb.hfov_deg)[None], len(c2w), 0), "free_space"
+    keep = spread(len(c2w), scfg.max_views)
+    return c2w[keep], ks[keep], kind
+
+
+def render_views(renderer, c2w: np.ndarray, Ks: np.ndarray, scfg: SemanticsConfig, features=None):
+    """Yields per batch of `batch` views: (rgb uint8 [B, H, W, 3], depth [B, H, W] (0 where the
+    accumulated opacity is under min_alpha), composited `features` [B, H, W, C] or B Nones,
+    viewmats [B, 4, 4], Ks [B, 3, 3], camera -> world [B, 4, 4]), all numpy."""
+    for s in range(0, len(c2w), scfg.batch):
+        vm = np.linalg.inv(c2w[s:s + scfg.batch]).astype(np.float32)
+        ks = Ks[s:s + scfg.batch]
+        out = renderer.render(vm, ks, scfg.width, scfg.height, extra=features)
+        rgb = (out.rgb * 255 + 0.5).to(torch.uint8).cpu().numpy()
+        depth = torch.where(out.alpha >= scfg.min_alpha, out.depth, 0.0).cpu().numpy()
+        extra = out.extra.cpu().numpy() if out.extra is not None else [None] * len(vm)
+        yield rgb, depth, extra, vm, ks, c2w[s:s + scfg.batch]
+
+
+def scene_frames(renderer, segmenter, c2w: np.ndarray, Ks: np.ndarray, scfg: SemanticsConfig, timings: dict):
+    """Yields (depth [H, W], K, camera -> world, {category index: [masks]}) per view: views rendered
+    `batch` at a time (RGB-D, plus the segmenter's per-Gaussian features in the same pass),
+    segmented by batch; seconds spent go to timings["render"] / ["segment"]."""
+    prompts = [scfg.prompt(c) for c in scfg.categories]
+    views = render_views(renderer, c2w, Ks, scfg, segmenter.gaussian_features)
+    while True:
+        t0 = time.perf_counter()
+        batch = next(views, None)
+        if batch is None:
+            return
+        rgb, depth, extra, vm, ks, cw = batch
+        t1 = time.perf_counter()
+        segs = segmenter.segment_batch(rgb, prompts, [{"viewmat": v, "K": k, "extra": e}
+                                                      for v, k, e in zip(vm, ks, extra)])
+        timings["render"] = timings.get("render", 0.0) + t1 - t0
+        timings["segment"] = timings.get("segment", 0.0) + time.perf_counter() - t1
+        for i, seg in enumerate(segs):
+            yield depth[i], ks[i], cw[i], category_masks(seg, prompts)
+
+
+def category_masks(seg: dict, prompts: list[str]) -> dict[int, list[np.ndarray]]:
+    """A segmenter's {prompt: [(mask, score)]} -> {category index: [masks]} (categories with none left out)."""
+    out = {c: [m for m, _ in seg.get(p, [])] for c, p in enumerate(prompts)}
+    return {c: m for c, m in out.items() if m}
+
+
+def predict_instances(renderer, segmenter, c2w, Ks, means: np.ndarray, scfg: SemanticsConfig):
+    """Instance candidates of one scene: (labels.json entries with source model_predicted and ids
+    1..n in (category, -support) order, their support, timings {render, segment, lift, total} s)."""
+    timings: dict = {}
+    t0 = time.perf_counter()
+    cands = lift(scene_frames(renderer, segmenter, c2w, Ks, scfg, timings), means, scfg.lifting)
+    total = time.perf_counter() - t0
+    timings["lift"] = total - timings.get("render", 0.0) - timings.get("segment", 0.0)
+    timings["total"] = total
+    cands.sort(key=lambda c: (c["label"], -c["support"], tuple(np.round(c["center"], 6))))
+    labels, support = [], {}
+    for i, c in enumerate(cands, 1):
+        labels.append({"instance_id": i, "category": scfg.categories[c["label"]],
+                       "position": [float(v) for v in c["center"]],
+                       "bounding_box": {"min": [float(v) for v in c["min"]], "max": [float(v) for v in c["max"]]},
+                       "confidence": round(float(c["confidence"]), 6), "source": "model_predicted"})
+        support[i] = c["support"]
+    return labels, support, timings
+
+
+def run(scene, cfg, catalog) -> dict:
+    from stages.costmap.query import Costmap
+    from stages.episodes.generate import stream_seed
+    from stages.gaussians.store import read_scene_zarr
+    from stages.render import Renderer
+
+    scfg: SemanticsConfig = OmegaConf.to_object(cfg.semantics)
+    out = catalog.path("instances", scene)
+    if not scfg.enabled:
+        out.unlink(missing_ok=True)
+        return {"outputs": [], "enabled": False}
+    emb = OmegaConf.to_object(cfg.embodiment)
+    gs, attrs = read_scene_zarr(catalog.path("aligned", scene))
+    cm = Costmap.load(catalog.path("costmaps", scene), emb.name)
+    c2w, ks, kind = covering_cameras(scene, catalog, scfg, emb, np.asarray(attrs["source_to_aligned"]), cm)
+    if not len(c2w):
+        raise ValueError(f"scene {scene.scene_id!r} ({scene.name}): no covering poses (no free costmap cells)")
+    renderer = Renderer(gs, scfg.renderer)
+    seed = stream_seed(scfg.seed, scene.scene_id, "semantics")
+    seg = SEGMENTERS.get_class(scfg.segmenter).from_scene(scene, catalog, renderer, scfg, seed)
+    labels, support, timings = predict_instances(renderer, seg, c2w, ks, gs.means, scfg)
+    table = labels_to_table(labels, support)
+    with atomic_path(out) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+    counts: dict = {}
+    for lab in labels:
+        counts[lab["category"]] = counts.get(lab["category"], 0) + 1
+    return {"outputs": [str(out)], "views": len(c2w), "poses": kind, "renderer": renderer.backend,
+            "segmenter": scfg.segmenter, "instances": len(labels), "by_category": dict(sorted(counts.items())),
+            "seconds": {k: round(v, 3) for k, v in timings.items()}}
