@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
 
-.PHONY: setup system-deps dataset test test-all bench bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu eval submit clean
+.PHONY: setup system-deps dataset test test-all bench bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 # open3d needs libusb at import time; install it when missing (root or sudo).
 system-deps:
@@ -38,7 +38,7 @@ test: $(STAMP)
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q -m "slow or not slow" $(ARGS)
 
-bench: bench-spatial bench-episodes bench-eval
+bench: bench-spatial bench-episodes bench-eval bench-semantics
 
 bench-spatial: $(STAMP)
 	$(BIN)/python -m benchmarks.spatial $(ARGS)
@@ -54,6 +54,15 @@ bench-eval: $(STAMP)
 
 bench-eval-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.eval --gpu $(ARGS)
+
+# semantic precision (valid-centre rate, recall; 3 corruption levels, ablations, naive baseline) on
+# 10 synthetic scenes and seconds per scene; merges data/08_reports/semantics_gpu.json when a CUDA
+# run (bench-semantics-gpu) left one there
+bench-semantics: $(STAMP)
+	$(BIN)/python -m benchmarks.semantics $(ARGS)
+
+bench-semantics-gpu: $(STAMP)
+	$(BIN)/python -m benchmarks.semantics --gpu $(ARGS)
 
 # evaluate an agent on the dataset, e.g. make eval ARGS="evaluate.agent=depth_reactive"
 eval: $(STAMP)

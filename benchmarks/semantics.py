@@ -16,8 +16,8 @@ of each scene as covering poses, rendered at the stage's default 320x240):
 
 Writes data/08_reports/bench_semantics.json and bench_semantics.md (and semantics_gpu.json with
 --gpu, merged into the report by a CPU run or --merge-gpu).
-    python -m benchmarks.semantics [--scenes 10] [--timed 2] [--out data/08_reports]
-    python -m benchmarks.semantics --gpu --out $OUT         (CUDA machine)
+    python -m benchmarks.semantics [--scenes 10] [--timed 2] [--jobs 2] [--out data/08_reports]
+    python -m benchmarks.semantics --gpu --timed 3 --jobs 8 --out $OUT         (CUDA machine)
 """
 from __future__ import annotations
 
@@ -112,14 +112,63 @@ def summarise(scenes: list[dict]) -> dict:
     return table
 
 
+def sam3_timing(args, scfg: SemanticsConfig) -> dict:
+    """Seconds per scene with the sam3 segmenter (the stage's path: render, SAM3 on every view for all
+    prompts, lifting) on the timed scenes. Random weights and a byte-level vocabulary: the forward
+    passes cost what the trained model's do; the masks mean nothing (timing only)."""
+    import gzip
+    import tempfile
+
+    import torch
+
+    from stages.semantics.sam3_segmenter import BPE_FILE, Sam3Segmenter, build_model
+
+    with tempfile.TemporaryDirectory() as d:
+        with gzip.open(Path(d) / BPE_FILE, "wt") as f:
+            f.write("#version: 0.2\n")
+        torch.manual_seed(0)
+        model = build_model(None, str(Path(d) / BPE_FILE), "cuda")
+    seg = Sam3Segmenter(model=model, device="cuda", confidence=scfg.sam3.confidence, batch=scfg.sam3.batch)
+    rows = []
+    for i in range(args.timed):
+        s, objects, c2w, ks = scene_inputs(args.first_seed + i, args.num_gaussians, scfg)
+        renderer = Renderer(s.gaussians, "gsplat")
+        if i == 0:  # warm-up: kernels and cuDNN plans
+            seg.segment_batch(np.zeros((scfg.sam3.batch, scfg.height, scfg.width, 3), np.uint8), ["chair"], [{}] * scfg.sam3.batch)
+        torch.cuda.synchronize()
+        _, _, t = predict_instances(renderer, seg, c2w, ks, s.gaussians.means, scfg)
+        rows.append({"views": len(c2w), **{k: round(v, 3) for k, v in t.items()}})
+    return {"scenes": rows, "seconds_per_scene": float(np.median([r["total"] for r in rows])),
+            "frames_per_s": float(np.median([r["views"] / r["segment"] for r in rows])),
+            "prompts": len(scfg.categories), "batch": scfg.sam3.batch, "resolution": scfg.sam3.resolution}
+
+
+def _untimed(seed_args):
+    seed, args = seed_args
+    return bench_scene(seed, args, SemanticsConfig(), False)
+
+
 def run(args) -> dict:
+    """Timed scenes one after the other in this process (no contention), the rest over `jobs`
+    processes."""
     scfg = SemanticsConfig()
+    seeds = [args.first_seed + i for i in range(args.scenes)]
     scenes = []
-    for i in range(args.scenes):
+    for seed in seeds[:args.timed]:
         t = time.perf_counter()
-        scenes.append(bench_scene(args.first_seed + i, args, scfg, i < args.timed))
-        print(f"scene {i + 1}/{args.scenes} (seed {args.first_seed + i}): {time.perf_counter() - t:.1f} s", flush=True)
+        scenes.append(bench_scene(seed, args, scfg, True))
+        print(f"scene seed {seed} (timed): {time.perf_counter() - t:.1f} s", flush=True)
+    rest = [(seed, args) for seed in seeds[args.timed:]]
+    if args.jobs > 1 and len(rest) > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(min(args.jobs, len(rest)), mp_context=mp.get_context("spawn")) as ex:
+            scenes += list(ex.map(_untimed, rest))
+    else:
+        scenes += [_untimed(r) for r in rest]
     table = summarise(scenes)
+    sam3 = sam3_timing(args, scfg) if args.sam3_timing else None
     secs = [s["seconds"]["total"] for s in scenes if "seconds" in s]
     full = table["full"]
     res = {
@@ -135,6 +184,7 @@ def run(args) -> dict:
         "seconds_per_scene": float(np.median(secs)) if secs else None,
         "seconds_breakdown": {k: float(np.median([s["seconds"][k] for s in scenes if "seconds" in s]))
                               for k in ("render", "segment", "lift")} if secs else None,
+        "sam3_timing": sam3,
         "per_scene": scenes,
     }
     return res
@@ -170,6 +220,11 @@ def markdown(rep: dict) -> str:
             b = t["breakdown"]
             lines.append(f"| {t['device']} ({t['machine']}) | {t['renderer']} | {t['seconds']:.1f} | "
                          f"{b['render']:.1f} | {b['segment']:.1f} | {b['lift']:.1f} |")
+    sam3 = rep.get("sam3_timing")
+    if sam3:
+        lines.append(f"| {rep['device']} | gsplat + sam3 (random weights: timing only), {sam3['prompts']} prompts, "
+                     f"batch {sam3['batch']} | {sam3['seconds_per_scene']:.1f} | | "
+                     f"{sam3['frames_per_s']:.1f} frames/s | |")
     return "\n".join(lines) + "\n"
 
 
@@ -205,6 +260,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--timed", type=int, default=2, help="scenes also timed through the stage's path")
     ap.add_argument("--num-gaussians", type=int, default=300_000)
     ap.add_argument("--renderer", default="auto")
+    ap.add_argument("--jobs", type=int, default=1, help="processes for the untimed scenes")
+    ap.add_argument("--sam3-timing", action="store_true", help="CUDA + sam3: also time the sam3 segmenter")
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--gpu", action="store_true", help="CUDA run: write semantics_gpu.json only")
     ap.add_argument("--merge-gpu", action="store_true", help="only fold semantics_gpu.json into the report")

@@ -133,3 +133,34 @@ def test_feature_rendering_gives_label_weights():
     assert lab[H // 2, left, 0] > 0.5 > lab[H // 2, left, 1]
     assert lab[H // 2, right, 1] > 0.5 > lab[H // 2, right, 0]
     assert np.allclose(lab.sum(-1), out.alpha[0].numpy(), atol=1e-5)  # weights add up to the coverage
+
+
+def backends():
+    out = ["cpu"]
+    if torch.cuda.is_available():
+        try:
+            import gsplat  # noqa: F401
+
+            out.append("gsplat")
+        except ImportError:
+            pass
+    return out
+
+
+@pytest.mark.parametrize("backend", backends())
+def test_extra_features_ride_along_with_the_colour(backend, small_scene):
+    # one pass with extra features gives the plain pass's colour, depth and alpha, and the features'
+    # composite equal to a features-only pass
+    gs = small_scene.gaussians.transformed(np.linalg.inv(small_scene.transform))
+    rooms = np.array(small_scene.layout.rooms)
+    poses = np.array([[(r[0] + r[2]) / 2, (r[1] + r[3]) / 2, a] for r in rooms[:2] for a in (0.0, 2.0)])
+    vm = viewmats(poses, 1.0)
+    k = np.repeat(intrinsics(W, H, HFOV)[None], len(vm), 0)
+    ids = small_scene.instance_ids
+    feats = np.stack([ids == i for i in np.unique(ids)[:5]], 1).astype(np.float32)
+    r = Renderer(gs, backend)
+    both, plain, only = r.render(vm, k, W, H, extra=feats), r.render(vm, k, W, H), r.render(vm, k, W, H, features=feats)
+    assert both.extra.shape == (len(vm), H, W, feats.shape[1]) and plain.extra is None
+    assert torch.allclose(both.rgb, plain.rgb, atol=2e-5) and torch.allclose(both.depth, plain.depth, atol=1e-5)
+    assert torch.allclose(both.alpha, plain.alpha, atol=1e-6)
+    assert torch.allclose(both.extra, only.rgb, atol=1e-5)

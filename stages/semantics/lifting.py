@@ -158,7 +158,11 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
                 g_label[i], _, g_conf[i] = cells[k]
         members = [(lab, np.flatnonzero(g_label == lab)) for lab in np.unique(g_label[g_label >= 0])]
         cloud = lambda idx: gaussian_means[idx]  # noqa: E731
-    else:  # the naive baseline: cluster the back-projected points themselves
+    else:  # the naive baseline: cluster the back-projected points themselves (pooled frames
+        # overlap: one point per delta_down voxel and label)
+        _, first = np.unique(np.column_stack([voxel_keys(points, cfg.delta_down), labels]), axis=0,
+                             return_index=True)
+        points, labels = points[np.sort(first)], labels[np.sort(first)]
         g_conf = None
         members = [(lab, np.flatnonzero(labels == lab)) for lab in np.unique(labels)]
         cloud = lambda idx: points[idx]  # noqa: E731

@@ -10,7 +10,7 @@ composite rendered in the same pass as the frame (`extra`, [H, W, C]).
 Implementations by registry key (or "module:Class"), each built by `from_scene(scene, ...)`:
 `oracle` renders the ground-truth per-Gaussian instance labels of synthetic scenes with the scene
 renderer and passes them through a corruption model that imitates a real segmenter (documented in
-`Corruption`); `sam3` is SAM3 concept segmentation (stages/semantics/sam3.py).
+`Corruption`); `sam3` is SAM3 concept segmentation (stages/semantics/sam3_segmenter.py).
 """
 from __future__ import annotations
 
@@ -148,3 +148,6 @@ class OracleSegmenter(Segmenter):
         h, w = rgb.shape[:2]
         imap = self.instance_map(context["viewmat"], context["K"], w, h, context.get("extra"))
         return corrupt(imap, self.categories, prompts, self.c, self.rng)
+
+
+from stages.semantics import sam3_segmenter  # noqa: E402,F401  (registers "sam3"; imports sam3 only when built)

@@ -15,9 +15,6 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import torch
-from omegaconf import OmegaConf
-
-from pipeline.atomic import atomic_path
 from stages.instances import labels_to_table
 from stages.render.camera import camera_to_world, intrinsics
 from stages.semantics.config import SemanticsConfig
@@ -174,6 +171,9 @@ def predict_instances(renderer, segmenter, c2w, Ks, means: np.ndarray, scfg: Sem
 
 
 def run(scene, cfg, catalog) -> dict:
+    from omegaconf import OmegaConf
+
+    from pipeline.atomic import atomic_path
     from stages.costmap.query import Costmap
     from stages.episodes.generate import stream_seed
     from stages.gaussians.store import read_scene_zarr
