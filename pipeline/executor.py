@@ -243,7 +243,7 @@ def _print_summary(summary: dict, console: Console) -> None:
             for s in r["shortfall"]:
                 f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], s.get("task", ""),
                           f"{s.get('episodes')} / {s.get('requested')}",
-                          ", ".join(f"{k} {v}" for k, v in s.get("rejections", {}).items()))
+                          ", ".join(f"{k} {v}" for k, v in s.get("rejections", {}).items()) or s.get("reason", ""))
         console.print(f)
 
 

@@ -158,3 +158,105 @@ def test_free_space_poses_cover_the_free_cells():
     d = np.hypot(pts[:, None, 0] - pts[None, :, 0], pts[:, None, 1] - pts[None, :, 1]) + np.eye(len(pts)) * 9
     assert d.min() >= 0.5
     assert np.array_equal(poses, free_space_poses(cm, valid, spacing=1.0, yaw_step_deg=45))
+
+
+# ---- the stage on a generated scene ---------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def semantics_run(tmp_path_factory):
+    from pipeline.executor import execute
+    from tests.test_pipeline import make_cfg
+
+    root = tmp_path_factory.mktemp("semantics")
+    over = ["stages=[asset]", "semantics.max_views=40"]
+    summary = execute(make_cfg(root, *over))
+    assert not summary["failures"], summary["failures"]
+    return root, over, summary
+
+
+def test_stage_predicts_valid_instances_into_the_table_and_the_asset(semantics_run):
+    import json
+
+    import pyarrow.parquet as pq
+
+    from stages.instances import INSTANCE_SCHEMA, table_to_labels
+    from stages.semantics.precision import ground_truth_objects, score
+
+    root, _, summary = semantics_run
+    sid = summary["results"][0]["scene_id"]
+    table = pq.read_table(root / "04_semantics" / sid / "instances.parquet")
+    assert table.schema.equals(INSTANCE_SCHEMA) and set(table.column("source").to_pylist()) == {"model_predicted"}
+    labels = table_to_labels(table)
+    src = next((root / "00_sources" / "synthetic").iterdir())
+    objects, c2s = ground_truth_objects(src)
+    s2a = np.asarray(json.loads((root / "01_scenes" / sid / "alignment.json").read_text())["source_to_aligned"])
+    r = score(labels, objects, [o["category"] for o in objects], np.linalg.inv(s2a @ c2s))
+    # moderate corruption (the default), 40 of the 81 capture views of a 60 k-Gaussian scene: the
+    # centres are valid, more than half of the objects found
+    assert r["predicted"] and r["valid"] >= 0.9 * r["predicted"] and r["found"] >= 0.5 * r["objects"], r
+    marker = json.loads((root / "_markers" / "semantics" / f"{sid}.json").read_text())["info"]
+    assert marker["poses"] == "source" and marker["views"] == 40 and marker["instances"] == len(labels)
+    asset = next((root / "09_assets" / "synthetic").iterdir())
+    assert json.loads((asset / "labels.json").read_text())["labels"] == labels
+
+
+def test_stage_is_deterministic_and_reads_its_config(semantics_run, tmp_path):
+    import json
+    import shutil
+
+    import pyarrow.parquet as pq
+
+    from pipeline.executor import execute
+    from tests.test_pipeline import make_cfg
+
+    root, over, summary = semantics_run
+    sid = summary["results"][0]["scene_id"]
+    first = (root / "04_semantics" / sid / "instances.parquet").read_bytes()
+    execute(make_cfg(root, *over, "stages=[semantics]", "force=true"))
+    assert (root / "04_semantics" / sid / "instances.parquet").read_bytes() == first
+    # free-space poses instead of the capture cameras: another table, from free-space views
+    copy = tmp_path / "d"
+    shutil.copytree(root, copy)
+    s = execute(make_cfg(copy, *over, "stages=[semantics]", "semantics.poses=free_space", "semantics.spacing=2.0",
+                         "semantics.yaw_step_deg=90"))
+    info = next(r for r in s["results"] if r["stage"] == "semantics")
+    marker = json.loads((copy / "_markers" / "semantics" / f"{sid}.json").read_text())["info"]
+    assert info["status"] == "done" and marker["poses"] == "free_space" and marker["views"] <= 40
+    # without per-Gaussian ground truth the oracle cannot serve the scene: an empty table, a
+    # shortfall in the run summary, not a failure (the scene's other tasks go on)
+    next((copy / "00_sources" / "synthetic").iterdir()).joinpath("ground_truth", "instance_ids.npy").unlink()
+    s = execute(make_cfg(copy, *over, "stages=[semantics]", "force=true"))
+    assert [r["stage"] for r in s["shortfalls"]] == ["semantics"] and not s["failures"]
+    assert "ground truth" in s["shortfalls"][0]["shortfall"][0]["reason"]
+    assert pq.read_table(copy / "04_semantics" / sid / "instances.parquet").num_rows == 0
+
+
+def test_cameras_in_both_layouts():
+    from stages.semantics.stage import cameras_from_json, quat_wxyz_to_rotmat
+
+    r = quat_wxyz_to_rotmat([math.cos(0.4), 0, 0, math.sin(0.4)])  # 0.8 rad about z
+    assert np.allclose(r, [[math.cos(0.8), -math.sin(0.8), 0], [math.sin(0.8), math.cos(0.8), 0], [0, 0, 1]])
+    ours = {"hfov_deg": 90.0, "poses": [{"position": [1, 2, 3], "quat_wxyz": [math.cos(0.4), 0, 0, math.sin(0.4)]}]}
+    c2w, k = cameras_from_json(ours, 320, 240)
+    assert np.allclose(c2w[0, :3, :3], r) and np.allclose(c2w[0, :3, 3], [1, 2, 3]) and k[0, 0, 0] == 160
+    inria = [{"id": 0, "img_name": "a", "width": 1000, "height": 800, "position": [4, 5, 6],
+              "rotation": r.tolist(), "fx": 500.0, "fy": 510.0}]
+    c2w, k = cameras_from_json(inria, 320, 240)
+    assert np.allclose(c2w[0, :3, :3], r) and np.allclose(c2w[0, :3, 3], [4, 5, 6])
+    assert np.allclose(k[0], [[160, 0, 160], [0, 153, 120], [0, 0, 1]])
+
+
+def test_instance_table_round_trip_and_oracle_levels():
+    from stages.instances import labels_to_table, table_to_labels
+    from stages.semantics.config import OracleConfig
+
+    labels = [{"instance_id": 1, "category": "chair", "position": [1.0, 2.0, 0.4],
+               "bounding_box": {"min": [0.8, 1.8, 0.0], "max": [1.2, 2.2, 0.8]}, "confidence": 0.75,
+               "source": "model_predicted"},
+              {"instance_id": 2, "category": "bed", "position": [3.0, 1.0, 0.5], "bounding_box": None,
+               "confidence": 1.0, "source": "ground_truth"}]
+    assert table_to_labels(labels_to_table(labels)) == labels
+    assert OracleConfig(level="heavy").corruption().miss_rate == 0.3
+    assert OracleConfig(level="heavy", miss_rate=0.5).corruption().bleed_px == 6
+    with pytest.raises(ValueError, match="oracle.level"):
+        OracleConfig(level="extreme").corruption()

@@ -77,6 +77,10 @@ def corrupt(instance_map: np.ndarray, categories: dict[int, str], prompts: list[
     return out
 
 
+class SegmenterUnavailable(ValueError):
+    """The segmenter cannot serve this scene (e.g. the oracle on a scene without ground truth)."""
+
+
 class Segmenter:
     """Interface of a segmenter (see the module doc)."""
 
@@ -124,11 +128,11 @@ class OracleSegmenter(Segmenter):
 
         gt = catalog.path("source_synthetic", scene) / "ground_truth" if scene.synthetic else None
         if gt is None or not (gt / "instance_ids.npy").exists():
-            raise ValueError(f"scene {scene.scene_id!r} ({scene.name}): the oracle segmenter needs the per-Gaussian "
+            raise SegmenterUnavailable(f"scene {scene.scene_id!r} ({scene.name}): the oracle segmenter needs the per-Gaussian "
                              "ground truth of a synthetic scene; use semantics.segmenter=sam3 for this scene")
         ids = np.load(gt / "instance_ids.npy")
         if len(ids) != renderer.num_gaussians:
-            raise ValueError(f"scene {scene.scene_id!r}: {gt / 'instance_ids.npy'} labels {len(ids)} Gaussians, the "
+            raise SegmenterUnavailable(f"scene {scene.scene_id!r}: {gt / 'instance_ids.npy'} labels {len(ids)} Gaussians, the "
                              f"scene has {renderer.num_gaussians} (ingest dropped some); the oracle cannot align them")
         labels = json.loads((gt / "labels.json").read_text())["labels"]
         return cls(renderer, ids, {int(lab["instance_id"]): cfg.prompt(lab["category"]) for lab in labels},

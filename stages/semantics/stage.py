@@ -20,7 +20,7 @@ from stages.render.camera import camera_to_world, intrinsics
 from stages.semantics.config import SemanticsConfig
 from stages.semantics.lifting import lift
 from stages.semantics.poses import free_space_poses
-from stages.semantics.segmenters import SEGMENTERS
+from stages.semantics.segmenters import SEGMENTERS, SegmenterUnavailable
 
 CAMERA_FILE = "cameras.json"
 
@@ -192,7 +192,13 @@ def run(scene, cfg, catalog) -> dict:
         raise ValueError(f"scene {scene.scene_id!r} ({scene.name}): no covering poses (no free costmap cells)")
     renderer = Renderer(gs, scfg.renderer)
     seed = stream_seed(scfg.seed, scene.scene_id, "semantics")
-    seg = SEGMENTERS.get_class(scfg.segmenter).from_scene(scene, catalog, renderer, scfg, seed)
+    try:
+        seg = SEGMENTERS.get_class(scfg.segmenter).from_scene(scene, catalog, renderer, scfg, seed)
+    except SegmenterUnavailable as e:  # an empty table: the scene's other tasks go on, the summary says why
+        with atomic_path(out) as tmp:
+            pq.write_table(labels_to_table([]), tmp, compression="zstd")
+        return {"outputs": [str(out)], "instances": 0, "segmenter": scfg.segmenter,
+                "shortfall": [{"task": "objectnav instances", "episodes": 0, "requested": None, "reason": str(e)}]}
     labels, support, timings = predict_instances(renderer, seg, c2w, ks, gs.means, scfg)
     table = labels_to_table(labels, support)
     with atomic_path(out) as tmp:
