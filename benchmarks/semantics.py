@@ -33,7 +33,7 @@ import numpy as np
 from benchmarks import machine
 from stages.render import Renderer
 from stages.semantics.config import SemanticsConfig
-from stages.semantics.lifting import LiftingConfig, lift
+from stages.semantics.lifting import lift
 from stages.semantics.precision import score
 from stages.semantics.segmenters import CORRUPTION_LEVELS, OracleSegmenter, corrupt
 from stages.semantics.stage import cameras_from_json, category_masks, predict_instances, render_views
@@ -218,13 +218,19 @@ def markdown(rep: dict) -> str:
         t = rep.get(f"timing_{key}")
         if t:
             b = t["breakdown"]
-            lines.append(f"| {t['device']} ({t['machine']}) | {t['renderer']} | {t['seconds']:.1f} | "
-                         f"{b['render']:.1f} | {b['segment']:.1f} | {b['lift']:.1f} |")
+            lines.append(f"| {t['device']} ({t['machine']}) | {t['renderer']} | {t['seconds']:.2f} | "
+                         f"{b['render']:.2f} | {b['segment']:.2f} | {b['lift']:.2f} |")
     sam3 = rep.get("sam3_timing")
     if sam3:
         lines.append(f"| {rep['device']} | gsplat + sam3 (random weights: timing only), {sam3['prompts']} prompts, "
                      f"batch {sam3['batch']} | {sam3['seconds_per_scene']:.1f} | | "
                      f"{sam3['frames_per_s']:.1f} frames/s | |")
+    cpu = rep.get("cpu_run")
+    if cpu:
+        same = all(cpu[k] == rep[k] for k in ("valid_center_rate", "recall", "baseline_valid_center_rate"))
+        lines += ["", f"CPU-renderer run on the same {cpu['scenes']} scenes: valid-centre rate and recall "
+                  + ("identical to the GPU run's at every level." if same else
+                     f"{cpu['valid_center_rate']} / {cpu['recall']} (differs from the GPU run).")]
     return "\n".join(lines) + "\n"
 
 
