@@ -88,6 +88,14 @@ def _client(ex):
         raise ValueError(f"executor.kind must be local, address, slurm, pbs or sync, not {ex.kind!r}")
     # numba threads per worker: share the cores instead of oversubscribing them
     os.environ.setdefault("NUMBA_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // max(ex.n_workers, 1))))
+    # Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in its workers, which also freezes glibc's mmap
+    # threshold at 128 KiB: every large temporary (the CPU renderer's per-tile tensors) becomes a
+    # fresh mmap and page faults; a semantics scene took 6x longer in a worker than in a process
+    import dask
+
+    env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+    env.pop("MALLOC_TRIM_THRESHOLD_", None)
+    dask.config.set({"distributed.nanny.pre-spawn-environ": env})
     cluster = LocalCluster(n_workers=ex.n_workers, threads_per_worker=ex.threads_per_worker,
                            processes=ex.processes, memory_limit=ex.memory_limit,
                            dashboard_address=":0" if ex.dashboard else None, silence_logs=40)
