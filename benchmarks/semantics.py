@@ -116,18 +116,15 @@ def sam3_timing(args, scfg: SemanticsConfig) -> dict:
     """Seconds per scene with the sam3 segmenter (the stage's path: render, SAM3 on every view for all
     prompts, lifting) on the timed scenes. Random weights and a byte-level vocabulary: the forward
     passes cost what the trained model's do; the masks mean nothing (timing only)."""
-    import gzip
     import tempfile
 
     import torch
 
-    from stages.semantics.sam3_segmenter import BPE_FILE, Sam3Segmenter, build_model
+    from stages.semantics.sam3_segmenter import BPE_FILE, Sam3Segmenter, build_model, write_byte_vocabulary
 
     with tempfile.TemporaryDirectory() as d:
-        with gzip.open(Path(d) / BPE_FILE, "wt") as f:
-            f.write("#version: 0.2\n")
         torch.manual_seed(0)
-        model = build_model(None, str(Path(d) / BPE_FILE), "cuda")
+        model = build_model(None, str(write_byte_vocabulary(Path(d) / BPE_FILE)), "cuda")
     seg = Sam3Segmenter(model=model, device="cuda", confidence=scfg.sam3.confidence, batch=scfg.sam3.batch)
     rows = []
     for i in range(args.timed):

@@ -5,8 +5,6 @@ compiled operators, which PyPI has for CUDA builds of torch only); skipped elsew
 SAM3's full architecture: the test saves its random weights as a checkpoint in SAM3's layout,
 loads them through the segmenter's checkpoint path, and segments a batch of tiny frames.
 """
-import gzip
-
 import numpy as np
 import pytest
 import torch
@@ -23,11 +21,10 @@ pytestmark = pytest.mark.skipif(SAM3_ERROR is not None, reason=f"sam3 not import
 
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory):
-    from stages.semantics.sam3_segmenter import BPE_FILE, build_model
+    from stages.semantics.sam3_segmenter import BPE_FILE, build_model, write_byte_vocabulary
 
     d = tmp_path_factory.mktemp("sam3")
-    with gzip.open(d / BPE_FILE, "wt") as f:  # a vocabulary of single bytes: header line, no merges
-        f.write("#version: 0.2\n")
+    write_byte_vocabulary(d / BPE_FILE)
     torch.manual_seed(0)
     device = "cuda" if torch.cuda.is_available() else "cpu"
     model = build_model(None, str(d / BPE_FILE), device)  # random weights

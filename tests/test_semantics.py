@@ -232,10 +232,9 @@ def test_stage_is_deterministic_and_reads_its_config(semantics_run, tmp_path):
 
 
 def test_cameras_in_both_layouts():
-    from stages.semantics.stage import cameras_from_json, quat_wxyz_to_rotmat
+    from stages.semantics.stage import cameras_from_json
 
-    r = quat_wxyz_to_rotmat([math.cos(0.4), 0, 0, math.sin(0.4)])  # 0.8 rad about z
-    assert np.allclose(r, [[math.cos(0.8), -math.sin(0.8), 0], [math.sin(0.8), math.cos(0.8), 0], [0, 0, 1]])
+    r = np.array([[math.cos(0.8), -math.sin(0.8), 0], [math.sin(0.8), math.cos(0.8), 0], [0, 0, 1]])  # about z
     ours = {"hfov_deg": 90.0, "poses": [{"position": [1, 2, 3], "quat_wxyz": [math.cos(0.4), 0, 0, math.sin(0.4)]}]}
     c2w, k = cameras_from_json(ours, 320, 240)
     assert np.allclose(c2w[0, :3, :3], r) and np.allclose(c2w[0, :3, 3], [1, 2, 3]) and k[0, 0, 0] == 160

@@ -24,6 +24,16 @@ BPE_FILE = "bpe_simple_vocab_16e6.txt.gz"
 _MODELS: dict = {}  # (checkpoint, bpe, device) -> model, shared by the scenes of one worker
 
 
+def write_byte_vocabulary(path: Path) -> Path:
+    """A BPE vocabulary without merges (single bytes only): enough to run SAM3 with random weights
+    (tests, timing), never to use trained ones."""
+    import gzip
+
+    with gzip.open(path, "wt") as f:
+        f.write("#version: 0.2\n")
+    return Path(path)
+
+
 def build_model(checkpoint: str | None, bpe_path: str | None, device: str):
     """SAM3's image model with the weights of a local checkpoint (None: random weights, for tests)."""
     try:

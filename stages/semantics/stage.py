@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import torch
+from stages.gaussians.model import quat_to_rotmat
 from stages.instances import labels_to_table
 from stages.render.camera import camera_to_world, intrinsics
 from stages.semantics.config import SemanticsConfig
@@ -23,13 +24,6 @@ from stages.semantics.poses import free_space_poses
 from stages.semantics.segmenters import SEGMENTERS, SegmenterUnavailable
 
 CAMERA_FILE = "cameras.json"
-
-
-def quat_wxyz_to_rotmat(q) -> np.ndarray:
-    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 def read_cameras(path: Path, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
@@ -52,7 +46,8 @@ def cameras_from_json(data, width: int, height: int) -> tuple[np.ndarray, np.nda
         k = intrinsics(width, height, data["hfov_deg"])
         for p in data["poses"]:
             m = np.eye(4)
-            m[:3, :3], m[:3, 3] = quat_wxyz_to_rotmat(p["quat_wxyz"]), p["position"]
+            q = np.asarray(p["quat_wxyz"], float)
+            m[:3, :3], m[:3, 3] = quat_to_rotmat(q / np.linalg.norm(q)), p["position"]
             c2w.append(m)
             ks.append(k)
     else:
