@@ -13,6 +13,8 @@ from pathlib import Path
 
 import yaml
 
+from stages.gaussians.formats import detect_format
+
 LAYOUT_FILE = Path(__file__).resolve().parent.parent / "catalogs" / "layout.yaml"
 
 
@@ -28,7 +30,7 @@ class SceneEntry:
     name: str
     group: str
     path: str  # source file / folder ("" for synthetic until generated)
-    format: str  # inria_ply, supersplat_ply, ply, splat, spz, npy_folder, synthetic
+    format: str  # inria_ply, supersplat_ply, ply, splat, spz, sog, npy_folder, synthetic
     seed: int | None = None
     num_gaussians: int | None = None
 
@@ -52,7 +54,7 @@ class Catalog:
         self.scenes: list[SceneEntry] = []
         taken: set[str] = set()
         for e in spec.get("scenes") or []:
-            for key in ("name", "path", "format"):
+            for key in ("name", "path"):
                 if key not in e:
                     raise ValueError(f"catalog {self.file}: scene entry {e} lacks '{key}'")
             group = e.get("group", "default")
@@ -60,7 +62,8 @@ class Catalog:
             path = Path(e["path"])
             if not path.is_absolute():
                 path = (self.file.parent / path).resolve()  # relative to the catalog file's folder
-            self.scenes.append(SceneEntry(sid, e["name"], group, str(path), e["format"]))
+            fmt = e.get("format") or detect_format(path)  # left out: the path tells
+            self.scenes.append(SceneEntry(sid, e["name"], group, str(path), fmt))
             taken.add(sid)
         syn = spec.get("synthetic")
         if syn:

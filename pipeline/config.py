@@ -94,6 +94,9 @@ class IngestConfig:
     """Scene ingest."""
 
     limits: ValidationLimits = field(default_factory=ValidationLimits)
+    lod_level: int | None = None
+    """Level of detail of streamed SOG scenes (lod-meta.json; 0 = finest); null = the finest level
+    whose files are all present."""
 
 
 @dataclass

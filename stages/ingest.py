@@ -24,7 +24,7 @@ def source_path(scene, catalog):
 def run(scene, cfg, catalog) -> dict:
     path, fmt = source_path(scene, catalog)
     try:
-        raw = read_gaussians(path, fmt)
+        raw = read_gaussians(path, fmt, level=cfg.ingest.lod_level)
     except SceneFormatError as e:
         raise SceneFormatError(e.path, e.problem, scene.scene_id) from None
     limits = OmegaConf.to_object(cfg.ingest).limits

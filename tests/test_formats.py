@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from stages.gaussians import GaussianScene, SceneFormatError
-from stages.gaussians.formats import (read_gaussians, read_npy_folder, read_spz, write_inria_ply, write_npy_folder,
-                                      write_splat, write_spz)
+from stages.gaussians.formats import (detect_format, read_gaussians, read_npy_folder, read_sog, read_spz,
+                                      write_inria_ply, write_npy_folder, write_sog, write_sog_lod, write_splat, write_spz)
 from stages.gaussians.validate import sanitize
-from tests.conftest import REAL_DIR
+from tests.conftest import REAL_DIR, REAL_INDOOR_DIR
 
 REAL = {"inria_sh0_donut.ply": (45_624, 0), "inria_sh3_small.ply": (9_080, 3),
         "supersplat_guitar.compressed.ply": (90_854, 0), "antimatter_plant.splat": (113_648, 0)}
@@ -83,7 +83,7 @@ def test_splat_round_trip_within_quantization(tmp_path):
     assert same_rotation(t.quats / np.linalg.norm(t.quats, axis=1, keepdims=True), s.quats[order], 0.02)
 
 
-@pytest.mark.parametrize("version", [2, 3])
+@pytest.mark.parametrize("version", [2, 3, 4])
 def test_spz_round_trip_within_quantization(tmp_path, version):
     s = random_scene(deg=1)
     write_spz(tmp_path / "a.spz", s, version=version)
@@ -91,7 +91,7 @@ def test_spz_round_trip_within_quantization(tmp_path, version):
     assert np.allclose(t.means, s.means, atol=2 ** -12)
     assert np.allclose(t.log_scales, s.log_scales, atol=1 / 32 + 1e-6)
     assert np.allclose(t.alphas, s.alphas, atol=1 / 255)
-    assert same_rotation(t.quats, s.quats, 2e-3 if version == 3 else 0.03)
+    assert same_rotation(t.quats, s.quats, 2e-3 if version >= 3 else 0.03)
     assert np.allclose(t.sh[:, 1:], np.clip(s.sh[:, 1:], -1, 127 / 128), atol=1 / 128)
 
 
@@ -199,3 +199,126 @@ def test_transform_rotates_view_dependent_colour():
     assert np.array_equal(r.sh[:, 0], s.sh[:, 0])
     # orientations turn with the scene: the local axes map by R
     assert np.allclose(quat_to_rotmat(r.quats.astype(float)), t[:3, :3] @ quat_to_rotmat(s.quats.astype(float)), atol=1e-5)
+
+
+# ---- SPZ v4 and SOG ------------------------------------------------------------------------
+
+@pytest.mark.parametrize("deg", [0, 2])
+def test_spz_v4_layout_is_the_reference_one(tmp_path, deg):
+    """32-byte plaintext header, TOC at byte 32, one ZSTD stream per non-empty attribute."""
+    import zstandard
+
+    s = random_scene(n=300, deg=deg)
+    write_spz(tmp_path / "a.spz", s, version=4)
+    data = (tmp_path / "a.spz").read_bytes()
+    magic, version, n, sh_deg, frac, flags, n_streams, toc = struct.unpack_from("<IIIBBBBI", data)
+    assert data[:4] == b"NGSP" and (version, n, sh_deg, frac, toc) == (4, 300, deg, 12, 32)
+    assert n_streams == (5 if deg == 0 else 6) and data[20:32] == bytes(12)
+    sizes = np.frombuffer(data, "<u8", 2 * n_streams, 32).reshape(-1, 2)
+    assert sizes[:, 0].sum() + 32 + 16 * n_streams == len(data)
+    assert sizes[0, 1] == 300 * 9  # positions first
+    first = data[32 + 16 * n_streams:32 + 16 * n_streams + int(sizes[0, 0])]
+    assert len(zstandard.ZstdDecompressor().decompress(first)) == 300 * 9
+
+
+def test_bad_spz_v4_files(tmp_path):
+    write_spz(tmp_path / "a.spz", random_scene(n=200), version=4)
+    data = (tmp_path / "a.spz").read_bytes()
+    (tmp_path / "t.spz").write_bytes(data[:-50])
+    with pytest.raises(SceneFormatError, match="t.spz.*runs past the end.*truncated"):
+        read_gaussians(tmp_path / "t.spz")
+    lying = bytearray(data)
+    struct.pack_into("<I", lying, 8, 4_000_000_000)
+    (tmp_path / "l.spz").write_bytes(bytes(lying))
+    with pytest.raises(SceneFormatError, match="4,000,000,000 Gaussians need"):
+        read_gaussians(tmp_path / "l.spz")
+    bad = bytearray(data)
+    bad[32 + 16 * 5 + 4:32 + 16 * 5 + 12] = b"\xff" * 8  # inside the first ZSTD frame
+    (tmp_path / "z.spz").write_bytes(bytes(bad))
+    with pytest.raises(SceneFormatError, match="stream 'positions'"):
+        read_gaussians(tmp_path / "z.spz")
+    (tmp_path / "x.spz").write_bytes(b"PK\x03\x04 something else")
+    with pytest.raises(SceneFormatError, match="neither a gzip stream"):
+        read_gaussians(tmp_path / "x.spz")
+
+
+def assert_sog_close(t: GaussianScene, s: GaussianScene):
+    """Within SOG's quantization: 16 bits of the log-transformed position range, 256-entry
+    codebooks (quantiles here), 8-bit opacity and smallest-three quaternion components."""
+    lt = np.sign(s.means) * np.log1p(np.abs(s.means))
+    step = (lt.max(0) - lt.min(0)) / 65535
+    assert np.all(np.abs(t.means - s.means) <= np.exp(np.abs(lt)) * step * 0.51 + 1e-6)
+    for a, b in ((t.log_scales, s.log_scales), (t.sh[:, 0], s.sh[:, 0]), (t.sh[:, 1:], s.sh[:, 1:])):
+        if not a.size:
+            continue
+        cb = np.unique(a)
+        gap = np.diff(cb).max()
+        assert np.abs(a - b).max() <= gap / 2 + 1e-5
+        assert len(cb) <= 256
+    assert np.allclose(t.alphas, s.alphas, atol=0.5 / 255 + 1e-6)
+    assert same_rotation(t.quats, s.quats, 2e-4)
+
+
+@pytest.mark.parametrize("name,deg", [("a.sog", 0), ("a.sog", 3), ("folder", 1)])
+def test_sog_round_trip_within_quantization(tmp_path, name, deg):
+    s = random_scene(n=700, deg=deg)
+    write_sog(tmp_path / name, s)
+    assert detect_format(tmp_path / name) == "sog"
+    t = read_gaussians(tmp_path / name)
+    assert len(t) == 700 and t.sh_degree == deg
+    assert_sog_close(t, s)
+    if name == "folder":
+        assert np.array_equal(read_gaussians(tmp_path / name / "meta.json").means, t.means)
+
+
+def test_streamed_sog_levels_and_missing_files(tmp_path):
+    fine = [random_scene(n=300, seed=1), random_scene(n=200, seed=2)]
+    coarse = [random_scene(n=120, seed=3)]
+    meta = write_sog_lod(tmp_path / "lod", [fine, coarse])
+    assert detect_format(tmp_path / "lod") == "sog" and detect_format(meta) == "sog"
+    t = read_gaussians(meta)  # default: the finest complete level, units in file order
+    assert len(t) == 500
+    assert np.allclose(t.means[:300], fine[0].means, atol=1e-3) and np.allclose(t.means[300:], fine[1].means, atol=1e-3)
+    assert len(read_sog(tmp_path / "lod", level=1)) == 120
+    (tmp_path / "lod" / "0_1" / "quats.webp").unlink()
+    (tmp_path / "lod" / "0_1" / "meta.json").unlink()
+    assert len(read_gaussians(meta)) == 120  # level 0 is incomplete: level 1
+    with pytest.raises(SceneFormatError, match=r"level 0 lacks 1 of its 2 files \(0_1/meta.json\).*complete levels: \[1\]"):
+        read_sog(meta, level=0)
+    with pytest.raises(SceneFormatError, match="no level 5"):
+        read_sog(meta, level=5)
+    (tmp_path / "lod" / "1_0" / "meta.json").unlink()
+    with pytest.raises(SceneFormatError, match="no level of this streamed SOG has all its files.*1_0/meta.json"):
+        read_sog(meta)
+
+
+def test_bad_sog_inputs(tmp_path):
+    (tmp_path / "a.sog").write_bytes(b"not a zip")
+    with pytest.raises(SceneFormatError, match="a.sog.*not a valid zip"):
+        read_gaussians(tmp_path / "a.sog")
+    write_sog(tmp_path / "f", random_scene(n=50))
+    (tmp_path / "f" / "scales.webp").write_bytes(b"RIFF0000WEBPjunk")
+    with pytest.raises(SceneFormatError, match="scales.webp.*unreadable WebP"):
+        read_gaussians(tmp_path / "f")
+    (tmp_path / "f" / "meta.json").write_text('{"version": 1, "count": 3}')
+    with pytest.raises(SceneFormatError, match="version 1 is not supported"):
+        read_gaussians(tmp_path / "f")
+
+
+def test_shared_sog_folder_and_spz_agree():
+    """The shared streamed SOG (level 3) and the SPZ decoded independently from it: the same
+    Gaussians in the same order, within the two formats' quantization."""
+    sog, spz = REAL_INDOOR_DIR / "fungi_room_sog_lod", REAL_INDOOR_DIR / "fungi_room_lod3.spz"
+    if not (sog.exists() and spz.exists()):
+        pytest.skip(f"real indoor scenes not present at {REAL_INDOOR_DIR}")
+    with pytest.raises(SceneFormatError, match="level 0 lacks"):
+        read_sog(sog, level=0)  # lod-meta.json lists levels 0-2, whose folders are absent
+    a, b = read_gaussians(sog), read_gaussians(spz)
+    assert len(a) == len(b) == 1_500_000
+    assert np.abs(a.means - b.means).max() <= 2 ** -12 / 2 + 1e-6  # SPZ's 12 fractional bits
+    assert np.array_equal(np.round(a.alphas * 255), np.round(b.alphas * 255))
+    lo, hi = -10.0, 255 / 16 - 10.0  # SPZ's log-scale range, step 1/16
+    assert np.abs(np.clip(a.log_scales, lo, hi) - b.log_scales).max() <= 1 / 32 + 1e-5
+    lim = 127.5 / (0.15 * 255)  # SPZ's colour range, step 1 / (0.15 * 255)
+    assert np.abs(np.clip(a.sh[:, 0], -lim, lim) - b.sh[:, 0]).max() <= 0.5 / (0.15 * 255) + 1e-5
+    assert np.percentile(1 - np.abs((a.quats * b.quats).sum(1)), 99) < 2e-3  # SPZ v2: 8-bit x, y, z

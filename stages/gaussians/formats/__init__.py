@@ -7,7 +7,8 @@
 | inria_ply        | INRIA binary/ascii PLY, SH 0-3 | write_inria_ply       |
 | supersplat_ply   | SuperSplat compressed PLY   | -                        |
 | splat            | antimatter15 .splat         | write_splat (also NavArena compressed.splat) |
-| spz              | Niantic .spz (v2, v3)       | write_spz                |
+| spz              | Niantic .spz (v2, v3, v4)   | write_spz                |
+| sog              | PlayCanvas SOG v2: .sog zip, folder with meta.json, streamed lod-meta.json | write_sog, write_sog_lod |
 | npy_folder       | SceneSplat / InteriorGS .npy folder | write_npy_folder |
 """
 from __future__ import annotations
@@ -17,33 +18,40 @@ from pathlib import Path
 from stages.gaussians.errors import SceneFormatError
 from stages.gaussians.formats.npy_folder import read_npy_folder, write_npy_folder
 from stages.gaussians.formats.ply import read_ply, write_inria_ply
+from stages.gaussians.formats.sog import LOD_META, META, read_sog, write_sog, write_sog_lod
 from stages.gaussians.formats.splat import read_splat, write_splat
 from stages.gaussians.formats.spz import read_spz, write_spz
 
-FORMATS = ("inria_ply", "supersplat_ply", "splat", "spz", "npy_folder")
+FORMATS = ("inria_ply", "supersplat_ply", "splat", "spz", "sog", "npy_folder")
 
 
 def detect_format(path: str | Path) -> str:
-    """Format name from the path: a folder is an .npy folder, otherwise the suffix decides."""
+    """Format name from the path: a folder holding lod-meta.json or meta.json is SOG, another
+    folder an .npy folder; otherwise the file name decides."""
     p = Path(path)
     if p.is_dir():
-        return "npy_folder"
+        return "sog" if (p / LOD_META).is_file() or (p / META).is_file() else "npy_folder"
     name = p.name.lower()
+    if name.endswith(".sog") or name in (LOD_META, META):
+        return "sog"
     if name.endswith(".ply"):
         return "ply"  # INRIA or SuperSplat: the header tells
     if name.endswith(".splat"):
         return "splat"
     if name.endswith(".spz"):
         return "spz"
-    raise SceneFormatError(p, f"cannot tell the 3DGS format from the name; expected .ply, .splat, .spz or an .npy folder")
+    raise SceneFormatError(p, f"cannot tell the 3DGS format from the name; expected .ply, .splat, .spz, .sog, "
+                                "lod-meta.json / meta.json (SOG) or an .npy folder")
 
 
-def read_gaussians(path: str | Path, fmt: str | None = None):
+def read_gaussians(path: str | Path, fmt: str | None = None, level: int | None = None):
     """Read a 3DGS file into a GaussianScene (unvalidated: see stages.gaussians.validate).
 
     Args:
         path: file or folder.
         fmt: one of FORMATS, "ply" (either PLY flavour) or None to detect from the name.
+        level: level of detail of a streamed SOG (0 = finest; None = the finest whose files are
+            all present); other formats have one level and ignore it.
     """
     p = Path(path)
     if not p.exists():
@@ -55,6 +63,8 @@ def read_gaussians(path: str | Path, fmt: str | None = None):
         return read_splat(p)
     if fmt == "spz":
         return read_spz(p)
+    if fmt == "sog":
+        return read_sog(p, level)
     if fmt == "npy_folder":
         return read_npy_folder(p)
     raise SceneFormatError(p, f"unknown format {fmt!r}; known: {', '.join(FORMATS)}")
@@ -62,5 +72,5 @@ def read_gaussians(path: str | Path, fmt: str | None = None):
 
 __all__ = [
     "FORMATS", "detect_format", "read_gaussians", "read_ply", "write_inria_ply", "read_splat", "write_splat",
-    "read_spz", "write_spz", "read_npy_folder", "write_npy_folder",
+    "read_spz", "write_spz", "read_sog", "write_sog", "write_sog_lod", "read_npy_folder", "write_npy_folder",
 ]

@@ -1,12 +1,16 @@
-"""Niantic .spz (versions 2 and 3): a gzip stream holding a 16-byte header, then per-attribute
-arrays: positions (24-bit fixed point), alphas, colours, scales, rotations, SH.
+"""Niantic .spz, every version: v2 / v3 (a gzip stream holding a 16-byte header and the attribute
+arrays) and v4 (a 32-byte plaintext header "NGSP", optional extension records, a table of
+contents and one ZSTD stream per attribute).
 
-Facts from the nianticlabs/spz reference implementation: colours are f_dc * 0.15 * 255 + 127.5;
-scales (log) are (s + 10) * 16; alphas sigmoid * 255; v2 rotations store x, y, z as
-(q + 1) * 127.5 with w >= 0 derived; v3 stores the smallest three components (2-bit index of
-the largest, then 1 sign + 9 magnitude bits each, magnitude scaled by 1/sqrt2); SH bytes are
-(x * 128 + 128), coefficient-major with the colour channel fastest. Data are read as stored
-(no RUB -> RDF flip): the alignment stage finds the floor in any frame.
+Facts from the nianticlabs/spz reference implementation: attributes in the order positions
+(24-bit fixed point, ``fractional_bits``), alphas (sigmoid * 255), colours (f_dc * 0.15 * 255 +
+127.5), scales (log, (s + 10) * 16), rotations, SH ((x * 128 + 128), coefficient-major with the
+colour channel fastest). v2 rotations store x, y, z as (q + 1) * 127.5 with w >= 0 derived; v3 and
+v4 store the smallest three components (2-bit index of the largest, then 1 sign + 9 magnitude bits
+each, magnitude scaled by 1/sqrt2). v4 header: magic, version, numPoints (u32), shDegree,
+fractionalBits, flags, numStreams (u8), tocByteOffset (u32), 12 reserved bytes; the TOC holds
+(compressed, uncompressed) u64 sizes per stream; empty attributes (SH of degree 0) have no stream.
+Data are read as stored (no RUB -> RDF flip): the alignment stage finds the floor in any frame.
 """
 from __future__ import annotations
 
@@ -24,40 +28,113 @@ MAGIC = 0x5053474E
 COLOR_SCALE = 0.15
 _SQRT1_2 = np.float32(0.7071067811865476)
 _SH_DIM = {0: 0, 1: 3, 2: 8, 3: 15, 4: 24}
+_V4_HEADER = struct.Struct("<IIIBBBBI12s")  # 32 bytes
+_LEGACY_HEADER = struct.Struct("<IIIBBBB")  # 16 bytes
+VERSIONS = (2, 3, 4)
 
 
-def read_spz(path: str | Path) -> GaussianScene:
-    """Read a .spz file (v2 or v3)."""
-    path = Path(path)
-    try:
-        raw = gzip.decompress(path.read_bytes())
-    except (OSError, EOFError, zlib.error) as e:
-        raise SceneFormatError(path, f".spz is not a valid gzip stream ({e})") from None
-    if len(raw) < 16:
-        raise SceneFormatError(path, f".spz payload is {len(raw)} bytes, shorter than its 16-byte header")
-    magic, version, n, sh_deg, frac, flags, _ = struct.unpack("<IIIBBBB", raw[:16])
+def _attribute_sizes(version: int, shdim: int) -> list[tuple[str, int]]:
+    """(name, bytes per Gaussian) in stream order."""
+    return [("positions", 9), ("alphas", 1), ("colors", 3), ("scales", 3), ("rotations", 4 if version >= 3 else 3),
+            ("sh", shdim * 3)]
+
+
+def _check_header(path, magic, version, sh_deg) -> int:
     if magic != MAGIC:
         raise SceneFormatError(path, f".spz magic is 0x{magic:08x}, expected 0x{MAGIC:08x} ('NGSP')")
-    if version not in (2, 3):
-        raise SceneFormatError(path, f".spz version {version} is not supported (2 or 3)")
+    if version not in VERSIONS:
+        raise SceneFormatError(path, f".spz version {version} is not supported ({', '.join(map(str, VERSIONS))})")
     if sh_deg not in _SH_DIM:
         raise SceneFormatError(path, f".spz SH degree {sh_deg} is outside 0..4")
-    shdim = _SH_DIM[sh_deg]
-    rot_bytes = 4 if version >= 3 else 3
-    sizes = [("positions", 9), ("alphas", 1), ("colors", 3), ("scales", 3), ("rotations", rot_bytes),
-             ("sh", shdim * 3)]
-    need = 16 + n * sum(s for _, s in sizes)
+    return _SH_DIM[sh_deg]
+
+
+def _read_legacy(path: Path, data: bytes) -> tuple[int, int, int, int, dict]:
+    try:
+        raw = gzip.decompress(data)
+    except (OSError, EOFError, zlib.error) as e:
+        raise SceneFormatError(path, f".spz (v2/v3) is not a valid gzip stream ({e})") from None
+    if len(raw) < _LEGACY_HEADER.size:
+        raise SceneFormatError(path, f".spz payload is {len(raw)} bytes, shorter than its 16-byte header")
+    magic, version, n, sh_deg, frac, _flags, _ = _LEGACY_HEADER.unpack_from(raw)
+    shdim = _check_header(path, magic, version, sh_deg)
+    if version == 4:
+        raise SceneFormatError(path, ".spz declares version 4 inside a gzip stream (v4 files are not gzipped)")
+    sizes = _attribute_sizes(version, shdim)
+    per = sum(s for _, s in sizes)
+    need = _LEGACY_HEADER.size + n * per
     if need > len(raw):
-        per = sum(s for _, s in sizes)
         raise SceneFormatError(
             path, f".spz header declares {n:,} Gaussians ({need:,} bytes) but the payload holds {len(raw):,} "
                   f"bytes, room for {(len(raw) - 16) // per:,}")
     buf = np.frombuffer(raw, dtype=np.uint8)
-    off = 16
+    off = _LEGACY_HEADER.size
     arrs = {}
     for name, s in sizes:
-        arrs[name] = buf[off:off + n * s].reshape(n, s) if s else np.zeros((n, 0), np.uint8)
+        arrs[name] = buf[off:off + n * s].reshape(n, s)
         off += n * s
+    return version, n, shdim, frac, arrs
+
+
+def _read_v4(path: Path, data: bytes) -> tuple[int, int, int, int, dict]:
+    import zstandard
+
+    if len(data) < _V4_HEADER.size:
+        raise SceneFormatError(path, f".spz v4 file is {len(data)} bytes, shorter than its 32-byte header")
+    magic, version, n, sh_deg, frac, _flags, n_streams, toc, _ = _V4_HEADER.unpack_from(data)
+    shdim = _check_header(path, magic, version, sh_deg)
+    if version != 4:
+        raise SceneFormatError(path, f".spz starts with a plaintext 'NGSP' header (v4 layout) but declares "
+                                     f"version {version}")
+    sizes = [(k, s) for k, s in _attribute_sizes(version, shdim) if s]
+    if n_streams != len(sizes):
+        raise SceneFormatError(path, f".spz v4 header declares {n_streams} streams; SH degree {sh_deg} needs "
+                                     f"{len(sizes)} ({', '.join(k for k, _ in sizes)})")
+    toc_end = toc + 16 * n_streams
+    if toc < _V4_HEADER.size or toc_end > len(data):
+        raise SceneFormatError(path, f".spz v4 table of contents at byte {toc:,} (+{16 * n_streams}) lies outside "
+                                     f"the file ({len(data):,} bytes)")
+    entries = np.frombuffer(data, dtype="<u8", count=2 * n_streams, offset=toc).reshape(n_streams, 2)
+    off = toc_end
+    arrs = {}
+    dctx = zstandard.ZstdDecompressor()
+    for (name, s), (csize, usize) in zip(sizes, entries.tolist()):
+        if usize != n * s:
+            raise SceneFormatError(path, f".spz v4 stream '{name}' holds {usize:,} bytes; {n:,} Gaussians need "
+                                         f"{n * s:,}")
+        if off + csize > len(data):
+            raise SceneFormatError(path, f".spz v4 stream '{name}' ({csize:,} bytes at {off:,}) runs past the end "
+                                         f"of the file ({len(data):,} bytes): truncated?")
+        try:
+            raw = dctx.decompress(data[off:off + csize], max_output_size=usize)
+        except zstandard.ZstdError as e:
+            raise SceneFormatError(path, f".spz v4 stream '{name}' is not valid ZSTD ({e})") from None
+        if len(raw) != usize:
+            raise SceneFormatError(path, f".spz v4 stream '{name}' decompressed to {len(raw):,} bytes, "
+                                         f"expected {usize:,}")
+        arrs[name] = np.frombuffer(raw, dtype=np.uint8).reshape(n, s)
+        off += csize
+    if off != len(data):
+        raise SceneFormatError(path, f".spz v4 streams end at byte {off:,} but the file has {len(data):,} bytes")
+    arrs.setdefault("sh", np.zeros((n, 0), np.uint8))
+    return version, n, shdim, frac, arrs
+
+
+def read_spz(path: str | Path) -> GaussianScene:
+    """Read a .spz file of any version (the first bytes tell the layout: gzip or plaintext NGSP)."""
+    path = Path(path)
+    data = path.read_bytes()
+    if data[:4] == struct.pack("<I", MAGIC):
+        version, n, shdim, frac, arrs = _read_v4(path, data)
+    elif data[:2] == b"\x1f\x8b":
+        version, n, shdim, frac, arrs = _read_legacy(path, data)
+    else:
+        raise SceneFormatError(path, f".spz starts with bytes {data[:4].hex()}: neither a gzip stream (v2/v3) nor "
+                                     f"a plaintext 'NGSP' header (v4)")
+    return _decode(arrs, version, n, shdim, frac)
+
+
+def _decode(arrs: dict, version: int, n: int, shdim: int, frac: int) -> GaussianScene:
     p = arrs["positions"].reshape(n, 3, 3).astype(np.int32)
     fixed = p[..., 0] | (p[..., 1] << 8) | (p[..., 2] << 16)
     fixed = np.where(fixed & 0x800000, fixed | ~0xFFFFFF, fixed)
@@ -95,13 +172,10 @@ def read_spz(path: str | Path) -> GaussianScene:
     return GaussianScene(means, quats, log_scales, np.log(alpha / (1 - alpha)), sh)
 
 
-def write_spz(path: str | Path, scene: GaussianScene, version: int = 3, fractional_bits: int = 12) -> None:
-    """Write a .spz file (v2 or v3), quantizing as the reference implementation does."""
+def _encode(scene: GaussianScene, version: int, fractional_bits: int) -> list[np.ndarray]:
+    """The attribute arrays [N, bytes] in stream order."""
     n = len(scene)
     shdim = scene.sh.shape[1] - 1
-    deg = {v: k for k, v in _SH_DIM.items()}.get(shdim)
-    if deg is None:
-        raise ValueError(f"cannot store {shdim + 1} SH coefficients in .spz")
     u8 = lambda x: np.clip(np.round(x), 0, 255).astype(np.uint8)
     fixed = np.round(scene.means.astype(np.float64) * (1 << fractional_bits)).astype(np.int64)
     pos = np.stack([(fixed >> s) & 0xFF for s in (0, 8, 16)], -1).astype(np.uint8).reshape(n, 9)
@@ -126,6 +200,27 @@ def write_spz(path: str | Path, scene: GaussianScene, version: int = 3, fraction
         xyzw = np.where(xyzw[:, 3:] < 0, -xyzw, xyzw)
         rot = u8(xyzw[:, :3] * 127.5 + 127.5)
     sh = u8(scene.sh[:, 1:].reshape(n, -1) * 128.0 + 128.0) if shdim else np.zeros((n, 0), np.uint8)
-    header = struct.pack("<IIIBBBB", MAGIC, version, n, deg, fractional_bits, 0, 0)
-    payload = header + b"".join(a.tobytes() for a in (pos, alphas, colors, scales, rot, sh))
-    Path(path).write_bytes(gzip.compress(payload, mtime=0))
+    return [pos, alphas, colors, scales, rot, sh]
+
+
+def write_spz(path: str | Path, scene: GaussianScene, version: int = 4, fractional_bits: int = 12) -> None:
+    """Write a .spz file (v2, v3 or v4), quantizing as the reference implementation does."""
+    if version not in VERSIONS:
+        raise ValueError(f"cannot write .spz version {version} (known: {VERSIONS})")
+    shdim = scene.sh.shape[1] - 1
+    deg = {v: k for k, v in _SH_DIM.items()}.get(shdim)
+    if deg is None:
+        raise ValueError(f"cannot store {shdim + 1} SH coefficients in .spz")
+    arrays = _encode(scene, version, fractional_bits)
+    if version < 4:
+        header = _LEGACY_HEADER.pack(MAGIC, version, len(scene), deg, fractional_bits, 0, 0)
+        payload = header + b"".join(a.tobytes() for a in arrays)
+        Path(path).write_bytes(gzip.compress(payload, mtime=0))
+        return
+    import zstandard
+
+    cctx = zstandard.ZstdCompressor(level=12)
+    streams = [(a.nbytes, cctx.compress(a.tobytes())) for a in arrays if a.size]
+    header = _V4_HEADER.pack(MAGIC, 4, len(scene), deg, fractional_bits, 0, len(streams), _V4_HEADER.size, bytes(12))
+    toc = np.array([(len(c), u) for u, c in streams], dtype="<u8").tobytes()
+    Path(path).write_bytes(header + toc + b"".join(c for _, c in streams))
