@@ -36,7 +36,8 @@ from stages.semantics.config import SemanticsConfig
 from stages.semantics.lifting import lift
 from stages.semantics.precision import score
 from stages.semantics.segmenters import CORRUPTION_LEVELS, OracleSegmenter, corrupt
-from stages.semantics.stage import cameras_from_json, category_masks, predict_instances, render_views
+from stages.gaussians.cameras import cameras_from_json
+from stages.semantics.stage import category_masks, predict_instances, render_views
 from stages.synthetic.generate import SyntheticConfig, generate_scene, object_records
 
 LEVELS = ("none", "moderate", "heavy")

@@ -15,6 +15,7 @@ from stages.episodes.export import ExportConfig
 from stages.episodes.goal_images import GoalImagesConfig
 from stages.semantics.config import SemanticsConfig
 from stages.evaluate.config import EvaluateConfig
+from stages.gaussians.content import ContentConfig
 from stages.gaussians.validate import ValidationLimits
 from stages.synthetic.generate import SyntheticConfig
 from stages.voxelize.field import VoxelizeConfig
@@ -94,6 +95,8 @@ class IngestConfig:
     """Scene ingest."""
 
     limits: ValidationLimits = field(default_factory=ValidationLimits)
+    content: ContentConfig = field(default_factory=ContentConfig)
+    """How the scene's content is told from floaters (kept out of voxelization and maps)."""
     lod_level: int | None = None
     """Level of detail of streamed SOG scenes (lod-meta.json; 0 = finest); null = the finest level
     whose files are all present."""

@@ -7,6 +7,7 @@ import json
 from omegaconf import OmegaConf
 
 from pipeline.atomic import atomic_path, write_text_atomic
+from stages.gaussians.content import CONTENT_KEY, content_mask
 from stages.gaussians.errors import SceneFormatError
 from stages.gaussians.formats import read_gaussians
 from stages.gaussians.store import write_scene_zarr
@@ -29,10 +30,14 @@ def run(scene, cfg, catalog) -> dict:
         raise SceneFormatError(e.path, e.problem, scene.scene_id) from None
     limits = OmegaConf.to_object(cfg.ingest).limits
     clean, report = sanitize(raw, path, scene.scene_id, limits)
+    # floaters stay in the renderable model; the mask keeps them out of grids and maps
+    mask, content = content_mask(clean.means, OmegaConf.to_object(cfg.ingest).content)
+    clean.extras[CONTENT_KEY] = mask
     out = catalog.path("scene", scene)
     with atomic_path(out) as tmp:
         write_scene_zarr(tmp, clean, {"scene_id": scene.scene_id, "source": str(path), "format": fmt})
     rep = {"scene_id": scene.scene_id, "name": scene.name, "group": scene.group, "source": str(path),
-           "format": fmt, "validation": report.as_dict()}
+           "format": fmt, "validation": report.as_dict(), "content": content}
     write_text_atomic(catalog.path("ingest_report", scene), json.dumps(rep, indent=1))
-    return {"outputs": [str(out)], "validation": report.summary(), **report.as_dict()}
+    return {"outputs": [str(out)], "validation": report.summary(), **report.as_dict(), "floaters": content["floaters"],
+            "content_box_m": content["content_box_m"]}

@@ -232,7 +232,7 @@ def test_stage_is_deterministic_and_reads_its_config(semantics_run, tmp_path):
 
 
 def test_cameras_in_both_layouts():
-    from stages.semantics.stage import cameras_from_json
+    from stages.gaussians.cameras import cameras_from_json
 
     r = np.array([[math.cos(0.8), -math.sin(0.8), 0], [math.sin(0.8), math.cos(0.8), 0], [0, 0, 1]])  # about z
     ours = {"hfov_deg": 90.0, "poses": [{"position": [1, 2, 3], "quat_wxyz": [math.cos(0.4), 0, 0, math.sin(0.4)]}]}

@@ -1,4 +1,4 @@
 """Gravity alignment: RANSAC floor plane (open3d) -> rigid transform to z up, floor at z = 0."""
-from stages.align.floor import AlignConfig, fit_floor, floor_transform
+from stages.align.floor import AlignConfig, axis_name, fit_floor, floor_transform
 
-__all__ = ["AlignConfig", "fit_floor", "floor_transform"]
+__all__ = ["AlignConfig", "axis_name", "fit_floor", "floor_transform"]

@@ -1,51 +1,74 @@
-"""Find the floor plane among the occupied voxels and the rigid motion that puts it at z = 0.
+"""Find the up direction and the floor plane of a scene, and the rigid motion that puts the floor
+at z = 0 with +z up. Works in any source frame (up along +-x, +-y or +-z, tilts up to 30 degrees)
+and on trained reconstructions: floaters (the content mask keeps them out), reflection Gaussians
+mirrored below a shiny floor, ceilings, thick noisy floors, sparse halls.
 
-1. open3d RANSAC extracts up to ``max_planes`` dominant planes from occupied voxel centres.
-2. Each plane is oriented so that most occupied mass lies on its positive side; planes with more
-   than ``max_below_fraction`` of the mass below are rejected (a floor has nothing under it).
-   With ``up_hint`` set, planes tilted more than ``max_tilt_deg`` from it are rejected too.
-3. Indoor scenes are thinnest along gravity (a storey is ~2.5 m, rooms are wider): among the
-   candidates whose extent along their normal is within 15 % of the thinnest, the floor is the
-   one with the most occupied voxels 0.05 to 1.2 m above it (furniture stands on floors, not
-   under ceilings). ``up_hint`` overrides this for scenes where it fails (one long corridor).
-4. Refinement: a least-squares plane through the opaque Gaussian centres near the RANSAC plane
-   (floor Gaussians sit on the surface, so this is far more precise than voxel centres).
+Evidence comes from the Gaussians themselves: a flat Gaussian (smallest axis well below the other
+two) is a piece of surface whose normal is its smallest axis.
+1. Up-axis candidates: the three coordinate axes, the dominant normals of the flat Gaussians
+   (greedy mode search on the sphere, opacity-weighted), ``up_hint`` and the mean up vector of the
+   capture cameras when the scene has them.
+2. Indoors a scene is thinnest along gravity (a storey is ~2.5-10 m high, rooms and halls are
+   wider): the candidates whose robust extent (2nd-98th percentile of the centres along them) is
+   within ``thin_tolerance`` of the thinnest are kept; among them the one with the most flat mass
+   facing along it (floor and ceiling) is the up axis. ``up_hint`` / cameras restrict the
+   candidates to those within ``max_tilt_deg`` of them.
+3. Sign and height: for both signs, peaks of the height histogram of the flat Gaussians facing up
+   are floor candidates. Each is scored by
+   strength (the area its flat Gaussians cover / the largest such area: a floor spans the room,
+   while table tops are dense but small) x room above it (the share of the content's opacity
+   that lies above rather than below it: reflections below a shiny floor are a shallow layer, the
+   room above reaches the ceiling) x furniture (opacity 0.05-1.2 m above it,
+   relative to the best candidate): floors carry furniture, ceilings have lamps at most, and a
+   reflected room below a shiny floor is fainter than the floor itself. With cameras, only
+   peaks below (nearly) all cameras count, and the sign follows their up vectors.
+4. Refinement: a weighted least-squares plane through the opaque flat Gaussians near the peak.
+``alignment.json`` gets every candidate with its numbers.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from stages.gaussians.model import GaussianScene, quat_to_rotmat
 
 
 @dataclass
 class AlignConfig:
     """Parameters of the floor alignment."""
 
-    voxel_size: float = 0.05
-    """Resolution of the opacity field the plane is fitted to (metres)."""
-    distance_threshold: float = 0.06
-    """RANSAC inlier distance, metres."""
-    ransac_iterations: int = 1000
-    """RANSAC iterations per plane."""
-    ransac_max_points: int = 40_000
-    """RANSAC runs on a seeded random subset of at most this many occupied voxels."""
-    max_planes: int = 6
-    """Planes extracted before choosing the floor."""
-    min_plane_fraction: float = 0.03
-    """Smallest plane considered, as a fraction of the occupied voxels."""
-    max_below_fraction: float = 0.1
-    """Largest share of occupied voxels allowed more than 0.1 m below a floor candidate."""
+    max_gaussians: int = 400_000
+    """The floor is found on a seeded random subset of at most this many content Gaussians."""
+    flat_ratio: float = 0.5
+    """A Gaussian is flat (a piece of surface) when its smallest scale is below this share of the middle one."""
+    normal_tolerance_deg: float = 15.0
+    """A flat Gaussian faces along a direction when its normal is within this angle of it."""
+    dominant_normals: int = 4
+    """Dominant normal directions searched among the flat Gaussians (besides the coordinate axes)."""
+    thin_tolerance: float = 0.15
+    """Up-axis candidates with an extent within this share of the thinnest one's compete on flat mass."""
+    bin_m: float = 0.02
+    """Height histogram bin, metres."""
+    min_peak_strength: float = 0.05
+    """Floor candidates are histogram peaks at least this share of the strongest."""
+    coverage_cell_m: float = 0.25
+    """A floor candidate's strength is the area its flat Gaussians cover, counted in cells of this size, metres."""
+    coverage_halfwidth_m: float = 0.08
+    """... taking the flat Gaussians within this distance of the candidate's height, metres."""
+    furniture_band: tuple[float, float] = (0.05, 1.2)
+    """Heights above a floor candidate where furniture stands, metres."""
     up_hint: list[float] | None = None
     """Approximate up direction in the source frame (e.g. [0, 0, 1]); null = any."""
     max_tilt_deg: float = 45.0
-    """With up_hint: largest angle between a floor candidate's normal and the hint."""
+    """With up_hint or cameras: largest angle between the up axis and them."""
     refine_band: float = 0.05
-    """Gaussians within this distance of the RANSAC plane feed the refinement, metres."""
+    """Flat Gaussians within this distance of the floor candidate feed the refinement, metres."""
     refine_min_alpha: float = 0.5
     """Only Gaussians at least this opaque feed the refinement."""
     seed: int = 0
-    """RANSAC seed (open3d's global generator)."""
+    """Seed of the subsampling and of the dominant-normal search."""
 
 
 def _plane_svd(points: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.ndarray, float]:
@@ -57,73 +80,181 @@ def _plane_svd(points: np.ndarray, weights: np.ndarray | None = None) -> tuple[n
     return n, -float(n @ c)
 
 
-def fit_floor(occupied: np.ndarray, means: np.ndarray, alphas: np.ndarray, cfg: AlignConfig) -> tuple[np.ndarray, float, dict]:
-    """Floor plane n . p + d = 0 (unit n pointing up into the room).
+def surface_normals(scene: GaussianScene, flat_ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """([N, 3] unit normal = smallest axis of each Gaussian, [N] bool flat)."""
+    s = np.sort(scene.log_scales, axis=1)
+    flat = s[:, 0] < s[:, 1] + np.log(flat_ratio)
+    rot = quat_to_rotmat(scene.quats.astype(np.float64))
+    k = np.argmin(scene.log_scales, axis=1)
+    return np.take_along_axis(rot, k[:, None, None], axis=2)[..., 0], flat
+
+
+def _canonical(d: np.ndarray) -> np.ndarray:
+    """Unsigned direction: the sign that makes the largest component positive."""
+    d = d / np.linalg.norm(d)
+    return d if d[np.argmax(np.abs(d))] > 0 else -d
+
+
+def dominant_normals(normals: np.ndarray, weights: np.ndarray, k: int, rng: np.random.Generator,
+                     tol_deg: float = 8.0, n_probe: int = 1000, n_eval: int = 40_000) -> list[np.ndarray]:
+    """Up to k dominant unsigned directions among surface normals (greedy mode search: the probe
+    with the most weight within tol_deg, refined by the weighted mean of its inliers, removed)."""
+    if len(normals) == 0:
+        return []
+    pick = rng.choice(len(normals), min(n_eval, len(normals)), replace=False)
+    nrm, w = normals[pick], weights[pick]
+    cos_t, out = np.cos(np.radians(tol_deg)), []
+    alive = np.ones(len(nrm), bool)
+    for _ in range(k):
+        if w[alive].sum() <= 0.02 * w.sum():
+            break
+        idx = np.nonzero(alive)[0]
+        probes = nrm[rng.choice(idx, min(n_probe, len(idx)), replace=False, p=w[idx] / w[idx].sum())]
+        score = np.zeros(len(probes))
+        for c0 in range(0, len(probes), 100):
+            score[c0:c0 + 100] = ((np.abs(probes[c0:c0 + 100] @ nrm[alive].T) > cos_t) * w[alive]).sum(1)
+        d = probes[np.argmax(score)]
+        for _ in range(3):  # refine: weighted mean of sign-aligned inliers
+            dots = nrm @ d
+            inl = alive & (np.abs(dots) > cos_t)
+            if not inl.any():
+                break
+            d = ((nrm[inl] * np.sign(dots[inl])[:, None]) * w[inl, None]).sum(0)
+            d /= np.linalg.norm(d)
+        out.append(_canonical(d))
+        alive &= np.abs(nrm @ d) <= np.cos(np.radians(2 * tol_deg))
+    return out
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip(abs(a @ b), 0, 1))))
+
+
+def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | None = None
+              ) -> tuple[np.ndarray, float, dict]:
+    """Floor plane n . p + d = 0 (unit n pointing up into the room) of a scene's content.
 
     Args:
-        occupied: [M, 3] centres of occupied voxels (source frame, metres).
-        means, alphas: [N, 3], [N] Gaussian centres and opacities for the refinement.
+        scene: content Gaussians, source frame, metres.
+        cameras_c2w: [M, 4, 4] capture cameras (camera -> source frame, OpenCV axes) or None.
     Returns:
-        (n [3], d, info) with info on the candidates.
+        (n [3], d, info with every up-axis and floor candidate and the choice).
     """
-    import open3d as o3d
+    rng = np.random.default_rng(cfg.seed)
+    if len(scene) < 10:
+        raise ValueError(f"only {len(scene)} content Gaussians: nothing to find a floor in")
+    if len(scene) > cfg.max_gaussians:
+        scene = scene.subset(np.sort(rng.choice(len(scene), cfg.max_gaussians, replace=False)))
+    p = scene.means.astype(np.float64)
+    alpha = scene.alphas
+    normals, flat = surface_normals(scene, cfg.flat_ratio)
+    cos_t = np.cos(np.radians(cfg.normal_tolerance_deg))
 
-    if len(occupied) < 3:
-        raise ValueError(f"only {len(occupied)} occupied voxels: nothing to fit a floor to")
-    o3d.utility.random.seed(int(cfg.seed))
-    sub = occupied
-    if len(occupied) > cfg.ransac_max_points:
-        pick = np.random.default_rng(cfg.seed).choice(len(occupied), cfg.ransac_max_points, replace=False)
-        sub = occupied[np.sort(pick)]
-    remaining = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sub.astype(np.float64)))
+    # 1. up-axis candidates
+    # dominant normals first: a floor tilted by a degree keeps its exact normal, not the nearby axis
+    cands = [(d, "dominant_normal") for d in dominant_normals(normals[flat], alpha[flat], cfg.dominant_normals, rng)]
+    cands += [(e, "axis") for e in np.eye(3)]
     hint = None if cfg.up_hint is None else np.asarray(cfg.up_hint, float) / np.linalg.norm(cfg.up_hint)
-    candidates = []
-    for _ in range(cfg.max_planes):
-        if len(remaining.points) < max(3, cfg.min_plane_fraction * len(sub)):
-            break
-        model, inl = remaining.segment_plane(cfg.distance_threshold, 3, cfg.ransac_iterations)
-        if len(inl) < cfg.min_plane_fraction * len(sub):
-            break
-        n = np.asarray(model[:3], float)
-        d = float(model[3]) / np.linalg.norm(n)
-        n = n / np.linalg.norm(n)
-        sd = occupied @ n + d
-        if (sd < -0.1).sum() > (sd > 0.1).sum():
-            n, d, sd = -n, -d, -sd
-        below = float((sd < -0.1).mean())
-        thickness = float(np.percentile(sd, 99.5))
-        band = int(((sd > 0.05) & (sd < 1.2)).sum())
-        tilt = None if hint is None else float(np.degrees(np.arccos(np.clip(n @ hint, -1, 1))))
-        ok = below <= cfg.max_below_fraction and (tilt is None or tilt <= cfg.max_tilt_deg)
-        candidates.append({"normal": n.tolist(), "d": d, "inliers": len(inl), "below_fraction": below,
-                           "band_count": band, "thickness_m": thickness, "tilt_to_hint_deg": tilt, "eligible": ok})
-        remaining = remaining.select_by_index(inl, invert=True)
-    eligible = [c for c in candidates if c["eligible"]]
-    if not eligible:
-        raise ValueError(f"no floor plane found among {len(candidates)} RANSAC planes "
-                         f"(none has < {cfg.max_below_fraction:.0%} of the mass below it"
-                         + (f" within {cfg.max_tilt_deg} deg of up_hint" if hint is not None else "") + ")")
-    # indoors the scene is thinnest along gravity: keep the planes across the thinnest extent
-    # (floor and ceiling), then the one with furniture next to it
-    thin = min(c["thickness_m"] for c in eligible)
-    across = [c for c in eligible if c["thickness_m"] <= 1.15 * thin]
-    best = max(across, key=lambda c: c["band_count"])
-    n, d = np.asarray(best["normal"]), best["d"]
-    # refinement on opaque Gaussian centres near the plane, twice with a shrinking band
+    cam_up = cam_pos = None
+    if cameras_c2w is not None and len(cameras_c2w):
+        cam_up = -np.asarray(cameras_c2w)[:, :3, 1].mean(0)  # OpenCV: y points down
+        cam_up /= max(np.linalg.norm(cam_up), 1e-12)
+        cam_pos = np.asarray(cameras_c2w)[:, :3, 3]
+        cands.append((_canonical(cam_up), "cameras"))
+    if hint is not None:
+        cands.append((_canonical(hint), "up_hint"))
+    axes = []
+    for d, src in cands:
+        if any(_angle(d, a["dir"]) < 3.0 for a in axes):
+            continue
+        t = p @ d
+        lo, hi = np.percentile(t, [2, 98])
+        facing = flat & (np.abs(normals @ d) > cos_t)
+        allowed = all(_angle(d, ref) <= cfg.max_tilt_deg for ref in (hint, cam_up) if ref is not None)
+        axes.append({"dir": d, "source": src, "extent_m": float(hi - lo), "allowed": allowed,
+                     "flat_facing_fraction": float(alpha[facing].sum() / max(alpha[flat].sum(), 1e-12))})
+    ok = [a for a in axes if a["allowed"]]
+    if not ok:
+        raise ValueError(f"no up-axis candidate within {cfg.max_tilt_deg} deg of the up hint / camera up vectors")
+    thin = min(a["extent_m"] for a in ok)
+    contenders = [a for a in ok if a["extent_m"] <= (1 + cfg.thin_tolerance) * thin]
+    up = max(contenders, key=lambda a: a["flat_facing_fraction"])
+    u = up["dir"]
+
+    # 2. sign and floor height
+    t = p @ u
+    facing = flat & (np.abs(normals @ u) > cos_t)
+    e1 = np.cross(u, [1.0, 0, 0] if abs(u[0]) < 0.9 else [0, 1.0, 0])
+    e1 /= np.linalg.norm(e1)
+    plane_xy = np.stack([p @ e1, p @ np.cross(u, e1)], 1)
+
+    def coverage(sel: np.ndarray) -> int:
+        """Area covered by the selected Gaussians, in cfg.coverage_cell_m cells of the plane."""
+        return len(np.unique(np.floor(plane_xy[sel] / cfg.coverage_cell_m).astype(np.int64), axis=0))
+    floors = []
+    for sign in (1.0, -1.0):
+        if cam_up is not None and sign * (u @ cam_up) < 0:
+            continue  # cameras say which way is up
+        h = sign * t
+        lo, hi = np.percentile(h, [0.5, 99.5])
+        bins = np.arange(lo - 0.5, hi + 0.5 + cfg.bin_m, cfg.bin_m)
+        hist = gaussian_filter1d(np.histogram(h[facing], bins, weights=alpha[facing])[0], 1.0)
+        peak_ok = (hist >= np.roll(hist, 1)) & (hist >= np.roll(hist, -1)) & (hist >= cfg.min_peak_strength * hist.max())
+        cam_h = None if cam_pos is None else np.percentile(sign * (cam_pos @ u), 5)
+        order = np.sort(h)
+        csum = np.concatenate([[0.0], np.cumsum(alpha[np.argsort(h)])])
+        mass = lambda a, b: csum[np.searchsorted(order, b)] - csum[np.searchsorted(order, a)]
+        for i in np.nonzero(peak_ok)[0]:
+            z = 0.5 * (bins[i] + bins[i + 1])
+            if cam_h is not None and z > cam_h - 0.1:
+                continue  # a floor lies below the cameras
+            above, below = mass(z + 0.05, np.inf), mass(-np.inf, z - 0.05)
+            slab = facing & (np.abs(h - z) <= cfg.coverage_halfwidth_m)
+            floors.append({"sign": sign, "height": float(z), "strength": float(coverage(slab)),
+                           "open_above": float(above / max(above + below, 1e-12)),
+                           "furniture": float(mass(z + cfg.furniture_band[0], z + cfg.furniture_band[1]))})
+    if not floors:
+        raise ValueError("no floor candidate: no horizontal surface found along the up axis"
+                         + (" below the capture cameras" if cam_pos is not None else ""))
+    top_s = max(f["strength"] for f in floors)
+    top_f = max(f["furniture"] for f in floors)
+    for f in floors:
+        f["strength"] /= top_s
+        f["furniture"] /= max(top_f, 1e-12)
+        f["score"] = f["strength"] * f["open_above"] * f["furniture"]
+    best = max(floors, key=lambda f: f["score"])
+    n = best["sign"] * u
+    d = -best["height"]
+
+    # 3. refinement on opaque flat Gaussians near the plane, twice with a shrinking band
     band = cfg.refine_band
     for _ in range(2):
-        sd = means @ n + d
-        sel = (np.abs(sd) < band) & (alphas >= cfg.refine_min_alpha)
+        sd = p @ n + d
+        sel = (np.abs(sd) < band) & (alpha >= cfg.refine_min_alpha) & facing
         if sel.sum() < 100:
             break
-        n2, d2 = _plane_svd(means[sel].astype(np.float64), alphas[sel])
+        n2, d2 = _plane_svd(p[sel], alpha[sel])
         if n2 @ n < 0:
             n2, d2 = -n2, -d2
+        if _angle(n2, n) > 10:
+            break  # a sloppy patch; keep the histogram's plane
         n, d = n2, d2
-        res = np.abs(means[sel] @ n + d)
+        res = np.abs(p[sel] @ n + d)
         band = max(3.0 * float(np.median(res)) * 1.4826, 0.01)
-    info = {"candidates": candidates, "chosen": candidates.index(best), "normal": n.tolist(), "d": float(d)}
+    floors.sort(key=lambda f: -f["score"])
+    info = {"up_axis_candidates": [{**a, "dir": np.round(a["dir"], 5).tolist()} for a in axes],
+            "up_axis": np.round(u, 5).tolist(), "up_axis_source": up["source"],
+            "floor_candidates": floors[:12], "chosen": floors.index(best), "normal": n.tolist(), "d": float(d),
+            "used_cameras": cam_pos is not None, "gaussians_used": int(len(p))}
     return n, float(d), info
+
+
+def axis_name(n: np.ndarray) -> str:
+    """The signed coordinate axis nearest a direction, e.g. '-y' (with the angle when tilted > 1 deg)."""
+    k = int(np.argmax(np.abs(n)))
+    name = ("-" if n[k] < 0 else "+") + "xyz"[k]
+    tilt = float(np.degrees(np.arccos(min(1.0, abs(n[k])))))
+    return name if tilt <= 1.0 else f"{name} (tilted {tilt:.1f} deg)"
 
 
 def floor_transform(n: np.ndarray, d: float) -> np.ndarray:

@@ -1,8 +1,16 @@
 """Costmap construction (DESIGN.md spatial layer, steps 3-5).
 
 For an embodiment with radius r and body interval [h_min, h_max] above the floor:
+- Floor layer: trained floors are thick, noisy and slightly uneven. A local floor height field
+  (median height of the flat, horizontal Gaussians near z = 0 per ``floor_cell``) and its local
+  spread give a floor layer per cell; Gaussians whose centre lies in it or below it (reflections
+  under a shiny floor) are floor, never obstacles: a real obstacle rises above the floor and
+  has Gaussians there.
+- Isolated Gaussians (fewer than ``outlier_min_neighbours`` other non-floor centres within
+  ``outlier_radius``: open3d's radius outlier removal) are reconstruction noise hovering over
+  sparse floors, not objects. Everything else that reaches the body band is an obstacle.
 - M_raw: a column is an obstacle when any voxel of it whose z-extent meets the body interval
-  is occupied (A >= tau_occ). The body band is voxelized at a finer xy resolution
+  is occupied (A >= tau_occ) by the non-floor Gaussians. The body band is voxelized at a finer xy resolution
   (``raw_resolution``) than the stored map so obstacle boundaries are known to ~1 cm.
 - M_sup: DBSCAN on the occupied voxels of the whole aligned field drops isolated clusters; the
   alpha shape (Delaunay triangles with circumradius <= alpha_radius) of the remaining voxels'
@@ -90,6 +98,19 @@ class CostmapConfig:
     """Occupied voxels below this height are ignored for the support, metres."""
     support_z_max: float = 3.0
     """Occupied voxels above this height are ignored for the support, metres."""
+    floor_cell: float = 0.5
+    """Cell of the local floor height field, metres."""
+    floor_search: float = 0.15
+    """Flat horizontal Gaussians within this height of z = 0 define the local floor, metres."""
+    floor_layer_min: float = 0.02
+    """Smallest half-thickness of the floor layer, metres."""
+    floor_layer_max: float = 0.06
+    """Largest half-thickness of the floor layer (2.5 local spreads, clipped to [min, max]), metres:
+    anything whose centre is higher is a potential obstacle."""
+    outlier_radius: float = 0.1
+    """Radius of the isolated-Gaussian test, metres (0 disables it)."""
+    outlier_min_neighbours: int = 4
+    """Non-floor Gaussians with fewer other centres within outlier_radius are noise, not obstacles."""
     extra_margin: float = 0.0
     """Added to the interpolation margin, metres (a safety buffer beyond the exact bound)."""
     embodiments: list[str] = field(default_factory=list)
@@ -139,8 +160,64 @@ def supersample_factor(res: float, raw_res: float) -> int:
     return s if s % 2 == 1 else s + 1
 
 
+def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, dict]:
+    """[N] bool: Gaussians of the floor layer or below it (never obstacles), and a summary.
+
+    The local floor height is the median height of the flat, horizontal Gaussians within
+    ``floor_search`` of z = 0 in each ``floor_cell`` (3x3-cell median-filtered; 0 where none),
+    the half-thickness 2.5 x their local robust spread (MAD), clipped to the configured range."""
+    from stages.align.floor import surface_normals
+
+    z = scene.means[:, 2].astype(np.float64)
+    normals, flat = surface_normals(scene, 0.5)
+    near = flat & (np.abs(normals[:, 2]) > np.cos(np.radians(20))) & (np.abs(z) < cfg.floor_search)
+    cell = np.floor(scene.means[:, :2] / cfg.floor_cell).astype(np.int64)
+    lo = cell.min(0)
+    shape = tuple(cell.max(0) - lo + 1)
+    idx = cell - lo
+    height, spread = np.zeros(shape), np.full(shape, np.nan)
+    if near.any():
+        lin = np.ravel_multi_index(idx[near].T, shape)
+        order = np.lexsort((z[near], lin))
+        lin_s, z_s = lin[order], z[near][order]
+        starts = np.r_[0, np.nonzero(np.diff(lin_s))[0] + 1]
+        counts = np.diff(np.r_[starts, len(lin_s)])
+        med = z_s[starts + counts // 2]
+        mad = np.array([np.median(np.abs(z_s[a:a + c] - m)) for a, c, m in zip(starts, counts, med)])
+        ok = counts >= 5
+        height.flat[lin_s[starts][ok]] = med[ok]
+        spread.flat[lin_s[starts][ok]] = 1.4826 * mad[ok]
+        height = ndimage.median_filter(height, size=3, mode="nearest")
+    typical = float(np.nanmedian(spread)) if np.isfinite(spread).any() else 0.0
+    spread = np.where(np.isfinite(spread), spread, typical)
+    half = np.clip(2.5 * spread, cfg.floor_layer_min, cfg.floor_layer_max)
+    top = height[idx[:, 0], idx[:, 1]] + half[idx[:, 0], idx[:, 1]]
+    mask = z <= top
+    info = {"floor_gaussians": int((mask & (z >= -cfg.floor_search)).sum()), "below_floor": int((z < -cfg.floor_search).sum()),
+            "floor_height_p5_p95_m": np.percentile(height[height != 0], [5, 95]).round(3).tolist()
+            if (height != 0).any() else [0.0, 0.0],
+            "floor_half_thickness_median_m": round(float(np.median(half)), 4)}
+    return mask, info
+
+
+def obstacle_candidates(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, dict]:
+    """[N] bool: Gaussians that may be obstacles (not floor, not isolated noise), and a summary."""
+    floor, info = floor_layer(scene, cfg)
+    cand = ~floor
+    if cfg.outlier_radius > 0 and cand.sum() > cfg.outlier_min_neighbours:
+        import open3d as o3d
+
+        pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(scene.means[cand].astype(np.float64)))
+        _, kept = pc.remove_radius_outlier(nb_points=cfg.outlier_min_neighbours + 1, radius=cfg.outlier_radius)
+        idx = np.nonzero(cand)[0]
+        cand[:] = False
+        cand[idx[np.asarray(kept, dtype=np.int64)]] = True
+        info["isolated_dropped"] = int(len(idx) - len(kept))
+    return cand, info
+
+
 def map_extent(scene: GaussianScene, cfg: CostmapConfig) -> tuple[tuple[float, float], tuple[int, int]]:
-    """Map origin (x, y) and shape (ny, nx) covering the scene's Gaussians plus a margin."""
+    """Map origin (x, y) and shape (ny, nx) covering the scene's (content) Gaussians plus a margin."""
     q = cfg.extent_quantile
     lo, hi = np.percentile(scene.means[:, :2], [q, 100 - q], axis=0)
     res = cfg.resolution
@@ -226,7 +303,8 @@ def build_costmap(scene: GaussianScene, emb: Embodiment, cfg: CostmapConfig, vcf
     """
     origin, shape = extent or map_extent(scene, cfg)
     s = supersample_factor(cfg.resolution, cfg.raw_resolution)
-    fine = raw_obstacles_fine(scene, origin, shape, s, emb, cfg, vcfg)
+    cand, finfo = obstacle_candidates(scene, cfg)
+    fine = raw_obstacles_fine(scene.subset(cand), origin, shape, s, emb, cfg, vcfg)
     res_f = cfg.resolution / s
     if fine.any():
         dist_f = ndimage.distance_transform_edt(~fine) * res_f
@@ -249,5 +327,5 @@ def build_costmap(scene: GaussianScene, emb: Embodiment, cfg: CostmapConfig, vcf
             "free_cells": int(free.sum()), "free_area_m2": float(free.sum() * cfg.resolution ** 2),
             "main_component_area_m2": float((components == 1).sum() * cfg.resolution ** 2),
             "supported_area_m2": float(sup.sum() * cfg.resolution ** 2), "free_components": int(n_comp),
-            "support": sinfo}
+            "support": sinfo, "floor": finfo}
     return layers, info

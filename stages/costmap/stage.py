@@ -9,6 +9,7 @@ from omegaconf import OmegaConf
 
 from pipeline.atomic import atomic_path
 from stages.costmap.build import CostmapConfig, build_costmap, map_extent, support_mask
+from stages.gaussians.content import content_of
 from stages.gaussians.store import read_scene_zarr
 
 
@@ -31,6 +32,7 @@ def run(scene, cfg, catalog) -> dict:
     ccfg: CostmapConfig = OmegaConf.to_object(cfg.costmap)
     vcfg = OmegaConf.to_object(cfg.voxelize)
     gs, _ = read_scene_zarr(catalog.path("aligned", scene))
+    gs = content_of(gs)  # floaters stay out of the maps
     extent = map_extent(gs, ccfg)
     support = support_mask(gs, *extent, ccfg, vcfg)
     out = catalog.path("costmaps", scene)

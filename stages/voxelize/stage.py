@@ -1,5 +1,6 @@
 """Stage `voxelize`: opacity field of the ingested (source-frame) scene -> 02_voxels Zarr
-(A float16, V bool, grid origin and voxel size). Written x-block by x-block: memory stays bounded."""
+(A float16, V bool, grid origin and voxel size) over the content's box (floaters are left out).
+Written x-block by x-block: memory stays bounded."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,6 +8,7 @@ import zarr
 from omegaconf import OmegaConf
 
 from pipeline.atomic import atomic_path
+from stages.gaussians.content import content_of
 from stages.gaussians.store import read_scene_zarr
 from stages.voxelize.field import VoxelizeConfig, log_transmittance_blocks
 from stages.voxelize.grid import grid_for_points
@@ -15,7 +17,8 @@ from stages.voxelize.grid import grid_for_points
 def run(scene, cfg, catalog) -> dict:
     vcfg: VoxelizeConfig = OmegaConf.to_object(cfg.voxelize)
     gs, _ = read_scene_zarr(catalog.path("scene", scene))
-    grid = grid_for_points(gs.means, vcfg.resolution, margin=2 * vcfg.resolution, lo_q=0.1, hi_q=99.9)
+    gs = content_of(gs)  # floaters neither size the grid nor fill it
+    grid = grid_for_points(gs.means, vcfg.resolution, margin=2 * vcfg.resolution)
     out = catalog.path("voxels", scene)
     n_occ = 0
     with atomic_path(out) as tmp:
@@ -30,11 +33,7 @@ def run(scene, cfg, catalog) -> dict:
             v_arr[x0:x0 + len(blk)] = occ
             n_occ += int(occ.sum())
         g.attrs.update({**grid.as_dict(), "tau_occ": vcfg.tau_occ, "sample": vcfg.sample, "frame": "source"})
-    return {"outputs": [str(out)], "grid_shape": list(grid.shape), "occupied_voxels": n_occ}
+    content_voxels = int(np.prod(np.ceil((gs.means.max(0) - gs.means.min(0)) / vcfg.resolution)))
+    return {"outputs": [str(out)], "grid_shape": list(grid.shape), "grid_voxels": grid.n_voxels,
+            "content_voxels": content_voxels, "occupied_voxels": n_occ}
 
-
-def occupied_centers(path) -> np.ndarray:
-    """[M, 3] centres (metres) of the occupied voxels of a voxelize output."""
-    g = zarr.open_group(str(path), mode="r")
-    idx = np.argwhere(np.asarray(g["V"][...]))
-    return np.asarray(g.attrs["origin"]) + (idx + 0.5) * np.asarray(g.attrs["voxel_size"])
