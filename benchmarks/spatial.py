@@ -26,7 +26,9 @@ import numpy as np
 from stages.align.floor import AlignConfig, fit_floor, floor_transform
 from stages.costmap.build import CostmapConfig, Embodiment, build_costmap
 from stages.costmap.query import Costmap
+from stages.gaussians.content import CONTENT_KEY, content_mask, content_of
 from stages.synthetic.generate import SyntheticConfig, generate_scene
+from stages.synthetic.realism import RealismConfig
 from stages.voxelize.field import VoxelizeConfig, opacity_field
 from stages.voxelize.grid import grid_for_points
 
@@ -111,15 +113,15 @@ def time_batch(fn, arg, n: int, repeats: int = 7) -> float:
 
 
 def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_states: int,
-              n_motions: int) -> dict:
-    sc = generate_scene(seed, SyntheticConfig(num_gaussians=n_gauss))
+              n_motions: int, realism: str = "none", resolutions=RESOLUTIONS, timing: bool = True) -> dict:
+    """One synthetic scene through content -> align -> costmap, against FCL on the mesh."""
+    sc = generate_scene(seed, SyntheticConfig(num_gaussians=n_gauss, realism=RealismConfig(level=realism)))
     g = sc.gaussians
-    grid = grid_for_points(g.means, 0.05, margin=0.1, lo_q=0.1, hi_q=99.9)
-    a = opacity_field(g, grid, VoxelizeConfig(resolution=0.05, sample=vcfg.sample))
-    occ = np.asarray(grid.origin) + (np.argwhere(a >= vcfg.tau_occ) + 0.5) * 0.05
-    n, d, _ = fit_floor(occ, g.means.astype(np.float64), g.alphas, AlignConfig())
+    mask, _ = content_mask(g.means)
+    g.extras[CONTENT_KEY] = mask
+    n, d, _ = fit_floor(content_of(g), AlignConfig())
     t_align = floor_transform(n, d)
-    aligned = g.transformed(t_align)
+    aligned = content_of(g.transformed(t_align))
     # alignment error against the ground truth: normal angle, and height of the true floor
     up_src = sc.transform[:3, :3] @ [0, 0, 1.0]
     tilt = float(np.degrees(np.arccos(np.clip(n @ up_src, -1, 1))))
@@ -142,7 +144,7 @@ def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_
     ref_motion = np.array([ref.motion(*s) for s in segs])
     out = {"seed": seed, "n_gaussians": len(g), "align_tilt_deg": tilt, "align_height_m": height,
            "fcl_state_positive": int(ref_state.sum()), "fcl_motion_positive": int(ref_motion.sum()), "res": {}}
-    for res in RESOLUTIONS:
+    for res in resolutions:
         t0 = time.perf_counter()
         layers, info = build_costmap(aligned, emb, CostmapConfig(resolution=res), vcfg)
         build_s = time.perf_counter() - t0
@@ -156,7 +158,7 @@ def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_
              "neg_motion": int((~ref_motion).sum()), "pos_motion": int(ref_motion.sum()),
              "clearance_kib": layers.clearance.nbytes / 1024, "occ_bitmap_kib": np.packbits(layers.occ).nbytes / 1024,
              "cells": int(layers.occ.size)}
-        if res == 0.05:  # query speed on the paper's resolution
+        if res == 0.05 and timing:  # query speed on the paper's resolution
             sl = [(float(x), float(y)) for x, y in states]
             ml = [tuple(map(float, s)) for s in segs]
             big_s = np.tile(states, (10, 1))
@@ -178,7 +180,9 @@ def voxelize_1m_cpu(repeats: int = 3) -> dict:
     """Time and peak memory of voxelizing a 1M-Gaussian scene at 0.05 m, in a fresh process."""
     code = r"""
 import json, time, numpy as np, resource
+from stages.gaussians.content import CONTENT_KEY, content_mask, content_of
 from stages.synthetic.generate import SyntheticConfig, generate_scene
+from stages.synthetic.realism import RealismConfig
 from stages.voxelize.field import VoxelizeConfig, opacity_field
 from stages.voxelize.grid import grid_for_points
 def status(key):

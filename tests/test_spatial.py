@@ -69,14 +69,8 @@ def test_floor_transform_maps_plane_to_z0():
     assert np.allclose(t[:3, :3] @ n, [0, 0, 1])
 
 
-def aligned_scene(sc, vcfg=VoxelizeConfig()):
-    from stages.voxelize.grid import grid_for_points
-
-    g = sc.gaussians
-    grid = grid_for_points(g.means, 0.05, margin=0.1, lo_q=0.1, hi_q=99.9)
-    a = opacity_field(g, grid, vcfg)
-    occ = np.asarray(grid.origin) + (np.argwhere(a >= vcfg.tau_occ) + 0.5) * 0.05
-    n, d, _ = fit_floor(occ, g.means.astype(float), g.alphas, AlignConfig())
+def aligned_scene(sc):
+    n, d, _ = fit_floor(sc.gaussians, AlignConfig())
     return n, d, floor_transform(n, d)
 
 

@@ -11,7 +11,9 @@ two) is a piece of surface whose normal is its smallest axis.
 2. Indoors a scene is thinnest along gravity (a storey is ~2.5-10 m high, rooms and halls are
    wider): the candidates whose robust extent (2nd-98th percentile of the centres along them) is
    within ``thin_tolerance`` of the thinnest are kept; among them the one with the most flat mass
-   facing along it (floor and ceiling) is the up axis. ``up_hint`` / cameras restrict the
+   facing along it within a third of ``normal_tolerance_deg`` (floor and ceiling; the tight
+   tolerance prefers the exact normal to a nearby coordinate axis) is the up axis, refined to the
+   mean normal of the flat Gaussians facing along it. ``up_hint`` / cameras restrict the
    candidates to those within ``max_tilt_deg`` of them.
 3. Sign and height: for both signs, peaks of the height histogram of the flat Gaussians facing up
    are floor candidates. Each is scored by
@@ -149,6 +151,7 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
     alpha = scene.alphas
     normals, flat = surface_normals(scene, cfg.flat_ratio)
     cos_t = np.cos(np.radians(cfg.normal_tolerance_deg))
+    cos_tight = np.cos(np.radians(cfg.normal_tolerance_deg / 3))  # ranks nearby candidates by exactness
 
     # 1. up-axis candidates
     # dominant normals first: a floor tilted by a degree keeps its exact normal, not the nearby axis
@@ -169,7 +172,7 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
             continue
         t = p @ d
         lo, hi = np.percentile(t, [2, 98])
-        facing = flat & (np.abs(normals @ d) > cos_t)
+        facing = flat & (np.abs(normals @ d) > cos_tight)
         allowed = all(_angle(d, ref) <= cfg.max_tilt_deg for ref in (hint, cam_up) if ref is not None)
         axes.append({"dir": d, "source": src, "extent_m": float(hi - lo), "allowed": allowed,
                      "flat_facing_fraction": float(alpha[facing].sum() / max(alpha[flat].sum(), 1e-12))})
@@ -180,6 +183,13 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
     contenders = [a for a in ok if a["extent_m"] <= (1 + cfg.thin_tolerance) * thin]
     up = max(contenders, key=lambda a: a["flat_facing_fraction"])
     u = up["dir"]
+    for _ in range(3):  # refine to the mean normal of the surfaces facing along it (floor, ceiling)
+        dots = normals @ u
+        inl = flat & (np.abs(dots) > cos_t)
+        if inl.sum() < 100:
+            break
+        v = ((normals[inl] * np.sign(dots[inl])[:, None]) * alpha[inl, None]).sum(0)
+        u = v / np.linalg.norm(v)
 
     # 2. sign and floor height
     t = p @ u

@@ -18,6 +18,7 @@ import numpy as np
 from stages.gaussians.formats import write_inria_ply
 from stages.gaussians.model import GaussianScene, rotmat_to_quat
 from stages.synthetic.layout import CATEGORIES, Layout, LayoutConfig, make_layout
+from stages.synthetic.realism import RealismConfig, add_artefacts, up_rotation
 from stages.synthetic.surface import layout_mesh, surface_gaussians, total_area
 
 SOURCE_FILE = "scene.ply"
@@ -45,6 +46,9 @@ class SyntheticConfig:
     """Largest translation per axis of the random rigid motion."""
     camera_height_m: float = 1.4
     """Height of the capture path cameras."""
+    realism: RealismConfig = field(default_factory=RealismConfig)
+    """Artefacts of trained reconstructions (reflections, far floaters, noisy floors, haze, sparse
+    coverage, any up axis); level none keeps the clean procedural scene."""
 
 
 @dataclass
@@ -142,7 +146,16 @@ def generate_scene(seed: int, cfg: SyntheticConfig) -> SyntheticScene:
     all_alpha = np.concatenate([alphas, fl_alpha, st_alpha])
     all_rgb = np.concatenate([rgb, rng.uniform(0.3, 0.9, (n_fl + n_st, 3))])
     all_inst = np.concatenate([inst, np.full(n_fl + n_st, -1, np.int32)])
-    canonical = GaussianScene.from_colors(all_means, all_quats, all_scales, all_alpha, all_rgb)
+    real = cfg.realism.resolved()
+    rrng = np.random.default_rng([seed, 1])  # its own stream: level none leaves the scene byte-identical
+    up_rot, _ = up_rotation(real.up_axis, rrng)
+    g = add_artefacts(dict(means=all_means, quats=all_quats, scales=all_scales, alphas=all_alpha, rgb=all_rgb,
+                           inst=all_inst),
+                      (all_inst == 0) & (np.abs(all_means[:, 2]) < 0.01),
+                      np.array([c[:3, 3] for c in _capture_path(lay, cfg.camera_height_m, np.random.default_rng(0))]),
+                      real, rrng)
+    all_inst = g["inst"]
+    canonical = GaussianScene.from_colors(g["means"], g["quats"], g["scales"], g["alphas"], g["rgb"])
     if cfg.sh_degree > 0:
         k = (cfg.sh_degree + 1) ** 2
         sh = np.zeros((len(canonical), k, 3), np.float32)
@@ -150,6 +163,8 @@ def generate_scene(seed: int, cfg: SyntheticConfig) -> SyntheticScene:
         sh[:, 1:] = rng.normal(0, 0.02, (len(canonical), k - 1, 3))
         canonical.sh = sh
     transform = random_rigid_transform(rng, cfg.max_tilt_deg, cfg.max_offset_m)
+    transform[:3, :3] = up_rot @ transform[:3, :3]  # then the up axis (identity for +z)
+    transform[:3, 3] = up_rot @ transform[:3, 3]
     cams = [transform @ c for c in _capture_path(lay, cfg.camera_height_m, rng)]
     cameras = [{"position": c[:3, 3].tolist(), "quat_wxyz": rotmat_to_quat(c[:3, :3]).tolist()} for c in cams]
     return SyntheticScene(canonical.transformed(transform), all_inst, lay, transform, cameras)

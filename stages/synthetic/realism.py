@@ -1,0 +1,139 @@
+"""Artefacts of trained reconstructions, added to procedural scenes so the spatial stages are
+measured on what real scenes look like (each a knob; ``level`` sets them all at once):
+
+- reflections: surface Gaussians within ``reflection_depth`` above the floor mirrored below it,
+  fainter (a shiny floor is rendered by a mirrored room seen through it);
+- far floaters: large Gaussians 10-300 m away (sky, background, optimisation debris);
+- floor noise: floor Gaussians thick (less flat), scattered in height and slightly tilted in patches;
+- haze: large low-opacity Gaussians hugging surfaces;
+- sparse coverage: surfaces thinned with their distance from the capture path;
+- up axis: the scene's up direction before the random tilt (+-x, +-y, +-z; "random" from the seed).
+Levels (``none`` / ``moderate`` / ``heavy``) are the presets in LEVELS; a knob set explicitly wins.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+LEVELS = {
+    "none": dict(reflection_fraction=0.0, far_floater_fraction=0.0, floor_noise_m=0.0, haze_fraction=0.0,
+                 sparse_distance_m=0.0, up_axis="+z"),
+    "moderate": dict(reflection_fraction=0.3, far_floater_fraction=0.02, floor_noise_m=0.01, haze_fraction=0.01,
+                     sparse_distance_m=3.0, up_axis="random"),
+    "heavy": dict(reflection_fraction=0.6, far_floater_fraction=0.05, floor_noise_m=0.02, haze_fraction=0.03,
+                  sparse_distance_m=1.5, up_axis="random"),
+}
+AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0)}
+
+
+@dataclass
+class RealismConfig:
+    """Reconstruction artefacts of the procedural scenes (README: realistic synthetic scenes)."""
+
+    level: str = "none"
+    """Preset of every knob below: none | moderate | heavy (knobs set explicitly override it)."""
+    reflection_fraction: float | None = None
+    """Share of the surface Gaussians within reflection_depth above the floor mirrored below it."""
+    reflection_depth: float = 1.5
+    """Height above the floor whose surfaces are mirrored, metres."""
+    reflection_alpha: float = 0.5
+    """Opacity factor of the mirrored Gaussians."""
+    far_floater_fraction: float | None = None
+    """Share of extra Gaussians placed 10-300 m away (large, opaque or not)."""
+    floor_noise_m: float | None = None
+    """Height noise of the floor Gaussians (sigma, metres); they also get 4x thicker."""
+    haze_fraction: float | None = None
+    """Share of extra large (0.1-0.3 m), faint (alpha 0.03-0.2) Gaussians within 0.1 m of surfaces."""
+    sparse_distance_m: float | None = None
+    """Surfaces farther than this from the capture path are thinned: keep probability
+    exp(-(d - this) / this); 0 keeps everything."""
+    up_axis: str | None = None
+    """Up direction of the written scene before the random tilt: +x, -x, +y, -y, +z, -z or random."""
+
+    def resolved(self) -> "RealismConfig":
+        """A copy with every None knob taken from the level's preset."""
+        if self.level not in LEVELS:
+            raise ValueError(f"synthetic.realism.level={self.level!r}; choose {' | '.join(LEVELS)}")
+        preset = LEVELS[self.level]
+        vals = {f.name: getattr(self, f.name) for f in fields(self)}
+        vals.update({k: v for k, v in preset.items() if vals[k] is None})
+        return RealismConfig(**vals)
+
+
+def up_rotation(axis: str, rng: np.random.Generator) -> tuple[np.ndarray, str]:
+    """Rotation taking +z to the named axis (random: one of the six from rng), and the axis name."""
+    if axis == "random":
+        axis = list(AXES)[int(rng.integers(6))]
+    if axis not in AXES:
+        raise ValueError(f"synthetic.realism.up_axis={axis!r}; choose one of {', '.join(AXES)} or random")
+    k, sgn = AXES[axis]
+    target = np.zeros(3)
+    target[k] = sgn
+    z = np.array([0.0, 0.0, 1.0])
+    v, c = np.cross(z, target), float(z @ target)
+    if np.linalg.norm(v) < 1e-12:
+        return (np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])), axis
+    kx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + kx + kx @ kx / (1 + c), axis
+
+
+def add_artefacts(g: dict, floor_mask: np.ndarray, cams_xyz: np.ndarray, cfg: RealismConfig,
+                  rng: np.random.Generator) -> dict:
+    """Apply the artefacts to canonical-frame arrays (z up, floor z = 0).
+
+    Args:
+        g: means [N, 3], quats [N, 4] wxyz, scales [N, 3] m, alphas [N], rgb [N, 3], inst [N] int32.
+        floor_mask: [N] bool, the floor's surface Gaussians.
+        cams_xyz: [C, 3] capture positions.
+    Returns:
+        the new arrays (added Gaussians have instance -1).
+    """
+    g = {k: np.array(v, copy=True) for k, v in g.items()}
+    n = len(g["means"])
+    if cfg.floor_noise_m:
+        f = np.nonzero(floor_mask)[0]
+        g["means"][f, 2] += rng.normal(0, cfg.floor_noise_m, len(f))
+        g["scales"][f, 2] = np.maximum(g["scales"][f, 2] * 4.0, cfg.floor_noise_m)
+    if cfg.sparse_distance_m:
+        from scipy.spatial import cKDTree
+
+        d = cKDTree(cams_xyz[:, :2]).query(g["means"][:, :2])[0]
+        keep = rng.random(n) < np.exp(-np.maximum(d - cfg.sparse_distance_m, 0) / cfg.sparse_distance_m)
+        g = {k: v[keep] for k, v in g.items()}
+        n = len(g["means"])
+    extra = []
+    if cfg.reflection_fraction:
+        z = g["means"][:, 2]
+        cand = np.nonzero((z > 0.02) & (z < cfg.reflection_depth))[0]
+        pick = cand[rng.random(len(cand)) < cfg.reflection_fraction]
+        m = g["means"][pick] * [1, 1, -1]
+        q = g["quats"][pick] * [1, -1, -1, 1]  # mirror in z: R -> M R M keeps a proper rotation
+        extra.append((m, q, g["scales"][pick], g["alphas"][pick] * cfg.reflection_alpha, g["rgb"][pick] * 0.8))
+    lo, hi = g["means"].min(0), g["means"].max(0)
+    if cfg.far_floater_fraction:
+        k = int(n * cfg.far_floater_fraction)
+        dirs = rng.normal(size=(k, 3))
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        m = (lo + hi) / 2 + dirs * rng.uniform(10, 300, (k, 1))
+        extra.append((m, _random_quats(rng, k), rng.uniform(0.2, 3.0, (k, 3)), rng.uniform(0.05, 0.95, k),
+                      rng.uniform(0.3, 0.9, (k, 3))))
+    if cfg.haze_fraction:
+        k = int(n * cfg.haze_fraction)
+        base = g["means"][rng.integers(n, size=k)]
+        m = base + rng.normal(0, 0.05, (k, 3))
+        extra.append((m, _random_quats(rng, k), rng.uniform(0.1, 0.3, (k, 3)), rng.uniform(0.03, 0.2, k),
+                      rng.uniform(0.3, 0.9, (k, 3))))
+    for m, q, s, a, c in extra:
+        g["means"] = np.concatenate([g["means"], m])
+        g["quats"] = np.concatenate([g["quats"], q])
+        g["scales"] = np.concatenate([g["scales"], s])
+        g["alphas"] = np.concatenate([g["alphas"], a])
+        g["rgb"] = np.concatenate([g["rgb"], c])
+        g["inst"] = np.concatenate([g["inst"], np.full(len(m), -1, np.int32)])
+    return g
+
+
+def _random_quats(rng: np.random.Generator, k: int) -> np.ndarray:
+    q = rng.normal(size=(k, 4))
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
