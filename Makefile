@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
 
-.PHONY: setup system-deps dataset test test-all bench bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: setup system-deps dataset test test-all bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 # open3d needs libusb at import time; install it when missing (root or sudo).
 system-deps:
@@ -70,6 +70,11 @@ eval: $(STAMP)
 
 # on a CUDA machine: writes data/08_reports/voxelize_gpu.json; bench-spatial merges it (or
 # `python -m benchmarks.spatial --merge-gpu` folds it into an existing report)
+# the real indoor scenes of ../shared/data/real_indoor end to end (catalogs/real_indoor.yaml), the
+# render-based costmap check, and the realistic synthetic scenes against the mesh
+bench-real: $(STAMP)
+	$(BIN)/python -m benchmarks.real $(ARGS)
+
 bench-spatial-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.voxelize_gpu $(ARGS)
 

@@ -26,6 +26,7 @@ import numpy as np
 from stages.align.floor import AlignConfig, fit_floor, floor_transform
 from stages.costmap.build import CostmapConfig, Embodiment, build_costmap
 from stages.costmap.query import Costmap
+from stages.costmap.render_check import RenderCheckConfig, check_costmap, estimate_rates
 from stages.gaussians.content import CONTENT_KEY, content_mask, content_of
 from stages.synthetic.generate import SyntheticConfig, generate_scene
 from stages.synthetic.realism import RealismConfig
@@ -113,15 +114,19 @@ def time_batch(fn, arg, n: int, repeats: int = 7) -> float:
 
 
 def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_states: int,
-              n_motions: int, realism: str = "none", resolutions=RESOLUTIONS, timing: bool = True) -> dict:
-    """One synthetic scene through content -> align -> costmap, against FCL on the mesh."""
+              n_motions: int, realism: str = "none", resolutions=RESOLUTIONS, timing: bool = True,
+              render_check: RenderCheckConfig | None = None) -> dict:
+    """One synthetic scene through content -> align -> costmap, against FCL on the mesh; with
+    render_check, the render-based estimate of the 0.05 m map's FP / FN rates at the first
+    render_check.poses of the same states, beside the true rates there."""
     sc = generate_scene(seed, SyntheticConfig(num_gaussians=n_gauss, realism=RealismConfig(level=realism)))
     g = sc.gaussians
     mask, _ = content_mask(g.means)
     g.extras[CONTENT_KEY] = mask
     n, d, _ = fit_floor(content_of(g), AlignConfig())
     t_align = floor_transform(n, d)
-    aligned = content_of(g.transformed(t_align))
+    renderable = g.transformed(t_align)
+    aligned = content_of(renderable)
     # alignment error against the ground truth: normal angle, and height of the true floor
     up_src = sc.transform[:3, :3] @ [0, 0, 1.0]
     tilt = float(np.degrees(np.arccos(np.clip(n @ up_src, -1, 1))))
@@ -173,6 +178,16 @@ def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_
                 "fcl_motion_us": 1e6 * time_per_call(ref.motion, ml[:500], repeats=3),
             }
         out["res"][f"{res:.2f}"] = r
+        if res == 0.05 and render_check is not None:
+            k = render_check.poses
+            t0 = time.perf_counter()
+            est = check_costmap(renderable, cm, emb, render_check, xy=states[:k])
+            true = estimate_rates(ours_state[:k], ref_state[:k])
+            out["render_check"] = {
+                "fp_est": est["fp_est"], "fn_est": est["fn_est"], "fp_true": true["fp_est"],
+                "fn_true": true["fn_est"], "poses": k, "seconds": time.perf_counter() - t0,
+                "render_vs_mesh_agreement": float((est["render_blocked_mask"] == ref_state[:k]).mean()),
+                "abs_err_fp": abs(est["fp_est"] - true["fp_est"]), "abs_err_fn": abs(est["fn_est"] - true["fn_est"])}
     return out
 
 

@@ -95,6 +95,9 @@ class IngestConfig:
     """Scene ingest."""
 
     limits: ValidationLimits = field(default_factory=ValidationLimits)
+    scale: float = 1.0
+    """Multiplies positions and Gaussian sizes on read: the source's units -> metres (e.g. 0.01
+    for centimetres). The run summary warns when a scene's measures look implausible for metres."""
     content: ContentConfig = field(default_factory=ContentConfig)
     """How the scene's content is told from floaters (kept out of voxelization and maps)."""
     lod_level: int | None = None

@@ -38,8 +38,7 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
         return {**base, "status": "n/a"}
     marker = catalog.path("markers", scene, stage=stage_name)
     if not force and is_done(marker, config_hash):
-        short = json.loads(marker.read_text()).get("info", {}).get("shortfall")
-        return {**base, "status": "cached", **({"shortfall": short} if short else {})}
+        return {**base, "status": "cached", **notes(json.loads(marker.read_text()).get("info", {}))}
     marker.unlink(missing_ok=True)  # outputs are about to change: the old marker must not vouch for them
     t0 = time.perf_counter()
     try:
@@ -50,8 +49,13 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
     duration = round(time.perf_counter() - t0, 3)
     write_marker(marker, {"stage": stage_name, "scene_id": scene.scene_id, "config_hash": config_hash,
                           "duration_s": duration, "info": info})
-    short = {"shortfall": info["shortfall"]} if info.get("shortfall") else {}
-    return {**base, "status": "done", "duration_s": duration, **short}
+    return {**base, "status": "done", "duration_s": duration, **notes(info)}
+
+
+def notes(info: dict) -> dict:
+    """What a stage's result says the run summary must show: shortfalls (outputs it could not
+    yield) and warnings (e.g. a scene whose scale is implausible for metres)."""
+    return {k: info[k] for k in ("shortfall", "warnings") if info.get(k)}
 
 
 def jobqueue_cluster(ex):
@@ -194,7 +198,8 @@ def execute(cfg, console: Console | None = None) -> dict:
                "catalog": str(cat_file), "shard": [cfg.scenes.shard, cfg.scenes.num_shards],
                "stages": [s.name for s in stages], "config_hashes": {s.name: hashes[s.name] for s in stages},
                "counts": {}, "failures": [r for r in results if r["status"] in FAILED],
-               "shortfalls": [r for r in results if r.get("shortfall")], "results": results}
+               "shortfalls": [r for r in results if r.get("shortfall")],
+               "warnings": [r for r in results if r.get("warnings")], "results": results}
     for r in results:
         c = summary["counts"].setdefault(r["stage"], {})
         c[r["status"]] = c.get(r["status"], 0) + 1
@@ -252,6 +257,14 @@ def _print_summary(summary: dict, console: Console) -> None:
                 f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], s.get("task", ""),
                           f"{s.get('episodes')} / {s.get('requested')}",
                           ", ".join(f"{k} {v}" for k, v in s.get("rejections", {}).items()) or s.get("reason", ""))
+        console.print(f)
+    if summary["warnings"]:
+        f = Table(title="warnings")
+        for col in ("scene", "stage", "warning"):
+            f.add_column(col, overflow="fold")
+        for r in summary["warnings"]:
+            for w in r["warnings"]:
+                f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], w)
         console.print(f)
 
 

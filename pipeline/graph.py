@@ -49,13 +49,13 @@ def _load(target: str) -> Callable:
 
 STAGES: tuple[Stage, ...] = (
     Stage("synthesize", "stages.synthetic.stage:run", (), ("synthetic",), only_synthetic=True),
-    Stage("ingest", "stages.ingest:run", ("synthesize",), ("ingest",)),
-    Stage("voxelize", "stages.voxelize.stage:run", ("ingest",), ("voxelize",), version="2"),
-    Stage("align", "stages.align.stage:run", ("voxelize",), ("align",)),
+    Stage("ingest", "stages.ingest:run", ("synthesize",), ("ingest",), version="2"),
+    Stage("voxelize", "stages.voxelize.stage:run", ("ingest",), ("voxelize",), version="3"),
+    Stage("align", "stages.align.stage:run", ("voxelize",), ("align",), version="2"),
     Stage("costmap", "stages.costmap.stage:run", ("align",), ("costmap", "voxelize", "embodiment"),
           inputs="stages.costmap.stage:hashed_inputs"),
     Stage("semantics", "stages.semantics.stage:run", ("costmap",), ("semantics", "embodiment")),
-    Stage("asset", "stages.asset:run", ("costmap", "semantics"), ("asset",), version="2"),
+    Stage("asset", "stages.asset:run", ("costmap", "semantics"), ("asset",), version="3"),
     Stage("episodes", "stages.episodes.stage:run", ("costmap", "semantics"), ("episodes", "task", "planner", "embodiment")),
     Stage("goal_images", "stages.episodes.goal_images:run", ("episodes",), ("goal_images",)),
     Stage("export", "stages.episodes.export:run", ("episodes", "asset", "goal_images"), ("export",),

@@ -1,12 +1,15 @@
 """Stage `asset`: the NavArena V1 scene asset directory (NAVARENA_FORMATS.md section 1) of the
 main embodiment: manifest.json, source.ply, aligned.ply, nav_map.pgm + nav_map.yaml (ROS
 map_server), nav_mask.png, labels.json (the semantics stage's predicted instances, or the ground
-truth of synthetic scenes: asset.labels; aligned frame), compressed.splat and costmap_topdown.png."""
+truth of synthetic scenes: asset.labels; aligned frame), compressed.splat, costmap_topdown.png and floor_side_view.png (the chosen floor over the Gaussian
+density); manifest.json also holds the metric-scale evidence (floor-to-ceiling height, narrowest
+doorway-like gaps)."""
 from __future__ import annotations
 
 import datetime as dt
 import json
 import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -75,7 +78,8 @@ def run(scene, cfg, catalog) -> dict:
     aligned, aattrs = read_scene_zarr(catalog.path("aligned", scene))
     t = np.asarray(aattrs["source_to_aligned"])
     emb = cfg.embodiment.name
-    g = zarr.open_group(str(catalog.path("costmaps", scene)), mode="r")[emb]
+    root = zarr.open_group(str(catalog.path("costmaps", scene)), mode="r")
+    g = root[emb]
     occ, sup, raw, comp = (np.asarray(g[k][...]) for k in ("occ", "support", "raw", "components"))
     res, origin = float(g.attrs["resolution"]), list(g.attrs["origin"])
     steps = []
@@ -100,6 +104,9 @@ def run(scene, cfg, catalog) -> dict:
             "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n")
         Image.fromarray(np.where(sup, 255, 0).astype(np.uint8)[::-1]).save(tmp / "nav_mask.png")
         Image.fromarray(topdown_image(raw, sup, occ, comp)).save(tmp / "costmap_topdown.png")
+        side = catalog.path("floor_side_view", scene)
+        if side.exists():  # the floor the align stage chose, over the Gaussian density
+            shutil.copyfile(side, tmp / "floor_side_view.png")
         if cfg.asset.write_compressed_splat:
             write_splat(tmp / "compressed.splat", aligned)
             files["compressed_ply"] = "compressed.splat"
@@ -121,6 +128,7 @@ def run(scene, cfg, catalog) -> dict:
                                       "tau_occ": float(cfg.voxelize.tau_occ)}},
             "processing": {"normalizer_version": NORMALIZER_VERSION, "processed_at": now, "normalized": True,
                            "extrinsic_matrix": t.tolist(), "steps": steps},
+            "scale": dict(root.attrs.get("scale", {})),  # metric sanity: floor-to-ceiling, doorway-like gaps
             "tags": [scene.group], "created_at": now, "updated_at": now,
         }
         (tmp / "manifest.json").write_text(json.dumps(manifest, indent=1))

@@ -157,3 +157,117 @@ def test_shared_real_scenes_align_with_minus_y_up():
         z = g.subset(mask).transformed(floor_transform(n, d)).means[:, 2]
         hist, edges = np.histogram(z[np.abs(z) < 0.3], np.arange(-0.3, 0.31, 0.01))
         assert abs(edges[np.argmax(hist)] + 0.005) <= 0.03, p.name
+
+
+# ---- ground truth shipped with real datasets --------------------------------------------------
+
+class _Scene:
+    synthetic = False
+
+    def __init__(self, path):
+        self.path = str(path)
+
+
+def test_scenesplat_per_gaussian_labels_become_the_ground_truth_table(tmp_path):
+    from stages.gaussians.formats import read_gaussians, write_npy_folder
+    from stages.instances import shipped_instances
+
+    rng = np.random.default_rng(0)
+    boxes = {1: ([1, 1, 0], [2, 1.5, 0.8], 3), 2: ([4, 0, 0], [5, 2, 0.5], 7), 3: ([0, 3, 0], [0.5, 3.5, 1], 3)}
+    means, inst, seg = [], [], []
+    for iid, (lo, hi, cls) in boxes.items():
+        means.append(rng.uniform(lo, hi, (500, 3)))
+        inst += [iid] * 500
+        seg += [cls] * 480 + [5] * 20  # a few mislabelled Gaussians: the majority wins
+    means.append(rng.uniform(-1, 6, (300, 3)))
+    inst += [-1] * 300
+    seg += [0] * 300
+    n = len(inst)
+    g = GaussianScene.from_colors(np.concatenate(means), np.tile([1.0, 0, 0, 0], (n, 1)), np.full((n, 3), 0.01),
+                                  np.full(n, 0.9), np.full((n, 3), 0.5),
+                                  {"instance": np.array(inst, np.int32), "segment": np.array(seg, np.int32)})
+    write_npy_folder(tmp_path / "s", g)
+    names = ["wall", "floor", "bed", "couch", "x", "y", "z", "TV"]
+    (tmp_path / "s" / "classes.txt").write_text("\n".join(names))
+    back = read_gaussians(tmp_path / "s")
+    assert np.array_equal(back.extras["instance"], inst) and np.array_equal(back.extras["segment"], seg)
+    t = np.eye(4)
+    t[:3, 3] = [10, 0, 0]
+    table, origin = shipped_instances(_Scene(tmp_path / "s"), back.transformed(t), t)
+    rows = {r["instance_id"]: r for r in table.to_pylist()}
+    assert "scenesplat" in origin and set(rows) == {1, 2, 3}
+    assert [rows[i]["category"] for i in (1, 2, 3)] == ["sofa", "tv_monitor", "sofa"]  # couch -> sofa, TV -> tv_monitor
+    assert {r["source"] for r in rows.values()} == {"ground_truth"} and rows[2]["support"] == 500
+    assert abs(rows[2]["center_x"] - 14.5) < 0.05 and abs(rows[2]["max_y"] - 2.0) < 0.05
+
+
+def test_interiorgs_labels_json_beside_the_scene(tmp_path):
+    from stages.instances import read_label_file, shipped_instances
+
+    corners = [{"x": x, "y": y, "z": z} for x in (1.0, 2.0) for y in (3.0, 3.5) for z in (0.0, 0.9)]
+    (tmp_path / "labels.json").write_text(__import__("json").dumps(
+        [{"ins_id": "17", "label": "Dining Table", "bounding_box": corners},
+         {"ins_id": "x9", "label": "chair", "bounding_box": corners[:4] + corners[4:]}]))
+    (tmp_path / "scene.ply").write_bytes(b"")
+    labs = read_label_file(tmp_path / "labels.json")
+    assert labs[0]["instance_id"] == 17 and labs[0]["category"] == "table"
+    assert labs[0]["position"] == [1.5, 3.25, 0.45] and labs[0]["bounding_box"]["max"] == [2.0, 3.5, 0.9]
+    assert labs[1]["instance_id"] == 2  # ids that are not integers are numbered by position
+    t = np.eye(4)
+    t[:3, :3] = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]  # 90 degrees about z
+    table, origin = shipped_instances(_Scene(tmp_path / "scene.ply"), GaussianScene.from_colors(
+        np.zeros((1, 3)), [[1.0, 0, 0, 0]], [[0.1] * 3], [0.5], [[0.5] * 3]), t)
+    r = table.to_pylist()[0]
+    assert origin.endswith("labels.json") and np.allclose([r["center_x"], r["center_y"]], [-3.25, 1.5])
+    (tmp_path / "labels.json").write_text('[{"nothing": 1}]')
+    with pytest.raises(ValueError, match="labels.json: label entry 0"):
+        read_label_file(tmp_path / "labels.json")
+
+
+# ---- metric scale and the render check ------------------------------------------------------------
+
+def test_doorway_gaps_known_answer_and_scale_warnings():
+    from stages.costmap.build import doorway_gaps, scale_warnings
+
+    res = 0.05
+    clr = np.zeros((100, 200))  # two 4 x 4 m rooms side by side, wall at x = 5 m with a 0.9 m door
+    yy, xx = (np.mgrid[0:100, 0:200] + 0.5) * res
+    walls = [np.abs(xx - 0.5), np.abs(xx - 9.5), np.abs(yy - 0.5), np.abs(yy - 4.5)]
+    door = (np.abs(yy - 2.5) <= 0.45)
+    wall_mid = np.where(door, np.hypot(np.abs(xx - 5.0), np.minimum(np.abs(yy - 2.05), np.abs(yy - 2.95))),
+                        np.abs(xx - 5.0))
+    wall_mid = np.where(door & (np.abs(xx - 5.0) < 0.01), np.minimum(np.abs(yy - 2.05), np.abs(yy - 2.95)), wall_mid)
+    clr = np.minimum.reduce(walls + [wall_mid])
+    gaps = doorway_gaps(clr, res)
+    assert len(gaps) >= 1 and abs(gaps[0] - 0.9) <= 0.1
+    assert doorway_gaps(np.minimum.reduce(walls), res) == []  # one open room: no gap
+    assert scale_warnings(2.7, gaps) == []
+    w = scale_warnings(270.0, [0.09])
+    assert len(w) == 2 and "ingest.scale" in w[0] and "270.00 m" in w[0]
+
+
+def wall_scene(rng, x_wall=1.0):
+    """A floor and a wall at x = x_wall (dense flat Gaussians), aligned frame."""
+    floor = flat_floor(rng, 20_000, 0.0, size=3.0)
+    floor.means[:, :2] -= 1.5
+    k = 20_000
+    p = np.column_stack([np.full(k, x_wall), rng.uniform(-1.5, 1.5, k), rng.uniform(0, 2, k)])
+    q = np.tile([np.cos(np.pi / 4), 0, np.sin(np.pi / 4), 0], (k, 1))  # disc normal along x
+    wall = GaussianScene.from_colors(p, q, np.column_stack([np.full(k, 0.02), np.full(k, 0.02), np.full(k, 0.002)]),
+                                     np.full(k, 0.95), np.full((k, 3), 0.7))
+    return concat(floor, wall)
+
+
+def test_visible_clearance_known_answer_and_rates():
+    from stages.costmap.render_check import RenderCheckConfig, estimate_rates, visible_clearance
+
+    g = wall_scene(np.random.default_rng(1))
+    xy = np.array([[0.9, 0.0], [0.7, 0.3], [0.3, -0.2], [-1.0, 0.0]])
+    v = visible_clearance(g, xy, Embodiment(), RenderCheckConfig(), backend="cpu")
+    assert np.allclose(v[1:3], [0.3, 0.7], atol=0.01), v
+    # 10 cm from a wall of 2 cm splats the side cameras see it obliquely: expected depth (the
+    # splats' centre depths) reads short by up to about two splat sigmas, never long
+    assert 0.1 - 0.045 <= v[0] <= 0.1 + 0.005, v
+    assert np.isinf(v[3])  # 2 m from the wall: beyond the crop, and the floor is never a hit
+    r = estimate_rates(np.array([True, True, False, False, True]), np.array([True, False, False, True, True]))
+    assert r["fp_est"] == 0.5 and r["fn_est"] == 1 / 3 and r["render_blocked"] == 3

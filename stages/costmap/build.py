@@ -329,3 +329,37 @@ def build_costmap(scene: GaussianScene, emb: Embodiment, cfg: CostmapConfig, vcf
             "supported_area_m2": float(sup.sum() * cfg.resolution ** 2), "free_components": int(n_comp),
             "support": sinfo, "floor": finfo}
     return layers, info
+
+
+def doorway_gaps(clearance: np.ndarray, res: float, min_area_m2: float = 2.0,
+                 widths=np.arange(0.3, 2.05, 0.05)) -> list[float]:
+    """Widths (metres) of the narrowest doorway-like gaps: growing the required width w, the
+    supported free space {clearance >= w / 2} splits into more regions of at least min_area_m2 at
+    each width that closes a passage between two such regions. Returns the widths at which the
+    count of such regions grew (narrowest first); empty for a single open space."""
+    out, prev = [], None
+    min_cells = min_area_m2 / (res * res)
+    for w in widths:
+        lab, n = ndimage.label(clearance >= w / 2)
+        big = int((np.bincount(lab.ravel())[1:] >= min_cells).sum()) if n else 0
+        if prev is not None and big > prev:
+            out.append(round(float(w), 2))
+        prev = big
+    return out
+
+
+SCALE_PLAUSIBLE = {"floor_to_ceiling_m": (1.8, 20.0), "narrowest_gap_m": (0.45, 5.0)}
+
+
+def scale_warnings(floor_to_ceiling: float | None, gaps: list[float]) -> list[str]:
+    """Warnings when a scene's measures are implausible for metres (wrong units: ingest.scale)."""
+    out = []
+    lo, hi = SCALE_PLAUSIBLE["floor_to_ceiling_m"]
+    if floor_to_ceiling is not None and not lo <= floor_to_ceiling <= hi:
+        out.append(f"floor-to-ceiling height {floor_to_ceiling:.2f} m is outside {lo}-{hi} m: are the scene's units "
+                   f"metres? (ingest.scale fixes them)")
+    lo, hi = SCALE_PLAUSIBLE["narrowest_gap_m"]
+    if gaps and gaps[0] < lo:
+        out.append(f"the narrowest doorway-like gap is {gaps[0]:.2f} m (< {lo} m): are the scene's units metres? "
+                   f"(ingest.scale fixes them)")
+    return out

@@ -3,12 +3,14 @@
 once and shared, as all embodiments use one grid)."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import zarr
 from omegaconf import OmegaConf
 
 from pipeline.atomic import atomic_path
-from stages.costmap.build import CostmapConfig, build_costmap, map_extent, support_mask
+from stages.costmap.build import CostmapConfig, build_costmap, doorway_gaps, map_extent, scale_warnings, support_mask
 from stages.gaussians.content import content_of
 from stages.gaussians.store import read_scene_zarr
 
@@ -49,10 +51,18 @@ def run(scene, cfg, catalog) -> dict:
                             "margin": layers.margin, "h_min": emb.h_min, "h_max": emb.h_max,
                             "layout": "[ny, nx], row = y; cell (i, j) centre = origin + ((j+.5) res, (i+.5) res)",
                             "info": info})
+            if emb.name == cfg.embodiment.name:
+                gaps = doorway_gaps(np.where(layers.support, layers.clearance, -1.0), layers.resolution)
+                g.attrs["doorway_gaps_m"] = gaps
             result["embodiments"][emb.name] = {"free_area_m2": round(info["free_area_m2"], 2),
                                                "main_component_area_m2": round(info["main_component_area_m2"], 2),
                                                "free_components": info["free_components"]}
         root.attrs["main_embodiment"] = cfg.embodiment.name
+        ceiling = json.loads(catalog.path("alignment", scene).read_text()).get("floor_to_ceiling_m")
+        root.attrs["scale"] = result["scale"] = {"floor_to_ceiling_m": ceiling, "narrowest_gaps_m": gaps[:5]}
+        warnings = scale_warnings(ceiling, gaps)
+        if warnings:
+            result["warnings"] = warnings
         if not np.asarray(support[0]).any():
             raise ValueError("the supported region is empty: no occupied structure found near the floor")
     return result

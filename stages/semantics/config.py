@@ -56,6 +56,9 @@ class SemanticsConfig:
 
     enabled: bool = True
     """Off: the stage writes no instance table (ObjectNav then needs instance_source=ground_truth)."""
+    shipped_labels: bool = True
+    """Use the ground-truth labels a real scene ships (SceneSplat instance.npy / segment.npy in its
+    .npy folder, or an InteriorGS / NavArena labels.json beside it) instead of a segmenter."""
     segmenter: str = "oracle"
     """Registry key (oracle | sam3) or "module:Class"."""
     categories: list[str] = field(default_factory=lambda: list(OBJECTNAV_CATEGORIES))

@@ -1,6 +1,8 @@
 """SceneSplat / InteriorGS ``.npy`` folders: coord.npy [N, 3] metres, color.npy [N, 3] (uint8 0-255,
 or float in [0, 1]), opacity.npy [N] or [N, 1] (activated, 0-1), quat.npy [N, 4] (w, x, y, z),
-scale.npy [N, 3] (activated, metres). Other files in the folder (lang_feat.npy, ...) are ignored."""
+scale.npy [N, 3] (activated, metres). SceneSplat's per-Gaussian labels, when shipped (instance.npy,
+segment.npy [N] int), are carried along as extras "instance" and "segment"; other files in the
+folder (lang_feat.npy, ...) are ignored."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -11,6 +13,7 @@ from stages.gaussians.errors import SceneFormatError
 from stages.gaussians.model import GaussianScene
 
 REQUIRED = ("coord", "color", "opacity", "quat", "scale")
+LABELS = ("instance", "segment")
 
 
 def read_npy_folder(path: str | Path) -> GaussianScene:
@@ -36,8 +39,18 @@ def read_npy_folder(path: str | Path) -> GaussianScene:
     color = arrs["color"].astype(np.float64)
     if arrs["color"].dtype == np.uint8 or color.max(initial=0) > 1.0 + 1e-6:
         color = color / 255.0
+    extras = {}
+    for k in LABELS:
+        if (path / f"{k}.npy").exists():
+            try:
+                a = np.load(path / f"{k}.npy", allow_pickle=False).reshape(-1)
+            except (ValueError, OSError, EOFError) as e:
+                raise SceneFormatError(path / f"{k}.npy", f"unreadable .npy ({e})") from None
+            if a.shape != (n,) or not np.issubdtype(a.dtype, np.integer):
+                raise SceneFormatError(path / f"{k}.npy", f"holds {a.size} {a.dtype} values, expected {n} integers")
+            extras[k] = a.astype(np.int32)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return GaussianScene.from_colors(arrs["coord"], arrs["quat"], arrs["scale"], op, color)
+        return GaussianScene.from_colors(arrs["coord"], arrs["quat"], arrs["scale"], op, color, extras)
 
 
 def write_npy_folder(path: str | Path, scene: GaussianScene) -> None:
@@ -49,3 +62,6 @@ def write_npy_folder(path: str | Path, scene: GaussianScene) -> None:
     np.save(path / "opacity.npy", scene.alphas.astype(np.float32)[:, None])
     np.save(path / "quat.npy", scene.quats)
     np.save(path / "scale.npy", scene.scales.astype(np.float32))
+    for k in LABELS:
+        if k in scene.extras:
+            np.save(path / f"{k}.npy", scene.extras[k].astype(np.int32))

@@ -1,0 +1,297 @@
+"""bench-real: the pipeline on real trained indoor scenes (catalogs/real_indoor.yaml), with the
+same parameters as the synthetic ones, and the checks that need no ground truth.
+
+Per scene: read time, floaters, up axis, floor error (height of the flat-surface density peak near
+the chosen floor), voxel grid against the content box, seconds per stage, free area and components,
+episodes per task, oracle SR under both protocols, the render-based FP / FN estimates of the
+costmap, the top-down costmap, the floor side view and three egocentric views at episode starts
+(CPU renderer, 320x240). Then, on realistic synthetic scenes (realism level moderate) against the
+mesh: the costmap's true state FP / FN rates and the render estimator's error at the same poses.
+
+Writes data/08_reports/bench_real.{json,md} and docs/bench_real.md. Pictures of the real scenes
+go to data/08_reports/bench_real/ only: their sources state no licence, so no render of them is
+committed or published (the markdown links the local files).
+  python -m benchmarks.real [--data data] [--synthetic-scenes 3] [--poses 200]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks import machine
+
+TASKS = ("pointnav", "imagenav", "objectnav")
+PROTOCOLS = ("distance", "explicit_stop")
+STAGES = ("ingest", "voxelize", "align", "costmap", "semantics", "asset", "episodes", "export")
+
+
+def compose(data: str, *over: str):
+    from hydra import compose as hydra_compose, initialize_config_dir
+
+    from pipeline.config import CONF_DIR, register_configs
+
+    register_configs()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return hydra_compose("config", overrides=[f"data_root={data}", "scenes=real_indoor", *over])
+
+
+def run_pipeline(data: str, executor: str) -> dict:
+    """The default stages, then the oracle under both protocols; returns the run summaries."""
+    from pipeline.executor import execute
+
+    out = {"dataset": execute(compose(data, f"executor={executor}"))}
+    for p in PROTOCOLS:
+        out[p] = execute(compose(data, f"executor={executor}", "stages=[evaluate]", "evaluate.agent=oracle",
+                                 f"evaluate.protocol={p}", "evaluate.render=false"))
+    return out
+
+
+def floor_error(aligned) -> float:
+    """|height| of the density peak of the flat, upward-facing content Gaussians within 0.3 m of
+    the chosen floor (1 cm bins): how far the plane sits from the floor the Gaussians show."""
+    from stages.align.floor import surface_normals
+
+    z = aligned.means[:, 2]
+    n, flat = surface_normals(aligned, 0.5)
+    sel = flat & (np.abs(n[:, 2]) > np.cos(np.radians(15))) & (np.abs(z) < 0.3)
+    hist, edges = np.histogram(z[sel], np.arange(-0.3, 0.3001, 0.01), weights=aligned.alphas[sel])
+    return float(abs(0.5 * (edges[np.argmax(hist)] + edges[np.argmax(hist) + 1])))
+
+
+def marker(catalog, scene, stage: str) -> dict:
+    p = catalog.path("markers", scene, stage=stage)
+    return json.loads(p.read_text()) if p.exists() else {}
+
+
+def episode_counts(catalog, scene) -> dict:
+    import pyarrow.parquet as pq
+
+    out = {}
+    for t in TASKS:
+        p = catalog.path("episodes", scene, task=t)
+        out[t] = pq.read_metadata(p).num_rows if p.exists() else 0
+    return out
+
+
+def oracle_sr(data: Path, scene_id: str) -> dict:
+    import pandas as pd
+
+    out = {}
+    for p in PROTOCOLS:
+        f = data / "07_eval" / f"oracle_{p}" / "results" / f"scene_id={scene_id}" / "part-0.parquet"
+        df = pd.read_parquet(f, columns=["task", "sr"]) if f.exists() else pd.DataFrame(columns=["task", "sr"])
+        out[p] = {"all": round(float(df["sr"].mean()), 4) if len(df) else None,
+                  **{t: round(float(g["sr"].mean()), 4) for t, g in df.groupby("task")}}
+    return out
+
+
+def egocentric_views(gs, catalog, scene, emb, folder: Path, k: int = 3) -> list[str]:
+    """RGB at the starts of the first k PointNav episodes (CPU renderer, 320x240)."""
+    import pyarrow.parquet as pq
+    from PIL import Image
+
+    from stages.render import Renderer
+    from stages.render.camera import embodiment_camera
+
+    p = catalog.path("episodes", scene, task="pointnav")
+    if not p.exists():
+        return []
+    ep = pq.read_table(p, columns=["start_x", "start_y", "start_yaw"]).to_pandas().head(k)
+    if not len(ep):
+        return []
+    vm, ks, w, h = embodiment_camera(emb, ep[["start_x", "start_y", "start_yaw"]].to_numpy(), 320, 240)
+    rgb = Renderer(gs, "cpu").render(vm, ks, w, h).rgb.numpy()
+    names = []
+    for i, im in enumerate(rgb):
+        name = f"{scene.name}_view{i}.png"
+        Image.fromarray((im * 255).round().astype(np.uint8)).save(folder / name)
+        names.append(name)
+    return names
+
+
+def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) -> dict:
+    from omegaconf import OmegaConf
+
+    from stages.costmap.query import Costmap
+    from stages.costmap.render_check import RenderCheckConfig, check_costmap
+    from stages.gaussians.content import content_of
+    from stages.gaussians.formats import read_gaussians
+    from stages.gaussians.store import read_scene_zarr
+
+    t0 = time.perf_counter()
+    read_gaussians(scene.path, None)
+    read_s = time.perf_counter() - t0
+    ingest = json.loads(catalog.path("ingest_report", scene).read_text())
+    align = json.loads(catalog.path("alignment", scene).read_text())
+    vox = marker(catalog, scene, "voxelize").get("info", {})
+    cm_info = marker(catalog, scene, "costmap").get("info", {})
+    emb = OmegaConf.to_object(cfg.embodiment)
+    gs, _ = read_scene_zarr(catalog.path("aligned", scene))
+    cm = Costmap.load(catalog.path("costmaps", scene), emb.name)
+    t0 = time.perf_counter()
+    rc = check_costmap(gs, cm, emb, RenderCheckConfig(poses=poses), backend="cpu")
+    rc_s = time.perf_counter() - t0
+    asset = catalog.path("asset", scene)
+    pics = {}
+    for name in ("costmap_topdown.png", "floor_side_view.png"):
+        if (asset / name).exists():
+            shutil.copyfile(asset / name, pictures / f"{scene.name}_{name}")
+            pics[name[:-4]] = f"{scene.name}_{name}"
+    pics["views"] = egocentric_views(gs, catalog, scene, emb, pictures)
+    main = cm_info.get("embodiments", {}).get(emb.name, {})
+    return {
+        "scene": scene.name, "scene_id": scene.scene_id, "source": scene.path, "format": scene.format,
+        "gaussians": ingest["validation"]["n_input"], "read_s": round(read_s, 2),
+        "floaters": ingest["content"]["floaters"], "content_box_m": ingest["content"]["content_box_m"],
+        "all_box_m": ingest["content"]["all_box_m"],
+        "up_axis": align["up_axis"], "tilt_deg": round(align["tilt_from_nearest_axis_deg"], 3),
+        "floor_error_m": round(floor_error(content_of(gs)), 4),
+        "floor_to_ceiling_m": align["floor_to_ceiling_m"], "ceiling_from": align["ceiling_from"],
+        "narrowest_gaps_m": cm_info.get("scale", {}).get("narrowest_gaps_m"),
+        "warnings": cm_info.get("warnings", []),
+        "grid_shape": vox.get("grid_shape"), "grid_voxels": vox.get("grid_voxels"),
+        "content_voxels": vox.get("content_voxels"),
+        "seconds": {s: marker(catalog, scene, s).get("duration_s") for s in STAGES},
+        "free_area_m2": main.get("free_area_m2"), "main_component_area_m2": main.get("main_component_area_m2"),
+        "free_components": main.get("free_components"),
+        "episodes": episode_counts(catalog, scene), "oracle_sr": oracle_sr(data, scene.scene_id),
+        "render_fp_est": round(rc["fp_est"], 4), "render_fn_est": round(rc["fn_est"], 4),
+        "render_check": {k: rc[k] for k in ("render_free", "render_blocked", "costmap_blocked", "poses")}
+        | {"seconds": round(rc_s, 1)},
+        "pictures": pics,
+    }
+
+
+def synthetic_validation(n_scenes: int, poses: int, gaussians: int) -> dict:
+    """Realistic synthetic scenes (moderate): costmap vs mesh, and the render estimator vs the truth."""
+    from benchmarks.spatial import run_scene
+    from stages.costmap.build import Embodiment
+    from stages.costmap.render_check import RenderCheckConfig
+    from stages.voxelize.field import VoxelizeConfig
+
+    rows = []
+    for k in range(n_scenes):
+        t0 = time.perf_counter()
+        r = run_scene(200 + k, gaussians, Embodiment(), VoxelizeConfig(), 3000, 600, realism="moderate",
+                      resolutions=(0.05,), timing=False, render_check=RenderCheckConfig(poses=poses))
+        r5 = r["res"]["0.05"]
+        rows.append({"seed": r["seed"], "align_tilt_deg": r["align_tilt_deg"], "align_height_m": r["align_height_m"],
+                     **{k2: r5[k2] for k2 in ("fp_state", "fn_state", "neg_state", "pos_state", "fp_motion",
+                                              "fn_motion", "neg_motion", "pos_motion")},
+                     "render_check": r["render_check"], "seconds": time.perf_counter() - t0})
+        print(f"synthetic {k}: FP {r5['fp_state']}/{r5['neg_state']} FN {r5['fn_state']}/{r5['pos_state']} "
+              f"estimate {r['render_check']}", flush=True)
+    tot = lambda key: sum(r[key] for r in rows)
+    errs = [e for r in rows for e in (r["render_check"]["abs_err_fp"], r["render_check"]["abs_err_fn"])]
+    return {"scenes": rows, "realism_fp_state": tot("fp_state") / max(tot("neg_state"), 1),
+            "realism_fn_state": tot("fn_state") / max(tot("pos_state"), 1),
+            "realism_fp_motion": tot("fp_motion") / max(tot("neg_motion"), 1),
+            "realism_fn_motion": tot("fn_motion") / max(tot("pos_motion"), 1),
+            "estimator_abs_err": float(np.mean(errs)), "estimator_abs_err_max": float(np.max(errs)),
+            "realism_align_max_tilt_deg": max(r["align_tilt_deg"] for r in rows),
+            "realism_align_max_height_m": max(r["align_height_m"] for r in rows)}
+
+
+def markdown(rep: dict, pictures_rel: str) -> str:
+    pct = lambda v: "n/a" if v is None else f"{100 * v:.1f} %"
+    lines = [f"# bench-real ({rep['machine']})", "",
+             "Real trained indoor scenes (`catalogs/real_indoor.yaml`), default parameters. Reproduce: `make bench-real`.",
+             "", "| | " + " | ".join(s["scene"] for s in rep["scenes"]) + " |",
+             "|---|" + "---|" * len(rep["scenes"])]
+    rows = [
+        ("Gaussians (read s)", lambda s: f"{s['gaussians']:,} ({s['read_s']:.1f} s, {s['format']})"),
+        ("floaters removed", lambda s: f"{s['floaters']:,}"),
+        ("extent: all / content (m)", lambda s: " x ".join(f"{v:.0f}" for v in s["all_box_m"]) + " / "
+         + " x ".join(f"{v:.1f}" for v in s["content_box_m"])),
+        ("up axis (tilt)", lambda s: f"{s['up_axis']} ({s['tilt_deg']:.2f} deg)"),
+        ("floor error vs density peak", lambda s: f"{100 * s['floor_error_m']:.1f} cm"),
+        ("floor to ceiling", lambda s: f"{s['floor_to_ceiling_m']:.2f} m ({s['ceiling_from']})"),
+        ("narrowest doorway-like gaps", lambda s: ", ".join(f"{g:.2f}" for g in s["narrowest_gaps_m"] or []) or "none"),
+        ("voxel grid / content voxels", lambda s: f"{s['grid_voxels']:,} / {s['content_voxels']:,} "
+         f"({s['grid_voxels'] / max(s['content_voxels'], 1):.2f}x)"),
+        ("free area (main component), components", lambda s: f"{s['free_area_m2']:.1f} m2 "
+         f"({s['main_component_area_m2']:.1f}), {s['free_components']}"),
+        ("episodes pointnav / imagenav / objectnav", lambda s: " / ".join(str(s["episodes"][t]) for t in TASKS)),
+        ("oracle SR distance / explicit stop", lambda s: f"{s['oracle_sr']['distance']['all']} / "
+         f"{s['oracle_sr']['explicit_stop']['all']}"),
+        ("render check: FP est / FN est (poses)", lambda s: f"{pct(s['render_fp_est'])} / {pct(s['render_fn_est'])} "
+         f"({s['render_check']['poses']}, {s['render_check']['render_blocked']} blocked in the render)"),
+        ("warnings", lambda s: "; ".join(s["warnings"]) or "none"),
+    ]
+    rows += [(f"seconds: {st}", (lambda st: lambda s: f"{s['seconds'][st]:.1f}" if s["seconds"][st] else "-")(st))
+             for st in STAGES]
+    for name, f in rows:
+        lines.append(f"| {name} | " + " | ".join(f(s) for s in rep["scenes"]) + " |")
+    v = rep["synthetic"]
+    lines += ["", f"## Realistic synthetic scenes (realism moderate, {len(v['scenes'])} scenes, against the mesh)", "",
+              "| figure | value | target |", "|---|---|---|",
+              f"| state FP / FN at 0.05 m | {pct(v['realism_fp_state'])} / {pct(v['realism_fn_state'])} | <= 5 % / 0 |",
+              f"| motion FP / FN | {pct(v['realism_fp_motion'])} / {pct(v['realism_fn_motion'])} | |",
+              f"| render estimator: mean / max abs. error of FP and FN rates | {pct(v['estimator_abs_err'])} / "
+              f"{pct(v['estimator_abs_err_max'])} | a few points |",
+              f"| floor normal / height error, worst scene | {v['realism_align_max_tilt_deg']:.3f} deg / "
+              f"{100 * v['realism_align_max_height_m']:.1f} cm | |", "",
+              "| seed | FP true | FP est | FN true | FN est | render = mesh verdict |", "|---|---|---|---|---|---|"]
+    for r in v["scenes"]:
+        c = r["render_check"]
+        lines.append(f"| {r['seed']} | {pct(c['fp_true'])} | {pct(c['fp_est'])} | {pct(c['fn_true'])} | "
+                     f"{pct(c['fn_est'])} | {pct(c['render_vs_mesh_agreement'])} |")
+    lines += ["", "## Pictures", "",
+              f"Written to `{pictures_rel}/` by the run, not committed: the real scenes' sources state no licence, "
+              "so their renders (and maps) stay on the machine that made them.", ""]
+    for s in rep["scenes"]:
+        p = s["pictures"]
+        lines.append(f"- {s['scene']}: " + ", ".join(f"`{pictures_rel}/{x}`" for x in
+                                                     [p.get("costmap_topdown"), p.get("floor_side_view"), *p["views"]] if x))
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", default="data")
+    ap.add_argument("--out", default="data/08_reports")
+    ap.add_argument("--docs", default="docs/bench_real.md")
+    ap.add_argument("--executor", default="sync", help="pipeline executor for the real scenes")
+    ap.add_argument("--poses", type=int, default=200, help="poses of the render check per scene")
+    ap.add_argument("--synthetic-scenes", type=int, default=3)
+    ap.add_argument("--synthetic-gaussians", type=int, default=300_000)
+    args = ap.parse_args(argv)
+    from pipeline.catalog import Catalog
+    from pipeline.config import CONF_DIR
+
+    data, out = Path(args.data), Path(args.out)
+    pictures = out / "bench_real"
+    pictures.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    runs = run_pipeline(str(data), args.executor)
+    cfg = compose(str(data))
+    catalog = Catalog(CONF_DIR.parent / cfg.scenes.catalog, data)
+    failures = [f for r in runs.values() for f in r["failures"]]
+    scenes = []
+    for scene in catalog.select():
+        if any(f["scene_id"] == scene.scene_id for f in failures):
+            print(f"{scene.name}: failed ({[f['error'] for f in failures if f['scene_id'] == scene.scene_id]})")
+            continue
+        scenes.append(scene_report(data, catalog, scene, cfg, args.poses, pictures))
+        print(json.dumps({k: v for k, v in scenes[-1].items() if k != "pictures"}), flush=True)
+    rep = {"machine": machine(), "scenes": scenes, "failures": failures,
+           "pipeline_wall_s": round(time.perf_counter() - t0, 1),
+           "synthetic": synthetic_validation(args.synthetic_scenes, args.poses, args.synthetic_gaussians)}
+    rep.update({k: rep["synthetic"][k] for k in ("realism_fp_state", "realism_fn_state", "estimator_abs_err")})
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "bench_real.json").write_text(json.dumps(rep, indent=1))
+    md = markdown(rep, str(pictures))
+    (out / "bench_real.md").write_text(md)
+    Path(args.docs).write_text(md)
+    print(md)
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
