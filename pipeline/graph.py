@@ -52,7 +52,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("ingest", "stages.ingest:run", ("synthesize",), ("ingest",), version="2"),
     Stage("voxelize", "stages.voxelize.stage:run", ("ingest",), ("voxelize",), version="3"),
     Stage("align", "stages.align.stage:run", ("voxelize",), ("align",), version="2"),
-    Stage("costmap", "stages.costmap.stage:run", ("align",), ("costmap", "voxelize", "embodiment"),
+    Stage("costmap", "stages.costmap.stage:run", ("align",), ("costmap", "voxelize", "embodiment"), version="2",
           inputs="stages.costmap.stage:hashed_inputs"),
     Stage("semantics", "stages.semantics.stage:run", ("costmap",), ("semantics", "embodiment")),
     Stage("asset", "stages.asset:run", ("costmap", "semantics"), ("asset",), version="3"),

@@ -241,8 +241,8 @@ def test_doorway_gaps_known_answer_and_scale_warnings():
     gaps = doorway_gaps(clr, res)
     assert len(gaps) >= 1 and abs(gaps[0] - 0.9) <= 0.1
     assert doorway_gaps(np.minimum.reduce(walls), res) == []  # one open room: no gap
-    assert scale_warnings(2.7, gaps) == []
-    w = scale_warnings(270.0, [0.09])
+    assert scale_warnings(2.7, gaps) == [] and scale_warnings(2.7, [0.3, 0.9]) == []  # one narrow passage is fine
+    w = scale_warnings(270.0, [0.09, 0.2])
     assert len(w) == 2 and "ingest.scale" in w[0] and "270.00 m" in w[0]
 
 
@@ -264,10 +264,10 @@ def test_visible_clearance_known_answer_and_rates():
     g = wall_scene(np.random.default_rng(1))
     xy = np.array([[0.9, 0.0], [0.7, 0.3], [0.3, -0.2], [-1.0, 0.0]])
     v = visible_clearance(g, xy, Embodiment(), RenderCheckConfig(), backend="cpu")
-    assert np.allclose(v[1:3], [0.3, 0.7], atol=0.01), v
-    # 10 cm from a wall of 2 cm splats the side cameras see it obliquely: expected depth (the
-    # splats' centre depths) reads short by up to about two splat sigmas, never long
-    assert 0.1 - 0.045 <= v[0] <= 0.1 + 0.005, v
+    # 10 cm from a wall of 2 cm splats the side cameras see it obliquely and expected depth reads
+    # short; the correction (1.2 sigma = 2.4 cm) makes it right near the robot radius and costs as
+    # much farther out, where no verdict depends on it
+    assert abs(v[0] - 0.1) <= 0.015 and np.allclose(v[1:3], [0.324, 0.724], atol=0.01), v
     assert np.isinf(v[3])  # 2 m from the wall: beyond the crop, and the floor is never a hit
     r = estimate_rates(np.array([True, True, False, False, True]), np.array([True, False, False, True, True]))
     assert r["fp_est"] == 0.5 and r["fn_est"] == 1 / 3 and r["render_blocked"] == 3

@@ -359,7 +359,7 @@ def scale_warnings(floor_to_ceiling: float | None, gaps: list[float]) -> list[st
         out.append(f"floor-to-ceiling height {floor_to_ceiling:.2f} m is outside {lo}-{hi} m: are the scene's units "
                    f"metres? (ingest.scale fixes them)")
     lo, hi = SCALE_PLAUSIBLE["narrowest_gap_m"]
-    if gaps and gaps[0] < lo:
-        out.append(f"the narrowest doorway-like gap is {gaps[0]:.2f} m (< {lo} m): are the scene's units metres? "
-                   f"(ingest.scale fixes them)")
+    if gaps and max(gaps) < lo:  # narrow passages exist (between cases, furniture); no door at all does not
+        out.append(f"every doorway-like gap is narrower than {lo} m (widest {max(gaps):.2f} m): are the scene's "
+                   f"units metres? (ingest.scale fixes them)")
     return out
