@@ -102,10 +102,10 @@ def egocentric_views(gs, catalog, scene, emb, folder: Path, k: int = 3) -> list[
     p = catalog.path("episodes", scene, task="pointnav")
     if not p.exists():
         return []
-    ep = pq.read_table(p, columns=["start_x", "start_y", "start_yaw"]).to_pandas().head(k)
+    ep = pq.read_table(p, columns=["start_position_x", "start_position_y", "start_yaw"]).to_pandas().head(k)
     if not len(ep):
         return []
-    vm, ks, w, h = embodiment_camera(emb, ep[["start_x", "start_y", "start_yaw"]].to_numpy(), 320, 240)
+    vm, ks, w, h = embodiment_camera(emb, ep.to_numpy(), 320, 240)
     rgb = Renderer(gs, "cpu").render(vm, ks, w, h).rgb.numpy()
     names = []
     for i, im in enumerate(rgb):

@@ -30,8 +30,7 @@ from stages.costmap.render_check import RenderCheckConfig, check_costmap, estima
 from stages.gaussians.content import CONTENT_KEY, content_mask, content_of
 from stages.synthetic.generate import SyntheticConfig, generate_scene
 from stages.synthetic.realism import RealismConfig
-from stages.voxelize.field import VoxelizeConfig, opacity_field
-from stages.voxelize.grid import grid_for_points
+from stages.voxelize.field import VoxelizeConfig
 
 RESOLUTIONS = (0.02, 0.05, 0.10)
 

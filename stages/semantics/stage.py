@@ -8,9 +8,7 @@ source "model_predicted"), which the episodes stage's ObjectNav and the asset's 
 """
 from __future__ import annotations
 
-import json
 import time
-from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq

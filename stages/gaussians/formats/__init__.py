@@ -40,7 +40,7 @@ def detect_format(path: str | Path) -> str:
         return "splat"
     if name.endswith(".spz"):
         return "spz"
-    raise SceneFormatError(p, f"cannot tell the 3DGS format from the name; expected .ply, .splat, .spz, .sog, "
+    raise SceneFormatError(p, "cannot tell the 3DGS format from the name; expected .ply, .splat, .spz, .sog, "
                                 "lod-meta.json / meta.json (SOG) or an .npy folder")
 
 
