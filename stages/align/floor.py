@@ -259,11 +259,15 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
     return n, float(d), info
 
 
+def nearest_axis(n: np.ndarray) -> tuple[str, float]:
+    """The signed coordinate axis nearest a unit direction ('-y') and the angle to it, degrees."""
+    k = int(np.argmax(np.abs(n)))
+    return ("-" if n[k] < 0 else "+") + "xyz"[k], float(np.degrees(np.arccos(min(1.0, abs(n[k])))))
+
+
 def axis_name(n: np.ndarray) -> str:
     """The signed coordinate axis nearest a direction, e.g. '-y' (with the angle when tilted > 1 deg)."""
-    k = int(np.argmax(np.abs(n)))
-    name = ("-" if n[k] < 0 else "+") + "xyz"[k]
-    tilt = float(np.degrees(np.arccos(min(1.0, abs(n[k])))))
+    name, tilt = nearest_axis(n)
     return name if tilt <= 1.0 else f"{name} (tilted {tilt:.1f} deg)"
 
 

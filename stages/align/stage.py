@@ -12,7 +12,7 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from pipeline.atomic import atomic_path, write_text_atomic
-from stages.align.floor import AlignConfig, axis_name, fit_floor, floor_transform, surface_normals
+from stages.align.floor import AlignConfig, axis_name, fit_floor, floor_transform, nearest_axis, surface_normals
 from stages.gaussians.cameras import camera_file, read_cameras
 from stages.gaussians.content import content_of
 from stages.gaussians.model import GaussianScene
@@ -79,7 +79,7 @@ def run(scene, cfg, catalog) -> dict:
         write_scene_zarr(tmp, aligned, {**attrs, "frame": "aligned", "source_to_aligned": t.tolist()})
     aligned_content = content_of(aligned)
     ceiling, how = ceiling_height(aligned_content, acfg)
-    tilt = float(np.degrees(np.arccos(np.clip(abs(n[np.argmax(np.abs(n))]), -1, 1))))
+    tilt = nearest_axis(n)[1]
     up = axis_name(n)
     summary = {"up_axis": up, "floor_normal_source": list(map(float, n)), "floor_offset": d,
                "tilt_from_nearest_axis_deg": tilt, "floor_to_ceiling_m": round(ceiling, 3), "ceiling_from": how,
