@@ -82,6 +82,22 @@ def test_floor_survives_heavy_reflections_and_shows_its_candidates():
     assert len(info["up_axis_candidates"]) >= 3
 
 
+@pytest.mark.parametrize("seed", [30, 31])
+def test_floor_of_round_gaussians_under_a_mirrored_room(seed):
+    """A trained floor can lose its flat Gaussians (thick, round splats) while the reflections
+    below it and the table tops above stay flat: the floor is still the room's densest opaque
+    layer and must win over the mirrored table tops under it."""
+    sc = realistic(seed, n=80_000, level="moderate", reflection_fraction=0.6, up_axis="+z")
+    g = sc.gaussians
+    canon_z = ((g.means.astype(float) - sc.transform[:3, 3]) @ sc.transform[:3, :3])[:, 2]
+    floor = np.abs(canon_z) < 0.03
+    g.log_scales[floor] = g.log_scales[floor].max(axis=1, keepdims=True)  # round, not flat
+    mask, _ = content_mask(g.means)
+    n, d, info = fit_floor(g.subset(mask), AlignConfig())
+    ang, h = floor_errors(sc, n, d)
+    assert ang < 1.0 and h < 0.03, (ang, h, info["floor_candidates"][:3])
+
+
 def test_capture_cameras_decide_which_side_is_up():
     sc = realistic(5, level="none")
     g = sc.gaussians
@@ -138,6 +154,44 @@ def test_thick_noisy_floor_is_free_and_what_rises_from_it_is_not():
     # the old model (every Gaussian may be an obstacle) speckles this floor
     old = CostmapConfig(resolution=0.05, margin_xy=0.0, floor_layer_max=0.0, floor_layer_min=-1.0, outlier_radius=0.0)
     assert build_costmap(scene, Embodiment(), old, VoxelizeConfig())[0].raw.sum() > 100
+
+
+def test_isolated_points_is_the_exact_neighbour_count():
+    from scipy.spatial.distance import cdist
+
+    from stages.costmap.build import isolated_points
+
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(0, 1, (600, 3)) * [2, 2, 0.5]
+    for k in (1, 4, 9):
+        within = (cdist(pts, pts) <= 0.1).sum(1) - 1  # others within the radius, brute force
+        assert np.array_equal(isolated_points(pts, 0.1, k), within < k)
+    assert isolated_points(pts[:3], 0.1, 4).all() and len(isolated_points(np.zeros((0, 3)), 0.1, 4)) == 0
+
+
+def test_haze_is_not_an_obstacle_but_an_opaque_wall_is():
+    """Large faint splats hugging a wall (trained scenes' view-dependent haze) would reach tau_occ in
+    the open air in front of it; only opaque Gaussians are obstacles."""
+    rng = np.random.default_rng(4)
+    floor = flat_floor(rng, 8_000, 0.005, size=2.0)
+    k = 2000
+    wall = GaussianScene.from_colors(np.column_stack([np.full(k, 1.8), rng.uniform(0, 2, k), rng.uniform(0, 1.2, k)]),
+                                     np.tile([1.0, 0, 0, 0], (k, 1)), np.tile([0.004, 0.03, 0.03], (k, 1)),
+                                     np.full(k, 0.95), np.full((k, 3), 0.5))
+    h = 1500
+    haze = GaussianScene.from_colors(np.column_stack([rng.uniform(1.3, 1.7, h), rng.uniform(0, 2, h), rng.uniform(0.1, 1.0, h)]),
+                                     np.tile([1.0, 0, 0, 0], (h, 1)), np.full((h, 3), 0.1), rng.uniform(0.03, 0.2, h),
+                                     np.full((h, 3), 0.5))
+    scene = concat(floor, wall, haze)
+    cfg = CostmapConfig(resolution=0.05, raw_resolution=0.025, margin_xy=0.0)
+    layers, info = build_costmap(scene, Embodiment(), cfg, VoxelizeConfig())
+    col = lambda x: int((x - layers.origin[0]) / 0.05)
+    row = layers.raw.shape[0] // 2
+    assert layers.raw[row, col(1.8)] and not layers.raw[row, col(1.5)]
+    assert info["floor"]["faint_dropped"] == h
+    cfg.min_obstacle_alpha = 0.0
+    hazy, _ = build_costmap(scene, Embodiment(), cfg, VoxelizeConfig())
+    assert hazy.raw[row, col(1.5)]  # without the rule the haze is a wall 30 cm in front of the wall
 
 
 def test_shared_real_scenes_align_with_minus_y_up():

@@ -15,10 +15,12 @@ two) is a piece of surface whose normal is its smallest axis.
    tolerance prefers the exact normal to a nearby coordinate axis) is the up axis, refined to the
    mean normal of the flat Gaussians facing along it. ``up_hint`` / cameras restrict the
    candidates to those within ``max_tilt_deg`` of them.
-3. Sign and height: for both signs, peaks of the height histogram of the flat Gaussians facing up
-   are floor candidates. Each is scored by
-   strength (the area its flat Gaussians cover / the largest such area: a floor spans the room,
-   while table tops are dense but small) x room above it (the share of the content's opacity
+3. Sign and height: for both signs, peaks of the height histograms of the flat Gaussians facing up
+   and of all opaque Gaussians (a thick, noisy trained floor may have lost its flat splats but is
+   still the room's densest layer) are floor candidates. Each is scored by
+   strength (the area the opaque Gaussians of its slab cover / the largest such area: a floor
+   spans the room, while table tops, and their mirror images under a shiny floor, are dense but
+   small) x room above it (the share of the content's opacity
    that lies above rather than below it: reflections below a shiny floor are a shallow layer, the
    room above reaches the ceiling) x furniture (opacity 0.05-1.2 m above it,
    relative to the best candidate): floors carry furniture, ceilings have lamps at most, and a
@@ -58,7 +60,7 @@ class AlignConfig:
     coverage_cell_m: float = 0.25
     """A floor candidate's strength is the area its flat Gaussians cover, counted in cells of this size, metres."""
     coverage_halfwidth_m: float = 0.08
-    """... taking the flat Gaussians within this distance of the candidate's height, metres."""
+    """... taking the opaque Gaussians (alpha >= refine_min_alpha) within this distance of the candidate's height, metres."""
     furniture_band: tuple[float, float] = (0.05, 1.2)
     """Heights above a floor candidate where furniture stands, metres."""
     up_hint: list[float] | None = None
@@ -194,6 +196,7 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
     # 2. sign and floor height
     t = p @ u
     facing = flat & (np.abs(normals @ u) > cos_t)
+    opaque = alpha >= cfg.refine_min_alpha
     e1 = np.cross(u, [1.0, 0, 0] if abs(u[0]) < 0.9 else [0, 1.0, 0])
     e1 /= np.linalg.norm(e1)
     plane_xy = np.stack([p @ e1, p @ np.cross(u, e1)], 1)
@@ -208,8 +211,15 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
         h = sign * t
         lo, hi = np.percentile(h, [0.5, 99.5])
         bins = np.arange(lo - 0.5, hi + 0.5 + cfg.bin_m, cfg.bin_m)
-        hist = gaussian_filter1d(np.histogram(h[facing], bins, weights=alpha[facing])[0], 1.0)
-        peak_ok = (hist >= np.roll(hist, 1)) & (hist >= np.roll(hist, -1)) & (hist >= cfg.min_peak_strength * hist.max())
+        peak_ok = np.zeros(len(bins) - 1, bool)
+        # peaks of the flat, facing surfaces, and of all the opacity: a thick noisy floor is no
+        # longer made of flat Gaussians but is still the densest layer of the room
+        for sel in (facing, opaque):
+            hist = gaussian_filter1d(np.histogram(h[sel], bins, weights=alpha[sel])[0], 1.0)
+            new = (hist >= np.roll(hist, 1)) & (hist >= np.roll(hist, -1)) & (hist >= cfg.min_peak_strength * hist.max())
+            for i in np.nonzero(new)[0]:
+                if not peak_ok[max(i - 2, 0):i + 3].any():
+                    peak_ok[i] = True
         cam_h = None if cam_pos is None else np.percentile(sign * (cam_pos @ u), 5)
         order = np.sort(h)
         csum = np.concatenate([[0.0], np.cumsum(alpha[np.argsort(h)])])
@@ -219,7 +229,7 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
             if cam_h is not None and z > cam_h - 0.1:
                 continue  # a floor lies below the cameras
             above, below = mass(z + 0.05, np.inf), mass(-np.inf, z - 0.05)
-            slab = facing & (np.abs(h - z) <= cfg.coverage_halfwidth_m)
+            slab = opaque & (np.abs(h - z) <= cfg.coverage_halfwidth_m)
             floors.append({"sign": sign, "height": float(z), "strength": float(coverage(slab)),
                            "open_above": float(above / max(above + below, 1e-12)),
                            "furniture": float(mass(z + cfg.furniture_band[0], z + cfg.furniture_band[1]))})

@@ -6,9 +6,12 @@ For an embodiment with radius r and body interval [h_min, h_max] above the floor
   spread give a floor layer per cell; Gaussians whose centre lies in it or below it (reflections
   under a shiny floor) are floor, never obstacles: a real obstacle rises above the floor and
   has Gaussians there.
+- Faint Gaussians (opacity below ``min_obstacle_alpha``) are haze: trained scenes put large
+  low-opacity Gaussians in front of surfaces to explain view-dependent colour, and many of them
+  together would reach tau_occ in open air. A surface is made of opaque Gaussians.
 - Isolated Gaussians (fewer than ``outlier_min_neighbours`` other non-floor centres within
-  ``outlier_radius``: open3d's radius outlier removal) are reconstruction noise hovering over
-  sparse floors, not objects. Everything else that reaches the body band is an obstacle.
+  ``outlier_radius``, an exact k-d tree count) are reconstruction noise hovering over sparse
+  floors, not objects. Everything else that reaches the body band is an obstacle.
 - M_raw: a column is an obstacle when any voxel of it whose z-extent meets the body interval
   is occupied (A >= tau_occ) by the non-floor Gaussians. The body band is voxelized at a finer xy resolution
   (``raw_resolution``) than the stored map so obstacle boundaries are known to ~1 cm.
@@ -111,6 +114,10 @@ class CostmapConfig:
     """Radius of the isolated-Gaussian test, metres (0 disables it)."""
     outlier_min_neighbours: int = 4
     """Non-floor Gaussians with fewer other centres within outlier_radius are noise, not obstacles."""
+    min_obstacle_alpha: float = 0.25
+    """Gaussians with a lower opacity are never obstacles (haze of trained scenes; 0 keeps all).
+    At synthetic.realism.level=moderate (1 M Gaussians) haze alone puts about a third of the free
+    poses in collision without it (bench-spatial's realism table)."""
     extra_margin: float = 0.0
     """Added to the interpolation margin, metres (a safety buffer beyond the exact bound)."""
     embodiments: list[str] = field(default_factory=list)
@@ -201,19 +208,30 @@ def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, d
 
 
 def obstacle_candidates(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, dict]:
-    """[N] bool: Gaussians that may be obstacles (not floor, not isolated noise), and a summary."""
+    """[N] bool: Gaussians that may be obstacles (not floor, not faint, not isolated noise), and a summary."""
     floor, info = floor_layer(scene, cfg)
-    cand = ~floor
+    faint = scene.alphas < cfg.min_obstacle_alpha
+    cand = ~floor & ~faint
+    info["faint_dropped"] = int((faint & ~floor).sum())
     if cfg.outlier_radius > 0 and cand.sum() > cfg.outlier_min_neighbours:
-        import open3d as o3d
-
-        pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(scene.means[cand].astype(np.float64)))
-        _, kept = pc.remove_radius_outlier(nb_points=cfg.outlier_min_neighbours + 1, radius=cfg.outlier_radius)
         idx = np.nonzero(cand)[0]
-        cand[:] = False
-        cand[idx[np.asarray(kept, dtype=np.int64)]] = True
-        info["isolated_dropped"] = int(len(idx) - len(kept))
+        kept = ~isolated_points(scene.means[idx], cfg.outlier_radius, cfg.outlier_min_neighbours)
+        cand[idx[~kept]] = False
+        info["isolated_dropped"] = int((~kept).sum())
     return cand, info
+
+
+def isolated_points(points: np.ndarray, radius: float, min_neighbours: int) -> np.ndarray:
+    """[N] bool: points with fewer than ``min_neighbours`` other points within ``radius`` (exact:
+    a k-d tree query of the min_neighbours + 1 nearest, the point itself included)."""
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points, np.float64)
+    if len(pts) == 0:
+        return np.zeros(0, bool)
+    d, _ = cKDTree(pts).query(pts, k=min_neighbours + 1, distance_upper_bound=radius)
+    d = d.reshape(len(pts), -1)
+    return ~np.isfinite(d[:, -1]) if d.shape[1] == min_neighbours + 1 else np.ones(len(pts), bool)
 
 
 def map_extent(scene: GaussianScene, cfg: CostmapConfig) -> tuple[tuple[float, float], tuple[int, int]]:

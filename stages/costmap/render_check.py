@@ -5,9 +5,12 @@ For each sampled pose the robot's surroundings are rendered (depth and opacity, 
 of 360 / n_dirs degrees each, at ``heights`` spread over the body band, rays within
 ``max_elevation_deg`` of horizontal); pixels that hit a surface (accumulated opacity >=
 ``min_alpha``) are back-projected, and the nearest one inside the body band gives the visible
-clearance (horizontal distance, metres). Steep rays are left out and the band is taken from
-``floor_guard`` above h_min: a renderer's expected depth of a large flat floor splat seen steeply is
-its centre's depth, which back-projects above the floor. The heights are spaced so that at the
+clearance (horizontal distance, metres). Splats centred below the band (from ``floor_guard``
+above h_min: the floor, its reflections, what the body steps over) are not rendered, steep rays are
+left out and hits count from the same height: a renderer's expected depth of a large floor splat
+is its centre's depth, which back-projects above the floor, and a floor splat centred next to a
+low camera covers its whole image at that one short depth (trained halls' floors are made of
+such 5-15 cm splats, scattered a few centimetres in height). The heights are spaced so that at the
 robot radius the cameras' vertical fields of view together cover the band.
 Expected depth reads splats seen obliquely near the camera short (the splats' centre depths, not the
 ray's hit): by up to about two splat sigmas at 10 cm from a wall. The visible clearance is therefore
@@ -92,6 +95,7 @@ def visible_clearance(scene, xy: np.ndarray, emb, cfg: RenderCheckConfig, backen
     out = np.full(len(c2w), np.inf)
     tree = cKDTree(scene.means[:, :2])
     alphas = scene.alphas
+    z = scene.means[:, 2]
     for i, near in enumerate(tree.query_ball_point(xy, cfg.crop_m)):
         if not near:
             continue
@@ -99,7 +103,8 @@ def visible_clearance(scene, xy: np.ndarray, emb, cfg: RenderCheckConfig, backen
         views = np.linalg.inv(cams).astype(np.float32)
         b0 = i * per_pose
         near = np.sort(near)
-        local = scene.subset(near[alphas[near] >= cfg.min_splat_alpha])
+        keep = (alphas[near] >= cfg.min_splat_alpha) & (z[near] >= emb.h_min + cfg.floor_guard)
+        local = scene.subset(near[keep])
         if not len(local):
             continue
         opaque = local.alphas >= cfg.min_alpha
