@@ -55,11 +55,10 @@ def run_pipeline(data: str, executor: str) -> dict:
 def floor_error(aligned) -> float:
     """|height| of the density peak of the flat, upward-facing content Gaussians within 0.3 m of
     the chosen floor (1 cm bins): how far the plane sits from the floor the Gaussians show."""
-    from stages.align.floor import surface_normals
+    from stages.align.floor import horizontal_surfaces
 
     z = aligned.means[:, 2]
-    n, flat = surface_normals(aligned, 0.5)
-    sel = flat & (np.abs(n[:, 2]) > np.cos(np.radians(15))) & (np.abs(z) < 0.3)
+    sel = horizontal_surfaces(aligned, 0.5, 15.0) & (np.abs(z) < 0.3)
     hist, edges = np.histogram(z[sel], np.arange(-0.3, 0.3001, 0.01), weights=aligned.alphas[sel])
     return float(abs(0.5 * (edges[np.argmax(hist)] + edges[np.argmax(hist) + 1])))
 

@@ -7,6 +7,7 @@ import pytest
 from stages.align.floor import AlignConfig, axis_name, fit_floor, floor_transform
 from stages.costmap.build import CostmapConfig, Embodiment, build_costmap, obstacle_candidates
 from stages.gaussians import GaussianScene
+from stages.gaussians.cameras import cameras_from_json
 from stages.gaussians.content import content_mask
 from stages.synthetic.generate import SyntheticConfig, generate_scene
 from stages.synthetic.realism import AXES, RealismConfig
@@ -101,14 +102,7 @@ def test_floor_of_round_gaussians_under_a_mirrored_room(seed):
 def test_capture_cameras_decide_which_side_is_up():
     sc = realistic(5, level="none")
     g = sc.gaussians
-    cams = []
-    for c in sc.cameras:
-        m = np.eye(4)
-        from stages.gaussians.model import quat_to_rotmat
-
-        m[:3, :3], m[:3, 3] = quat_to_rotmat(np.asarray(c["quat_wxyz"])), c["position"]
-        cams.append(m)
-    cams = np.stack(cams)
+    cams = cameras_from_json({"hfov_deg": 90.0, "poses": sc.cameras}, 8, 8)[0]  # the stage's own reader
     n, d, info = fit_floor(g, AlignConfig(), cams)
     assert info["used_cameras"] and floor_errors(sc, n, d)[0] < 0.5
     upside_down = cams.copy()

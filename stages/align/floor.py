@@ -93,6 +93,13 @@ def surface_normals(scene: GaussianScene, flat_ratio: float) -> tuple[np.ndarray
     return np.take_along_axis(rot, k[:, None, None], axis=2)[..., 0], flat
 
 
+def horizontal_surfaces(scene: GaussianScene, flat_ratio: float, tol_deg: float) -> np.ndarray:
+    """[N] bool: flat Gaussians whose normal is within tol_deg of vertical (aligned frame: floor,
+    ceiling, table tops)."""
+    normals, flat = surface_normals(scene, flat_ratio)
+    return flat & (np.abs(normals[:, 2]) > np.cos(np.radians(tol_deg)))
+
+
 def _canonical(d: np.ndarray) -> np.ndarray:
     """Unsigned direction: the sign that makes the largest component positive."""
     d = d / np.linalg.norm(d)

@@ -12,7 +12,7 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from pipeline.atomic import atomic_path, write_text_atomic
-from stages.align.floor import AlignConfig, axis_name, fit_floor, floor_transform, nearest_axis, surface_normals
+from stages.align.floor import AlignConfig, axis_name, fit_floor, floor_transform, horizontal_surfaces, nearest_axis
 from stages.gaussians.cameras import camera_file, read_cameras
 from stages.gaussians.content import content_of
 from stages.gaussians.model import GaussianScene
@@ -24,8 +24,7 @@ def ceiling_height(aligned: GaussianScene, cfg: AlignConfig) -> tuple[float, str
     band above 1.5 m where flat, horizontal Gaussians cover the most area; the 99.5th percentile of
     the content's heights when no ceiling was reconstructed (open halls, sparse captures)."""
     z = aligned.means[:, 2].astype(np.float64)
-    normals, flat = surface_normals(aligned, cfg.flat_ratio)
-    facing = flat & (np.abs(normals[:, 2]) > np.cos(np.radians(cfg.normal_tolerance_deg))) & (z > 1.5)
+    facing = horizontal_surfaces(aligned, cfg.flat_ratio, cfg.normal_tolerance_deg) & (z > 1.5)
     top = float(np.percentile(z, 99.5))
     floor_cells = len(np.unique(np.floor(aligned.means[np.abs(z) < 0.1, :2] / cfg.coverage_cell_m).astype(np.int64),
                                 axis=0))

@@ -173,11 +173,10 @@ def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, d
     The local floor height is the median height of the flat, horizontal Gaussians within
     ``floor_search`` of z = 0 in each ``floor_cell`` (3x3-cell median-filtered; 0 where none),
     the half-thickness 2.5 x their local robust spread (MAD), clipped to the configured range."""
-    from stages.align.floor import surface_normals
+    from stages.align.floor import horizontal_surfaces
 
     z = scene.means[:, 2].astype(np.float64)
-    normals, flat = surface_normals(scene, 0.5)
-    near = flat & (np.abs(normals[:, 2]) > np.cos(np.radians(20))) & (np.abs(z) < cfg.floor_search)
+    near = horizontal_surfaces(scene, 0.5, 20.0) & (np.abs(z) < cfg.floor_search)
     cell = np.floor(scene.means[:, :2] / cfg.floor_cell).astype(np.int64)
     lo = cell.min(0)
     shape = tuple(cell.max(0) - lo + 1)
@@ -230,8 +229,7 @@ def isolated_points(points: np.ndarray, radius: float, min_neighbours: int) -> n
     if len(pts) == 0:
         return np.zeros(0, bool)
     d, _ = cKDTree(pts).query(pts, k=min_neighbours + 1, distance_upper_bound=radius)
-    d = d.reshape(len(pts), -1)
-    return ~np.isfinite(d[:, -1]) if d.shape[1] == min_neighbours + 1 else np.ones(len(pts), bool)
+    return ~np.isfinite(d.reshape(len(pts), -1)[:, -1])  # the farthest of the k is beyond the radius
 
 
 def map_extent(scene: GaussianScene, cfg: CostmapConfig) -> tuple[tuple[float, float], tuple[int, int]]:

@@ -52,7 +52,7 @@ def run(scene, cfg, catalog) -> dict:
                             "layout": "[ny, nx], row = y; cell (i, j) centre = origin + ((j+.5) res, (i+.5) res)",
                             "info": info})
             if emb.name == cfg.embodiment.name:
-                gaps = doorway_gaps(np.where(layers.support, layers.clearance, -1.0), layers.resolution)
+                gaps = doorway_gaps(layers.clearance, layers.resolution)  # -1 where unsupported
                 g.attrs["doorway_gaps_m"] = gaps
             result["embodiments"][emb.name] = {"free_area_m2": round(info["free_area_m2"], 2),
                                                "main_component_area_m2": round(info["main_component_area_m2"], 2),
