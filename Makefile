@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
 
-.PHONY: setup dataset test test-all bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: setup dataset test lint test-all bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -22,8 +22,13 @@ setup: $(STAMP)
 dataset: $(STAMP)
 	$(BIN)/python -m pipeline $(ARGS)
 
-test: $(STAMP)
+# lint (ruff) and the import contracts (navcore <- stages <- pipeline) first, then the tests
+test: lint
 	$(BIN)/python -m pytest -q $(ARGS)
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/lint-imports
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q -m "slow or not slow" $(ARGS)

@@ -30,11 +30,12 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from benchmarks import machine
-from stages.costmap.build import Embodiment
-from stages.costmap.query import Costmap
+from navcore.io.datasets import CostmapDataset
+from navcore.nav.costmap import Costmap
+from navcore.nav.embodiment import Embodiment, Limits
+from navcore.nav.geodesic import eligible_cells
+from navcore.nav.poses import in_region
 from stages.episodes.config import EpisodesConfig
-from stages.episodes.geodesic import eligible_cells
-from stages.episodes.rollout import Limits, in_region
 from stages.episodes.validity import check_trajectory
 
 RELEASE_EPISODES = 22.2e6
@@ -85,11 +86,12 @@ def throughput_at_density(cfg, per_task: int) -> dict:
     the stored costmaps with the stage's own core: process CPU time, graph building included."""
     from omegaconf import OmegaConf
 
+    from navcore.instances import load_instances
+    from navcore.nav.geodesic import NavGraph, eligible_cells
+    from navcore.seeds import stream_seed
     from pipeline.executor import open_catalog
     from stages.episodes.config import PlannerConfig, TaskConfig
-    from stages.episodes.generate import EpisodeGenerator, stream_seed
-    from stages.episodes.geodesic import NavGraph, eligible_cells
-    from stages.instances import load_instances
+    from stages.episodes.generate import EpisodeGenerator
 
     catalog, scenes, _ = open_catalog(cfg)
     ecfg = OmegaConf.to_object(cfg.episodes)
@@ -98,7 +100,7 @@ def throughput_at_density(cfg, per_task: int) -> dict:
     shared, n, cpu = 0.0, dict.fromkeys(TASKS, 0), dict.fromkeys(TASKS, 0.0)
     for scene in scenes:
         c0 = time.process_time()
-        cm = Costmap.load(catalog.path("costmaps", scene), emb.name)
+        cm = catalog.dataset("costmaps", scene).load(emb.name)
         graph = NavGraph(cm, eligible_cells(cm, ecfg), ecfg.geodesic_neighbourhood)
         shared += time.process_time() - c0
         for t in TASKS:
@@ -118,16 +120,16 @@ def compare_planners(cfg, n: int = 100) -> dict:
     """Each registered planner on the first scene's PointNav: throughput and expert quality."""
     from omegaconf import OmegaConf
 
+    from navcore.nav.geodesic import NavGraph, eligible_cells
     from pipeline.executor import open_catalog
     from stages.episodes.config import PlannerConfig, TaskConfig
     from stages.episodes.generate import EpisodeGenerator
-    from stages.episodes.geodesic import NavGraph, eligible_cells
     from stages.episodes.planner import PLANNERS
 
     catalog, scenes, _ = open_catalog(cfg)
     ecfg = OmegaConf.to_object(cfg.episodes)
     emb = OmegaConf.to_object(cfg.embodiment)
-    cm = Costmap.load(catalog.path("costmaps", scenes[0]), emb.name)
+    cm = catalog.dataset("costmaps", scenes[0]).load(emb.name)
     graph = NavGraph(cm, eligible_cells(cm, ecfg), ecfg.geodesic_neighbourhood)
     tcfg: TaskConfig = OmegaConf.to_object(cfg.task["pointnav"])
     tcfg.episodes_per_scene = n
@@ -207,7 +209,7 @@ def main(argv=None) -> dict:
     rng = np.random.default_rng(0)
     ref_time = 0.0
     for sid in scenes:
-        cm = Costmap.load(data / "03_costmaps" / f"{sid}.zarr", emb.name)
+        cm = CostmapDataset(data / "03_costmaps" / f"{sid}.zarr").load(emb.name)
         t0 = time.perf_counter()
         ref = VisibilityReference(cm, eligible_cells(cm, ecfg))
         ref_time += time.perf_counter() - t0
@@ -318,7 +320,8 @@ def _histogram(eps: pd.DataFrame, cfg, path: Path) -> None:
 
 def _markdown(r: dict) -> str:
     lines = [f"# bench-episodes ({r['scenes']} synthetic scenes, planner {r['planner']}; {r['machine']})", "",
-             "| task | episodes | mean geodesic (m) | mean path (m) | mean steps (20 Hz) | total (h) | oracle actions | expert / geodesic (median, p95) | easy / medium / hard |",
+             "| task | episodes | mean geodesic (m) | mean path (m) | mean steps (20 Hz) | total (h) | oracle actions "
+             "| expert / geodesic (median, p95) | easy / medium / hard |",
              "|---|---|---|---|---|---|---|---|---|"]
     for t, v in r["table"].items():
         d = v["difficulty"]

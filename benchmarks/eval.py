@@ -22,18 +22,20 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import machine
-from stages.costmap.build import CostmapConfig, Embodiment, build_costmap
-from stages.costmap.query import Costmap
+from navcore.io.datasets import CostmapDataset
+from navcore.nav.costmap import Costmap
+from navcore.nav.embodiment import Embodiment
+from navcore.nav.geodesic import NavGraph, eligible_cells
+from navcore.voxels.field import VoxelizeConfig
+from stages.costmap.build import CostmapConfig, build_costmap
 from stages.episodes.config import EpisodesConfig
-from stages.episodes.geodesic import NavGraph, eligible_cells
 from stages.evaluate.env import EnvConfig, NavEnv, SceneContext
 from stages.evaluate.episode import Episode
-from stages.voxelize.field import VoxelizeConfig
 
 
 def bench_scene(seed: int, n: int, backend: str = "cpu"):
     """A synthetic scene in its canonical (already aligned) frame with its costmap and graph."""
-    from stages.synthetic.generate import SyntheticConfig, generate_scene
+    from stages.synthesize.generate import SyntheticConfig, generate_scene
 
     s = generate_scene(seed, SyntheticConfig(num_gaussians=n))
     gs = s.gaussians.transformed(np.linalg.inv(s.transform))
@@ -72,7 +74,7 @@ def steps_per_second(ctx, width: int, height: int, n_slots: int, n_steps: int, r
         _sync()
         rates.append(n_slots * (n_steps - 1) / (time.perf_counter() - t0))
     # the renderer alone on the same batch of poses (the raw frame rate beside the env's)
-    from stages.render.camera import embodiment_camera
+    from navcore.render.camera import embodiment_camera
 
     poses = np.stack([e.state.pose for e in env.envs]).astype(np.float64)
     vm, k, w, h = embodiment_camera(ctx.emb, poses, width, height)
@@ -128,7 +130,7 @@ def agents_on_dataset(data: Path) -> dict:
         for protocol in ("distance", "explicit_stop"):
             rows = []
             for sid, se in eps.groupby("scene_id"):
-                cm = Costmap.load(data / "03_costmaps" / f"{sid}.zarr", "locobot")
+                cm = CostmapDataset(data / "03_costmaps" / f"{sid}.zarr").load("locobot")
                 ctx = SceneContext(cm, NavGraph(cm, eligible_cells(cm, EpisodesConfig())), Embodiment())
                 episodes = [Episode.from_row(r) for r in se.to_dict("records")]
                 rows += run_episodes(ctx, episodes, make_agent(agent, seed=0), EnvConfig(render=False, protocol=protocol))

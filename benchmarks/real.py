@@ -32,7 +32,8 @@ STAGES = ("ingest", "voxelize", "align", "costmap", "semantics", "asset", "episo
 
 
 def compose(data: str, *over: str):
-    from hydra import compose as hydra_compose, initialize_config_dir
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
 
     from pipeline.config import CONF_DIR, register_configs
 
@@ -55,7 +56,7 @@ def run_pipeline(data: str, executor: str) -> dict:
 def floor_error(aligned) -> float:
     """|height| of the density peak of the flat, upward-facing content Gaussians within 0.3 m of
     the chosen floor (1 cm bins): how far the plane sits from the floor the Gaussians show."""
-    from stages.align.floor import horizontal_surfaces
+    from navcore.gaussians.surfaces import horizontal_surfaces
 
     z = aligned.means[:, 2]
     sel = horizontal_surfaces(aligned, 0.5, 15.0) & (np.abs(z) < 0.3)
@@ -95,8 +96,8 @@ def egocentric_views(gs, catalog, scene, emb, folder: Path, k: int = 3) -> list[
     import pyarrow.parquet as pq
     from PIL import Image
 
-    from stages.render import Renderer
-    from stages.render.camera import embodiment_camera
+    from navcore.render import Renderer
+    from navcore.render.camera import embodiment_camera
 
     p = catalog.path("episodes", scene, task="pointnav")
     if not p.exists():
@@ -117,11 +118,10 @@ def egocentric_views(gs, catalog, scene, emb, folder: Path, k: int = 3) -> list[
 def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) -> dict:
     from omegaconf import OmegaConf
 
-    from stages.costmap.query import Costmap
+    from navcore.gaussians.content import content_of
+    from navcore.gaussians.formats import read_gaussians
+    from navcore.gaussians.store import read_scene_zarr
     from stages.costmap.render_check import RenderCheckConfig, check_costmap
-    from stages.gaussians.content import content_of
-    from stages.gaussians.formats import read_gaussians
-    from stages.gaussians.store import read_scene_zarr
 
     t0 = time.perf_counter()
     read_gaussians(scene.path, None)
@@ -132,7 +132,7 @@ def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) ->
     cm_info = marker(catalog, scene, "costmap").get("info", {})
     emb = OmegaConf.to_object(cfg.embodiment)
     gs, _ = read_scene_zarr(catalog.path("aligned", scene))
-    cm = Costmap.load(catalog.path("costmaps", scene), emb.name)
+    cm = catalog.dataset("costmaps", scene).load(emb.name)
     t0 = time.perf_counter()
     rc = check_costmap(gs, cm, emb, RenderCheckConfig(poses=poses), backend="cpu")
     rc_s = time.perf_counter() - t0
@@ -170,9 +170,9 @@ def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) ->
 def synthetic_validation(n_scenes: int, poses: int, gaussians: int) -> dict:
     """Realistic synthetic scenes (moderate): costmap vs mesh, and the render estimator vs the truth."""
     from benchmarks.spatial import run_scene
-    from stages.costmap.build import Embodiment
+    from navcore.nav.embodiment import Embodiment
+    from navcore.voxels.field import VoxelizeConfig
     from stages.costmap.render_check import RenderCheckConfig
-    from stages.voxelize.field import VoxelizeConfig
 
     rows = []
     for k in range(n_scenes):

@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from stages.costmap.build import Embodiment
-from stages.render import Renderer
-from stages.render.camera import embodiment_camera
-from stages.synthetic.generate import SyntheticConfig, generate_scene
+from navcore.nav.embodiment import Embodiment
+from navcore.render import Renderer
+from navcore.render.camera import embodiment_camera
+from stages.synthesize.generate import SyntheticConfig, generate_scene
 
 
 def canonical_scene(seed: int, n: int):

@@ -31,14 +31,14 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import machine
-from stages.render import Renderer
+from navcore.gaussians.cameras import cameras_from_json
+from navcore.render import Renderer
 from stages.semantics.config import SemanticsConfig
 from stages.semantics.lifting import lift
 from stages.semantics.precision import score
 from stages.semantics.segmenters import CORRUPTION_LEVELS, OracleSegmenter, corrupt
-from stages.gaussians.cameras import cameras_from_json
 from stages.semantics.stage import category_masks, predict_instances, render_views
-from stages.synthetic.generate import SyntheticConfig, generate_scene, object_records
+from stages.synthesize.generate import SyntheticConfig, generate_scene, object_records
 
 LEVELS = ("none", "moderate", "heavy")
 VARIANTS = {

@@ -23,14 +23,15 @@ from pathlib import Path
 
 import numpy as np
 
+from navcore.gaussians.content import CONTENT_KEY, content_mask, content_of
+from navcore.nav.costmap import Costmap
+from navcore.nav.embodiment import Embodiment
+from navcore.voxels.field import VoxelizeConfig
 from stages.align.floor import AlignConfig, fit_floor, floor_transform
-from stages.costmap.build import CostmapConfig, Embodiment, build_costmap
-from stages.costmap.query import Costmap
+from stages.costmap.build import CostmapConfig, build_costmap
 from stages.costmap.render_check import RenderCheckConfig, check_costmap, estimate_rates
-from stages.gaussians.content import CONTENT_KEY, content_mask, content_of
-from stages.synthetic.generate import SyntheticConfig, generate_scene
-from stages.synthetic.realism import RealismConfig
-from stages.voxelize.field import VoxelizeConfig
+from stages.synthesize.generate import SyntheticConfig, generate_scene
+from stages.synthesize.realism import RealismConfig
 
 RESOLUTIONS = (0.02, 0.05, 0.10)
 
@@ -135,7 +136,7 @@ def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_
     can_to_al = t_align @ sc.transform
     height = float(np.abs((corners @ can_to_al[:3, :3].T + can_to_al[:3, 3])[:, 2]).max())
 
-    from stages.synthetic.surface import layout_mesh
+    from stages.synthesize.surface import layout_mesh
 
     mesh, _ = layout_mesh(sc.layout.parts)
     rng = np.random.default_rng(seed + 7)
@@ -200,11 +201,11 @@ def voxelize_1m_cpu(repeats: int = 3) -> dict:
     """Time and peak memory of voxelizing a 1M-Gaussian scene at 0.05 m, in a fresh process."""
     code = r"""
 import json, time, numpy as np, resource
-from stages.gaussians.content import CONTENT_KEY, content_mask, content_of
-from stages.synthetic.generate import SyntheticConfig, generate_scene
-from stages.synthetic.realism import RealismConfig
-from stages.voxelize.field import VoxelizeConfig, opacity_field
-from stages.voxelize.grid import grid_for_points
+from navcore.gaussians.content import CONTENT_KEY, content_mask, content_of
+from stages.synthesize.generate import SyntheticConfig, generate_scene
+from stages.synthesize.realism import RealismConfig
+from navcore.voxels.field import VoxelizeConfig, opacity_field
+from navcore.voxels.grid import grid_for_points
 def status(key):
     for line in open('/proc/self/status'):
         if line.startswith(key): return int(line.split()[1]) * 1024

@@ -17,9 +17,9 @@ import numpy as np
 def main(argv=None) -> int:
     import torch
 
-    from stages.synthetic.generate import SyntheticConfig, generate_scene
-    from stages.voxelize.field import VoxelizeConfig, opacity_field
-    from stages.voxelize.grid import grid_for_points
+    from navcore.voxels.field import VoxelizeConfig, opacity_field
+    from navcore.voxels.grid import grid_for_points
+    from stages.synthesize.generate import SyntheticConfig, generate_scene
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default="data/08_reports")

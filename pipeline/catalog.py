@@ -3,17 +3,23 @@
 A catalog YAML has ``scenes:`` (explicit entries; relative paths are relative to the catalog
 file's folder) and/or ``synthetic:`` (a generated range of
 procedural scenes), and may override entries of the shared layout (catalogs/layout.yaml) under
-``layout:``. Stage code asks ``catalog.path("costmaps", scene)``, never builds paths itself.
+``layout:``. Each layout entry is a path template and a dataset type (navcore/io/datasets.py);
+stage code asks ``catalog.dataset("costmaps", scene)`` and loads or saves through it, never
+building or opening paths itself. ``catalog.path`` is for the pipeline's own files (markers,
+run summaries) and for walking the roots of partitioned datasets.
 """
 from __future__ import annotations
 
 import hashlib
+import re
+import string
 from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
 
-from stages.gaussians.formats import detect_format
+from navcore.gaussians.formats import detect_format
+from navcore.io.datasets import TYPES, Dataset
 
 LAYOUT_FILE = Path(__file__).resolve().parent.parent / "catalogs" / "layout.yaml"
 
@@ -81,14 +87,52 @@ class Catalog:
                 self.scenes.append(SceneEntry(sid, name, group, "", "synthetic", seed,
                                               syn.get("num_gaussians")))
 
-    def path(self, dataset: str, scene: SceneEntry | None = None, **extra) -> Path:
-        """Resolve a logical dataset name to a path."""
+    def _entry(self, dataset: str) -> tuple[str, str | None]:
         if dataset not in self.layout:
             raise KeyError(f"dataset {dataset!r} is not in the layout ({', '.join(self.layout)})")
+        e = self.layout[dataset]
+        return (e, None) if isinstance(e, str) else (e["path"], e["type"])
+
+    def path(self, dataset: str, scene: SceneEntry | None = None, **extra) -> Path:
+        """Resolve a logical dataset name to a path."""
+        template, _ = self._entry(dataset)
         fields = {"root": str(self.root), **extra}
         if scene is not None:
             fields.update(scene_id=scene.scene_id, group=scene.group, name=scene.name)
-        return Path(self.layout[dataset].format(**fields))
+        try:
+            return Path(template.format(**fields))
+        except KeyError as e:
+            raise KeyError(f"dataset {dataset!r} ({template}) needs the field {e.args[0]!r}") from None
+
+    def dataset(self, dataset: str, scene: SceneEntry | None = None, **extra) -> Dataset:
+        """The typed dataset (load / save / writing) of a logical name, for one scene (and task,
+        run, ... where its path template has them)."""
+        _, kind = self._entry(dataset)
+        if kind is None:
+            raise KeyError(f"{dataset!r} is a folder of datasets, not a dataset; use catalog.path")
+        if kind not in TYPES:
+            raise ValueError(f"layout: dataset {dataset!r} has unknown type {kind!r} ({', '.join(TYPES)})")
+        return TYPES[kind](self.path(dataset, scene, **extra))
+
+    def find(self, dataset: str, scene: SceneEntry | None = None, **extra) -> dict[str, Dataset]:
+        """The existing datasets of a name whose path fields other than the given ones vary
+        (e.g. every task of one scene's episodes), keyed by the varying fields' values joined
+        with "/" (in the template's order), sorted."""
+        template, _ = self._entry(dataset)
+        fields = {"root": str(self.root), **extra}
+        if scene is not None:
+            fields.update(scene_id=scene.scene_id, group=scene.group, name=scene.name)
+        free = list(dict.fromkeys(n for _, n, _, _ in string.Formatter().parse(template) if n and n not in fields))
+        pattern = template.format(**{**{n: "*" for n in free}, **fields})
+        anchor = Path(pattern.split("*")[0]).parent if "*" in pattern else Path(pattern).parent
+        found = {}
+        regex = re.escape(pattern).replace(re.escape("*"), "([^/]+)")
+        for p in sorted(anchor.glob(str(Path(pattern).relative_to(anchor)))):
+            m = re.fullmatch(regex, str(p))
+            if m:
+                values = dict(zip(free, m.groups()))
+                found["/".join(m.groups())] = self.dataset(dataset, scene, **extra, **values)
+        return found
 
     def select(self, shard: int = 0, num_shards: int = 1, ids: list[str] | None = None,
                limit: int | None = None) -> list[SceneEntry]:

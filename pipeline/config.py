@@ -6,19 +6,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from hydra.core.config_store import ConfigStore
-from omegaconf import OmegaConf
 
+from navcore.gaussians.content import ContentConfig
+from navcore.gaussians.validate import ValidationLimits
+from navcore.nav.embodiment import Embodiment
+from navcore.voxels.field import VoxelizeConfig
+from pipeline.graph import DEFAULT_STAGES
 from stages.align.floor import AlignConfig
-from stages.costmap.build import CostmapConfig, Embodiment
+from stages.costmap.build import CostmapConfig
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
-from stages.episodes.export import ExportConfig
-from stages.episodes.goal_images import GoalImagesConfig
-from stages.semantics.config import SemanticsConfig
 from stages.evaluate.config import EvaluateConfig
-from stages.gaussians.content import ContentConfig
-from stages.gaussians.validate import ValidationLimits
-from stages.synthetic.generate import SyntheticConfig
-from stages.voxelize.field import VoxelizeConfig
+from stages.export.stage import ExportConfig
+from stages.goal_images.stage import GoalImagesConfig
+from stages.semantics.config import SemanticsConfig
+from stages.synthesize.generate import SyntheticConfig
 
 CONF_DIR = Path(__file__).resolve().parent.parent / "conf"
 
@@ -120,8 +121,7 @@ class AssetConfig:
 
 @dataclass
 class NavArenaConfig:
-    stages: list[str] = field(default_factory=lambda: ["synthesize", "ingest", "voxelize", "align", "costmap", "semantics",
-                                                       "asset", "episodes", "goal_images", "export"])
+    stages: list[str] = field(default_factory=lambda: list(DEFAULT_STAGES))
     """Stages to run (their missing or stale upstream stages run too); evaluate is not a default."""
     force: bool = False
     """Recompute the selected stages even when their markers are current."""
@@ -154,13 +154,3 @@ class NavArenaConfig:
 def register_configs() -> None:
     cs = ConfigStore.instance()
     cs.store(name="navarena_schema", node=NavArenaConfig)
-
-
-def load_embodiment(name: str) -> Embodiment:
-    """An embodiment from conf/embodiment/{name}.yaml (for costmap.embodiments)."""
-    path = CONF_DIR / "embodiment" / f"{name}.yaml"
-    if not path.exists():
-        known = sorted(p.stem for p in (CONF_DIR / "embodiment").glob("*.yaml"))
-        raise ValueError(f"unknown embodiment {name!r}; known: {', '.join(known)}")
-    node = OmegaConf.merge(OmegaConf.structured(Embodiment), OmegaConf.load(path))
-    return OmegaConf.to_object(node)

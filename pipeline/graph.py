@@ -2,12 +2,23 @@
 from __future__ import annotations
 
 import hashlib
-import importlib
 import json
 from dataclasses import dataclass
 from typing import Callable
 
 from omegaconf import OmegaConf
+
+from stages.align import stage as align
+from stages.asset import stage as asset
+from stages.costmap import stage as costmap
+from stages.episodes import stage as episodes
+from stages.evaluate import stage as evaluate
+from stages.export import stage as export
+from stages.goal_images import stage as goal_images
+from stages.ingest import stage as ingest
+from stages.semantics import stage as semantics
+from stages.synthesize import stage as synthesize
+from stages.voxelize import stage as voxelize
 
 
 @dataclass(frozen=True)
@@ -15,54 +26,48 @@ class Stage:
     """A pipeline stage keyed by scene.
 
     Attributes:
-        name: stage name (config key `stages`, marker folder).
-        target: "module:function" of its run(scene, cfg, catalog) -> dict.
+        name: stage name (config key `stages`, marker folder, and its package stages/<name>/).
+        run: its run(scene, cfg, catalog) -> dict.
         needs: upstream stages (per scene).
         config: config sections that determine its output (their change recomputes it).
         version: bump when the stage's code changes its output (stored outputs of another
             version are recomputed; v2 of voxelize: the bound exact over the voxel height).
         only_synthetic: the stage applies to synthetic scenes only (others pass through).
-        inputs: optional "module:function" of cfg -> JSON-able data the stage also reads from
-            outside its config sections (hashed with them), e.g. embodiment files.
-        finalize: optional "module:function" of (cfg, catalog) -> dict, run once after all scenes
-            of the stage (dataset-level files); it must derive them from what is on disk, so that
-            shards of one dataset agree.
+        inputs: optional function of cfg -> JSON-able data the stage also reads from outside its
+            config sections (hashed with them), e.g. embodiment files.
+        finalize: optional function of (cfg, catalog) -> dict, run once after all scenes of the
+            stage (dataset-level files); it must derive them from what is on disk, so that shards
+            of one dataset agree.
+        default: part of the default run (`stages` of the config); evaluate is not.
     """
 
     name: str
-    target: str
+    run: Callable
     needs: tuple[str, ...] = ()
     config: tuple[str, ...] = ()
     version: str = "1"
     only_synthetic: bool = False
-    inputs: str | None = None
-    finalize: str | None = None
-
-    def function(self) -> Callable:
-        return _load(self.target)
-
-
-def _load(target: str) -> Callable:
-    mod, fn = target.split(":")
-    return getattr(importlib.import_module(mod), fn)
+    inputs: Callable | None = None
+    finalize: Callable | None = None
+    default: bool = True
 
 
 STAGES: tuple[Stage, ...] = (
-    Stage("synthesize", "stages.synthetic.stage:run", (), ("synthetic",), only_synthetic=True),
-    Stage("ingest", "stages.ingest:run", ("synthesize",), ("ingest",), version="2"),
-    Stage("voxelize", "stages.voxelize.stage:run", ("ingest",), ("voxelize",), version="3"),
-    Stage("align", "stages.align.stage:run", ("voxelize",), ("align",), version="3"),
-    Stage("costmap", "stages.costmap.stage:run", ("align",), ("costmap", "voxelize", "embodiment"), version="3",
-          inputs="stages.costmap.stage:hashed_inputs"),
-    Stage("semantics", "stages.semantics.stage:run", ("costmap",), ("semantics", "embodiment")),
-    Stage("asset", "stages.asset:run", ("costmap", "semantics"), ("asset",), version="3"),
-    Stage("episodes", "stages.episodes.stage:run", ("costmap", "semantics"), ("episodes", "task", "planner", "embodiment")),
-    Stage("goal_images", "stages.episodes.goal_images:run", ("episodes",), ("goal_images",)),
-    Stage("export", "stages.episodes.export:run", ("episodes", "asset", "goal_images"), ("export",),
-          finalize="stages.episodes.export:finalize"),
-    Stage("evaluate", "stages.evaluate.stage:run", ("episodes",), ("evaluate", "episodes", "task", "embodiment"),
-          finalize="stages.evaluate.stage:finalize"),
+    Stage("synthesize", synthesize.run, (), ("synthetic",), only_synthetic=True),
+    Stage("ingest", ingest.run, ("synthesize",), ("ingest",), version="2"),
+    Stage("voxelize", voxelize.run, ("ingest",), ("voxelize",), version="3"),
+    Stage("align", align.run, ("voxelize",), ("align",), version="3"),
+    Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="3",
+          inputs=costmap.hashed_inputs),
+    Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment")),
+    Stage("asset", asset.run, ("costmap", "semantics"), ("asset",), version="3"),
+    Stage("episodes", episodes.run, ("costmap", "semantics"), ("episodes", "task", "planner", "embodiment")),
+    Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",)),
+    Stage("export", export.run, ("episodes", "asset", "goal_images"), ("export",), finalize=export.finalize),
+    Stage("evaluate", evaluate.run, ("episodes",), ("evaluate", "episodes", "task", "embodiment"),
+          finalize=evaluate.finalize, default=False),
 )
+DEFAULT_STAGES = [s.name for s in STAGES if s.default]
 BY_NAME = {s.name: s for s in STAGES}
 
 
@@ -88,7 +93,7 @@ def config_hashes(cfg) -> dict[str, str]:
     for s in STAGES:
         part = {k: OmegaConf.to_container(cfg[k], resolve=True) for k in s.config}
         if s.inputs:
-            part["_inputs"] = _load(s.inputs)(cfg)
+            part["_inputs"] = s.inputs(cfg)
         blob = json.dumps({"stage": s.name, "version": s.version, "config": part,
                            "needs": [out[n] for n in s.needs]}, sort_keys=True, default=str)
         out[s.name] = hashlib.sha256(blob.encode()).hexdigest()[:16]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from pipeline.atomic import write_text_atomic
+from navcore.io.atomic import write_text_atomic
 
 
 def read_marker(path: Path) -> dict | None:

@@ -1,3 +1,4 @@
+"""Fixtures shared by the test modules (they never import each other)."""
 import os
 from pathlib import Path
 
@@ -5,17 +6,34 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "2")
+_PROJECT = Path(__file__).resolve().parents[1]
 # the real 3DGS samples live beside the project (../shared/data/real), never in it;
 # NAVARENA_REAL_DATA points elsewhere
-REAL_DIR = Path(os.environ.get("NAVARENA_REAL_DATA") or Path(__file__).resolve().parents[2] / "shared" / "data" / "real")
+_REAL_DIR = Path(os.environ.get("NAVARENA_REAL_DATA") or _PROJECT.parent / "shared" / "data" / "real")
 # the real trained indoor scenes (SOG, SPZ) beside them; NAVARENA_REAL_INDOOR_DATA points elsewhere
-REAL_INDOOR_DIR = Path(os.environ.get("NAVARENA_REAL_INDOOR_DATA") or REAL_DIR.parent / "real_indoor")
-PROJECT = Path(__file__).resolve().parents[1]
+_REAL_INDOOR_DIR = Path(os.environ.get("NAVARENA_REAL_INDOOR_DATA") or _REAL_DIR.parent / "real_indoor")
+GRID_RES, GRID_RADIUS = 0.05, 0.1
+"""Cell size and robot radius of the hand-made grid costmaps."""
+
+
+@pytest.fixture(scope="session")
+def project_root() -> Path:
+    return _PROJECT
+
+
+@pytest.fixture(scope="session")
+def real_dir() -> Path:
+    return _REAL_DIR
+
+
+@pytest.fixture(scope="session")
+def real_indoor_dir() -> Path:
+    return _REAL_INDOOR_DIR
 
 
 @pytest.fixture(scope="session")
 def small_scene():
-    from stages.synthetic.generate import SyntheticConfig, generate_scene
+    from stages.synthesize.generate import SyntheticConfig, generate_scene
 
     return generate_scene(1, SyntheticConfig(num_gaussians=150_000))
 
@@ -23,3 +41,87 @@ def small_scene():
 @pytest.fixture
 def rng():
     return np.random.default_rng(0)
+
+
+@pytest.fixture(scope="session")
+def make_cfg():
+    """cfg(root, *overrides): the pipeline config of one small synthetic scene, run in-process."""
+    from hydra import compose, initialize_config_dir
+
+    from pipeline.config import CONF_DIR, register_configs
+
+    register_configs()
+
+    def make(root, *overrides):
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            return compose("config", overrides=[f"data_root={root}", "executor=sync", "scenes.count=1",
+                                                "scenes.num_gaussians=60000", *overrides])
+    return make
+
+
+@pytest.fixture(scope="session")
+def grid_costmap():
+    """costmap(free): a Costmap from a free-space grid (GRID_RES cells, radius GRID_RADIUS, margin 0):
+    clearance = distance to the nearest occupied cell, components by size."""
+    from scipy import ndimage
+
+    from navcore.nav.costmap import Costmap
+
+    def make(free: np.ndarray) -> Costmap:
+        clearance = (ndimage.distance_transform_edt(free) * GRID_RES).astype(np.float32)
+        valid = clearance >= GRID_RADIUS
+        lab, n = ndimage.label(valid, structure=np.ones((3, 3)))
+        sizes = ndimage.sum(valid, lab, range(1, n + 1))
+        order = np.argsort(-sizes) + 1
+        comp = np.zeros_like(lab)
+        for new, old in enumerate(order, 1):
+            comp[lab == old] = new
+        return Costmap(clearance, (0.0, 0.0), GRID_RES, GRID_RADIUS, 0.0, comp.astype(np.int32))
+    return make
+
+
+@pytest.fixture(scope="session")
+def room_with_door(grid_costmap):
+    """4 m x 3 m room (walls one cell thick), a wall at x = 2 m with a door for y in [2.0, 2.8]."""
+    free = np.ones((60, 80), bool)
+    free[[0, -1], :] = free[:, [0, -1]] = False
+    free[:, 40] = False
+    free[40:56, 40] = True
+    return grid_costmap(free)
+
+
+@pytest.fixture(scope="session")
+def ctx(room_with_door):
+    """The evaluation SceneContext of room_with_door (no renderer)."""
+    from navcore.nav.embodiment import Embodiment
+    from navcore.nav.geodesic import NavGraph
+    from stages.evaluate.env import SceneContext
+
+    cm = room_with_door
+    return SceneContext(cm, NavGraph(cm, ~cm.occupancy), Embodiment(radius=cm.radius))
+
+
+@pytest.fixture(scope="session")
+def make_episode():
+    """episode(start, goal, radius, geodesic, max_steps, **kw): a hand-made evaluation Episode."""
+    from stages.evaluate.episode import Episode
+
+    def make(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), radius=0.5, geodesic=2.0, max_steps=50, **kw):
+        g = np.array(goal, float)
+        return Episode("e0", kw.pop("task", "pointnav"), start, g, g[None], radius, geodesic, max_steps,
+                       goal_sources=g[None], **kw)
+    return make
+
+
+@pytest.fixture(scope="session")
+def episode_run(tmp_path_factory, make_cfg):
+    """The default graph through export on one generated scene: (root, overrides, summary)."""
+    from pipeline.executor import execute
+
+    root = tmp_path_factory.mktemp("episodes")
+    over = ["stages=[export]", "task.pointnav.episodes_per_scene=30", "task.imagenav.episodes_per_scene=20",
+            "task.objectnav.episodes_per_scene=20", "episodes.splits.train=0.75", "+episodes.splits.val_seen=0.25",
+            "export.chunk_size=8"]
+    summary = execute(make_cfg(root, *over))
+    assert not summary["failures"], summary["failures"]
+    return root, over, summary

@@ -7,49 +7,27 @@ import numpy as np
 import pandas as pd
 import pyarrow.parquet as pq
 import pytest
-from scipy import ndimage
 
-from stages.costmap.query import Costmap
+from navcore.io.datasets import CostmapDataset
+from navcore.nav.actions import MOVE_FORWARD, STOP
+from navcore.nav.embodiment import Embodiment, Limits
+from navcore.nav.geodesic import NavGraph, max_detour
+from navcore.nav.oracle import discrete_expert
+from navcore.nav.poses import integrate, relative_waypoints
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.generate import EpisodeGenerator, habitat_keep_probability, scene_split, split_names
-from stages.episodes.geodesic import NavGraph, max_detour
 from stages.episodes.planner import ScenePlanner, seed_ompl
-from stages.episodes.rollout import (MOVE_FORWARD, STOP, Limits, discrete_expert, integrate, relative_waypoints,
-                                     rollout, speed_profile)
+from stages.episodes.rollout import rollout, speed_profile
 from stages.episodes.validity import check_trajectory
-from stages.costmap.build import Embodiment
 
-RES, RADIUS = 0.05, 0.1
 LIMITS = Limits(0.45, 0.8, 0.25, 0.6)
-
-
-def grid_costmap(free: np.ndarray) -> Costmap:
-    """A costmap from a free-space grid: clearance = distance to the nearest occupied cell."""
-    clearance = (ndimage.distance_transform_edt(free) * RES).astype(np.float32)
-    valid = clearance >= RADIUS
-    lab, n = ndimage.label(valid, structure=np.ones((3, 3)))
-    sizes = ndimage.sum(valid, lab, range(1, n + 1))
-    order = np.argsort(-sizes) + 1
-    comp = np.zeros_like(lab)
-    for new, old in enumerate(order, 1):
-        comp[lab == old] = new
-    return Costmap(clearance, (0.0, 0.0), RES, RADIUS, 0.0, comp.astype(np.int32))
-
-
-def room_with_door() -> Costmap:
-    """4 m x 3 m room (walls one cell thick), a wall at x = 2 m with a door for y in [2.0, 2.8]."""
-    free = np.ones((60, 80), bool)
-    free[[0, -1], :] = free[:, [0, -1]] = False
-    free[:, 40] = False
-    free[40:56, 40] = True
-    return grid_costmap(free)
 
 
 def cell_of(cm, x, y):
     return np.array([int(y / cm.resolution), int(x / cm.resolution)])
 
 
-def test_geodesic_open_space_is_euclidean_within_the_neighbourhood_bound():
+def test_geodesic_open_space_is_euclidean_within_the_neighbourhood_bound(grid_costmap):
     free = np.ones((60, 80), bool)
     free[[0, -1], :] = free[:, [0, -1]] = False
     cm = grid_costmap(free)
@@ -65,21 +43,21 @@ def test_geodesic_open_space_is_euclidean_within_the_neighbourhood_bound():
     assert (d8 / np.maximum(e, 1e-9)).max() > 1.05
 
 
-def test_geodesic_through_a_door_matches_the_lower_bound():
-    cm = room_with_door()
+def test_geodesic_through_a_door_matches_the_lower_bound(room_with_door, grid_costmap):
+    cm = room_with_door
     g = NavGraph(cm, ~cm.occupancy)
     a, b = np.array([1.0, 0.5]), np.array([3.0, 0.5])
     f = g.field(cell_of(cm, *b)[None])
     d = f.at_cells(cell_of(cm, *a)[None])[0]
     ca, cb = cm.cell_centers(np.array([cell_of(cm, *a), cell_of(cm, *b)]))
-    # the exact continuous answer: the wall's cells dilated by RADIUS form a convex capsule; the
+    # the exact continuous answer: the wall's cells dilated by cm.radius form a convex capsule; the
     # taut path from a to b runs tangent to the disc of its top cell (2.025, 1.975), over the arc,
     # and tangent down to b
     c = np.array([2.025, 1.975])
     da, db = np.hypot(*(ca - c)), np.hypot(*(cb - c))
     ta, tb = math.atan2(*(ca - c)[::-1]), math.atan2(*(cb - c)[::-1])
-    arc = 2 * math.pi - (tb - ta) - math.acos(RADIUS / da) - math.acos(RADIUS / db)
-    exact = math.sqrt(da**2 - RADIUS**2) + math.sqrt(db**2 - RADIUS**2) + RADIUS * arc
+    arc = 2 * math.pi - (tb - ta) - math.acos(cm.radius / da) - math.acos(cm.radius / db)
+    exact = math.sqrt(da**2 - cm.radius**2) + math.sqrt(db**2 - cm.radius**2) + cm.radius * arc
     assert exact <= d <= exact * 1.01
     # the field's path is a chain of valid straight motions whose length is the distance
     path = f.path_xy(cell_of(cm, *a))
@@ -92,8 +70,8 @@ def test_geodesic_through_a_door_matches_the_lower_bound():
     assert np.isinf(g2.field(cell_of(cm, *b)[None]).at_cells(cell_of(cm, *a)[None])[0])
 
 
-def test_multi_source_field_is_the_minimum_of_single_fields():
-    cm = room_with_door()
+def test_multi_source_field_is_the_minimum_of_single_fields(room_with_door):
+    cm = room_with_door
     g = NavGraph(cm, ~cm.occupancy)
     srcs = np.array([cell_of(cm, 1.0, 1.0), cell_of(cm, 3.5, 2.5)])
     multi = g.field(srcs).node_dist
@@ -113,8 +91,8 @@ def test_speed_profile_covers_the_distance_within_limits(total):
     assert np.minimum(0.45, 0.25 * 0.05 * np.minimum(k, n + 1 - k)).sum() * 0.05 < total
 
 
-def test_rollout_follows_the_path_and_passes_the_filter():
-    cm = room_with_door()
+def test_rollout_follows_the_path_and_passes_the_filter(room_with_door):
+    cm = room_with_door
     path = np.array([[1.0, 0.5], [1.85, 2.1], [2.2, 2.1], [3.0, 0.5]])
     ro = rollout(path, 0.3, 1.0, LIMITS, 0.05)
     assert ro["x"][-1] == pytest.approx(3.0) and ro["y"][-1] == pytest.approx(0.5)
@@ -128,7 +106,7 @@ def test_rollout_follows_the_path_and_passes_the_filter():
     c, s = np.cos(ro["yaw"]), np.sin(ro["yaw"])
     assert np.allclose(ro["x"][:-1] + (c * dx - s * dy)[:-1], ro["x"][1:])
     goal = lambda px, py: math.hypot(px - 3.0, py - 0.5) <= 0.5  # noqa: E731
-    args = (cm, RADIUS, LIMITS, 0.05, goal)
+    args = (cm, cm.radius, LIMITS, 0.05, goal)
     assert check_trajectory(ro["x"], ro["y"], ro["yaw"], ro["v"], ro["w"], *args) is None
     # each corruption is caught with its reason
     bad = {k: v.copy() for k, v in ro.items()}
@@ -150,8 +128,8 @@ def test_rollout_follows_the_path_and_passes_the_filter():
     assert check_trajectory(lying["x"], lying["y"], lying["yaw"], lying["v"], lying["w"], *args) == "controls"
 
 
-def test_ompl_expert_is_valid_deterministic_and_near_the_geodesic():
-    cm = room_with_door()
+def test_ompl_expert_is_valid_deterministic_and_near_the_geodesic(room_with_door):
+    cm = room_with_door
     g = NavGraph(cm, ~cm.occupancy)
     a, b = cm.cell_centers(np.array([cell_of(cm, 1.0, 0.5), cell_of(cm, 3.0, 0.5)]))
     geo = g.field(cell_of(cm, 3.0, 0.5)[None]).at_cells(cell_of(cm, 1.0, 0.5)[None])[0]
@@ -170,8 +148,8 @@ def test_ompl_expert_is_valid_deterministic_and_near_the_geodesic():
         ScenePlanner(cm, PlannerConfig(name="nope"))
 
 
-def test_discrete_expert_reaches_the_goal_through_the_door():
-    cm = room_with_door()
+def test_discrete_expert_reaches_the_goal_through_the_door(room_with_door):
+    cm = room_with_door
     g = NavGraph(cm, ~cm.occupancy)
     goal = np.array([3.0, 0.5])
     f = g.field(cell_of(cm, *goal)[None])
@@ -212,15 +190,15 @@ def test_sampling_rules():
 
 
 @pytest.mark.parametrize("task", ["pointnav", "imagenav", "objectnav"])
-def test_generator_yields_valid_balanced_episodes(task):
-    cm = room_with_door()
+def test_generator_yields_valid_balanced_episodes(task, room_with_door):
+    cm = room_with_door
     g = NavGraph(cm, ~cm.occupancy)
     ecfg = EpisodesConfig()
     ecfg.difficulty.upper = [2.0, 3.0, 1e9]
     tcfg = TaskConfig(type=task, episodes_per_scene=24, success_radius=0.5 if task == "pointnav" else 1.0)
     inst = [{"instance_id": 4, "category": "chair", "center_x": 3.5, "center_y": 2.5, "center_z": 0.4,
              "min_x": 3.3, "min_y": 2.3, "min_z": 0.0, "max_x": 3.7, "max_y": 2.7, "max_z": 0.8}]
-    gen = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), Embodiment(radius=RADIUS), "t/scene", 3, inst)
+    gen = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), Embodiment(radius=cm.radius), "t/scene", 3, inst)
     res = gen.generate()
     assert len(res.episodes) == 24
     diff = [e["difficulty"] for e in res.episodes]
@@ -234,25 +212,11 @@ def test_generator_yields_valid_balanced_episodes(task):
             vp = json.loads(e["goals_json"])[0]["view_points"]
             assert all(math.hypot(p["position"][0] - 3.5, p["position"][1] - 2.5) <= 1.0 for p in vp)
     # same seed, same episodes
-    again = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), Embodiment(radius=RADIUS), "t/scene", 3, inst)
+    again = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), Embodiment(radius=cm.radius), "t/scene", 3, inst)
     assert [e["start_position_x"] for e in again.generate().episodes] == [e["start_position_x"] for e in res.episodes]
 
 
 # ---- the stage on a generated scene: storage, re-check, determinism, exports ---------------------
-
-@pytest.fixture(scope="module")
-def episode_run(tmp_path_factory):
-    from tests.test_pipeline import make_cfg
-    from pipeline.executor import execute
-
-    root = tmp_path_factory.mktemp("episodes")
-    over = ["stages=[export]", "task.pointnav.episodes_per_scene=30", "task.imagenav.episodes_per_scene=20",
-            "task.objectnav.episodes_per_scene=20", "episodes.splits.train=0.75", "+episodes.splits.val_seen=0.25",
-            "export.chunk_size=8"]
-    summary = execute(make_cfg(root, *over))
-    assert not summary["failures"], summary["failures"]
-    return root, over, summary
-
 
 def test_stored_episodes_query_with_pandas_and_pass_the_recheck(episode_run):
     root, _, summary = episode_run
@@ -262,7 +226,7 @@ def test_stored_episodes_query_with_pandas_and_pass_the_recheck(episode_run):
     assert len(obj) and (obj["goal_type"] == "object").all()
     trajs = pd.read_parquet(root / "06_trajectories")
     sid = obj["scene_id"].iloc[0]
-    cm = Costmap.load(root / "03_costmaps" / f"{sid}.zarr", "locobot")
+    cm = CostmapDataset(root / "03_costmaps" / f"{sid}.zarr").load("locobot")
     emb = Embodiment()
     for (task, eid), t in trajs.groupby(["task", "episode_id"], observed=True):
         e = eps[(eps["task"] == task) & (eps["episode_id"] == eid)].iloc[0]
@@ -287,8 +251,7 @@ def test_stored_episodes_query_with_pandas_and_pass_the_recheck(episode_run):
     assert summary["results"][-1]["stage"] == "export:finalize"
 
 
-def test_episode_shards_are_byte_identical_on_rerun_with_workers(episode_run, tmp_path):
-    from tests.test_pipeline import make_cfg
+def test_episode_shards_are_byte_identical_on_rerun_with_workers(episode_run, tmp_path, make_cfg):
     from pipeline.executor import execute
 
     root, over, _ = episode_run
@@ -302,7 +265,7 @@ def test_episode_shards_are_byte_identical_on_rerun_with_workers(episode_run, tm
 
 
 def test_exports_read_back_equal_to_the_store(episode_run):
-    from stages.episodes.export import NAVARENA_EPISODE_COLUMNS, NAVARENA_TRAJECTORY_COLUMNS, habitat_position
+    from stages.export.stage import NAVARENA_EPISODE_COLUMNS, NAVARENA_TRAJECTORY_COLUMNS, habitat_position
 
     root, _, _ = episode_run
     eps = pd.read_parquet(root / "05_episodes")
@@ -353,14 +316,13 @@ def test_exports_read_back_equal_to_the_store(episode_run):
         assert n == len(store)
 
 
-def test_goal_images_rendered_at_the_goal_camera_and_exported(episode_run):
+def test_goal_images_rendered_at_the_goal_camera_and_exported(episode_run, make_cfg):
     from PIL import Image
 
+    from navcore.gaussians.store import read_scene_zarr
+    from navcore.render import Renderer
+    from navcore.render.camera import intrinsics, viewmats
     from pipeline.executor import execute
-    from stages.gaussians.store import read_scene_zarr
-    from stages.render import Renderer
-    from stages.render.camera import intrinsics, viewmats
-    from tests.test_pipeline import make_cfg
 
     root, over, _ = episode_run
     summary = execute(make_cfg(root, *over[:-1], "export.chunk_size=8", "goal_images.enabled=true"))

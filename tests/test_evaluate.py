@@ -4,39 +4,23 @@ import math
 import numpy as np
 import pytest
 
-from stages.costmap.build import Embodiment
-from stages.episodes.geodesic import NavGraph
-from stages.episodes.rollout import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
+from navcore.nav.actions import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from stages.evaluate.agents import make_agent
-from stages.evaluate.env import EnvConfig, NavEnv, SceneContext
-from stages.evaluate.episode import Episode
+from stages.evaluate.env import EnvConfig, NavEnv
 from stages.evaluate.loop import run_episode, run_episodes
 from stages.evaluate.metrics import aggregate, dtw, episode_metrics
-from tests.test_episodes import RADIUS, episode_run, room_with_door  # noqa: F401 (fixture)
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    cm = room_with_door()
-    return SceneContext(cm, NavGraph(cm, ~cm.occupancy), Embodiment(radius=RADIUS))
-
-
-def episode(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), radius=0.5, geodesic=2.0, max_steps=50, **kw):
-    g = np.array(goal, float)
-    return Episode("e0", kw.pop("task", "pointnav"), start, g, g[None], radius, geodesic, max_steps,
-                   goal_sources=g[None], **kw)
-
-
-def test_moves_collisions_and_action_forms(ctx):
+def test_moves_collisions_and_action_forms(ctx, make_episode):
     env = NavEnv(ctx, EnvConfig(render=False))
-    env.reset(episode(start=(1.0, 0.5, -math.pi / 2)))  # facing the wall at y = 0
+    env.reset(make_episode(start=(1.0, 0.5, -math.pi / 2)))  # facing the wall at y = 0
     env.step(MOVE_FORWARD)
     assert env.state.y == pytest.approx(0.25) and env.state.collisions == 0
     env.step(MOVE_FORWARD)  # would end at y = 0, inside the wall: rejected
     assert env.state.y == pytest.approx(0.25) and env.state.collisions == 1 and env.state.moves == 2
     env.step(TURN_LEFT)  # turning in place never collides
     assert env.state.yaw == pytest.approx(-math.pi / 2 + math.radians(15))
-    env.reset(episode())
+    env.reset(make_episode())
     env.step({"waypoints": [{"x": 0.2, "y": 0.1, "yaw": 0.3}]})
     assert (env.state.x, env.state.y, env.state.yaw) == pytest.approx((1.2, 0.6, 0.3))
     env.step({"v": 0.5, "w": 1.0, "dt": 0.2})  # 0.1 m along the heading, then +0.2 rad
@@ -50,9 +34,9 @@ def test_moves_collisions_and_action_forms(ctx):
         env.step({"jump": 1})
 
 
-def test_explicit_stop_outside_the_region_fails(ctx):
+def test_explicit_stop_outside_the_region_fails(ctx, make_episode):
     env = NavEnv(ctx, EnvConfig(render=False, protocol="explicit_stop"))
-    env.reset(episode())
+    env.reset(make_episode())
     env.step(MOVE_FORWARD)
     _, info = env.step(STOP)
     assert info["done"] and not info["success"] and info["end_reason"] == "stop"
@@ -64,9 +48,9 @@ def test_explicit_stop_outside_the_region_fails(ctx):
         env.step(MOVE_FORWARD)
 
 
-def test_distance_protocol_ends_on_entry_and_stop_only_consumes_a_step(ctx):
+def test_distance_protocol_ends_on_entry_and_stop_only_consumes_a_step(ctx, make_episode):
     env = NavEnv(ctx, EnvConfig(render=False, protocol="distance"))
-    env.reset(episode(start=(2.2, 0.5, 0.0), goal=(3.0, 0.5), geodesic=0.8))
+    env.reset(make_episode(start=(2.2, 0.5, 0.0), goal=(3.0, 0.5), geodesic=0.8))
     _, info = env.step(STOP)
     assert not info["done"] and info["steps"] == 1
     env.step(MOVE_FORWARD)  # 2.45: 0.55 from the goal, outside
@@ -76,22 +60,22 @@ def test_distance_protocol_ends_on_entry_and_stop_only_consumes_a_step(ctx):
     assert m["sr"] == 1 and m["distance_sr"] == 1 and m["stop_sr"] == 0
     assert m["spl"] == pytest.approx(0.8 / max(0.5, 0.8))  # walked 0.5 < geodesic 0.8: SPL 1
     # the budget ends an episode
-    env.reset(episode(max_steps=3))
+    env.reset(make_episode(max_steps=3))
     for a in (TURN_LEFT, TURN_RIGHT, TURN_LEFT):
         _, info = env.step(a)
     assert info["done"] and info["end_reason"] == "budget" and not info["success"]
 
 
-def test_pose_criterion_and_spl_by_hand(ctx):
+def test_pose_criterion_and_spl_by_hand(ctx, make_episode):
     env = NavEnv(ctx, EnvConfig(render=False, protocol="explicit_stop"))
     for heading_deg, pose_ok in ((20.0, 1.0), (45.0, 0.0)):
-        ep = episode(start=(2.9, 0.5, math.radians(heading_deg)), task="imagenav", goal_yaw=0.0,
+        ep = make_episode(start=(2.9, 0.5, math.radians(heading_deg)), task="imagenav", goal_yaw=0.0,
                      heading_tolerance=math.radians(30), geodesic=0.1)
         env.reset(ep)
         env.step(STOP)
         m = episode_metrics(env.state, 0.1, 0.1, "explicit_stop")
         assert m["sr"] == 1 and m["pose_sr"] == pose_ok
-    env.reset(episode(start=(1.0, 0.5, 0.0), goal=(1.5, 0.5), radius=0.3, geodesic=0.5))
+    env.reset(make_episode(start=(1.0, 0.5, 0.0), goal=(1.5, 0.5), radius=0.3, geodesic=0.5))
     for _ in range(3):
         env.step(MOVE_FORWARD)  # overshoots to 1.75, still inside (0.25 from the goal)
     env.step(STOP)
@@ -114,8 +98,8 @@ def test_dtw_known_answers():
     assert dtw(a, a + [0, 1]) == pytest.approx(3.0)
 
 
-def test_oracle_succeeds_random_rarely_and_a_crashing_agent_fails_its_episode(ctx):
-    ep = episode(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), geodesic=2.3, max_steps=500)
+def test_oracle_succeeds_random_rarely_and_a_crashing_agent_fails_its_episode(ctx, make_episode):
+    ep = make_episode(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), geodesic=2.3, max_steps=500)
     ep.reference_path = np.array([[1.0, 0.5], [2.0, 2.2], [3.0, 0.5]])
     for protocol in ("distance", "explicit_stop"):
         row = run_episode(NavEnv(ctx, EnvConfig(render=False, protocol=protocol)), make_agent("oracle"), ep)
@@ -139,10 +123,11 @@ def test_oracle_succeeds_random_rarely_and_a_crashing_agent_fails_its_episode(ct
     assert type(make_agent("stages.evaluate.agents:RandomAgent")).__name__ == "RandomAgent"
 
 
-def test_batched_env_matches_single_envs_and_gym_wrapper(ctx):
-    from stages.evaluate.batch import BatchNavEnv, gym_env
+def test_batched_env_matches_single_envs_and_gym_wrapper(ctx, make_episode):
+    from stages.evaluate.batch import BatchNavEnv
+    from stages.evaluate.gym_env import NavGymEnv
 
-    eps = [episode(start=(1.0, 0.5, a), max_steps=60) for a in (0.0, 1.5, -1.0)]
+    eps = [make_episode(start=(1.0, 0.5, a), max_steps=60) for a in (0.0, 1.5, -1.0)]
     for i, e in enumerate(eps):
         e.episode_id = f"b{i}"
     rng = np.random.default_rng(1)
@@ -159,23 +144,22 @@ def test_batched_env_matches_single_envs_and_gym_wrapper(ctx):
             if a is not None:
                 s.step(a)
         assert [tuple(i["pose"]) for i in infos] == [tuple(s.info()["pose"]) for s in singles]
-    env = gym_env(ctx, eps, EnvConfig(render=False, protocol="explicit_stop"))
+    env = NavGymEnv(ctx, eps, EnvConfig(render=False, protocol="explicit_stop"))
     from gymnasium.utils.env_checker import check_env
 
     check_env(env, skip_render_check=True)
-    obs, _ = env.reset(options={"episode": episode(start=(2.0, 0.5, 0.0), goal=(2.4, 0.5), geodesic=0.4)})
+    obs, _ = env.reset(options={"episode": make_episode(start=(2.0, 0.5, 0.0), goal=(2.4, 0.5), geodesic=0.4)})
     _, reward, terminated, truncated, info = env.step(STOP)
     assert terminated and not truncated and info["success"] and reward == pytest.approx(2.5 - 0.01)
 
 
-def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run):
+def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run, make_cfg):
     import json
 
     import av
     import pandas as pd
 
     from pipeline.executor import execute
-    from tests.test_pipeline import make_cfg
 
     root, over, _ = episode_run
     common = [*over[:-1], "export.chunk_size=8", "stages=[evaluate]", "evaluate.tasks=[pointnav,objectnav]",
@@ -197,7 +181,10 @@ def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run):
     assert (rnd["difficulty"] == "easy").all() and len(rnd) <= 6
     tables = (root / "07_eval" / "tables.md").read_text()
     assert "random_distance" in tables and "oracle_explicit_stop" in tables and "Table 7" in tables
-    assert (root / "07_eval" / "distance_sr_by_difficulty.png").stat().st_size > 0
+    from PIL import Image
+
+    plot = np.asarray(Image.open(root / "07_eval" / "distance_sr_by_difficulty.png"))
+    assert plot.ndim == 3 and plot.shape[0] >= 200 and len(np.unique(plot.reshape(-1, plot.shape[2]), axis=0)) > 4
     assert len(list((run / "plots").glob("*.png"))) == 1
     videos = list((run / "videos").glob("*.mp4"))
     assert len(videos) == 1
@@ -207,10 +194,10 @@ def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run):
     assert frames[0].shape == (24, 32, 3) and len(frames) == first["steps"] + 1  # reset + every step
 
 
-def test_batched_loop_equals_the_single_loop_for_in_process_agents(ctx):
+def test_batched_loop_equals_the_single_loop_for_in_process_agents(ctx, make_episode):
     from stages.evaluate.loop import InProcessBatch, run_episodes_batched
 
-    eps = [episode(start=(1.0, 0.5, a), goal=g, geodesic=2.3, max_steps=300)
+    eps = [make_episode(start=(1.0, 0.5, a), goal=g, geodesic=2.3, max_steps=300)
            for a, g in ((0.0, (3.0, 0.5)), (1.0, (3.5, 2.5)), (-2.0, (1.5, 2.5)), (2.5, (3.0, 1.5)))]
     for i, e in enumerate(eps):
         e.episode_id = f"q{i}"

@@ -5,11 +5,21 @@ import struct
 import numpy as np
 import pytest
 
-from stages.gaussians import GaussianScene, SceneFormatError
-from stages.gaussians.formats import (detect_format, read_gaussians, read_npy_folder, read_sog, read_spz,
-                                      write_inria_ply, write_npy_folder, write_sog, write_sog_lod, write_splat, write_spz)
-from stages.gaussians.validate import sanitize
-from tests.conftest import REAL_DIR, REAL_INDOOR_DIR
+from navcore.gaussians import GaussianScene, SceneFormatError
+from navcore.gaussians.formats import (
+    detect_format,
+    read_gaussians,
+    read_npy_folder,
+    read_sog,
+    read_spz,
+    write_inria_ply,
+    write_npy_folder,
+    write_sog,
+    write_sog_lod,
+    write_splat,
+    write_spz,
+)
+from navcore.gaussians.validate import sanitize
 
 REAL = {"inria_sh0_donut.ply": (45_624, 0), "inria_sh3_small.ply": (9_080, 3),
         "supersplat_guitar.compressed.ply": (90_854, 0), "antimatter_plant.splat": (113_648, 0)}
@@ -28,10 +38,10 @@ def same_rotation(q1, q2, tol):
 
 
 @pytest.mark.parametrize("name", list(REAL))
-def test_real_files_read_with_expected_counts(name):
-    if not (REAL_DIR / name).exists():
-        pytest.skip(f"real sample {name} not present at {REAL_DIR}")
-    s = read_gaussians(REAL_DIR / name)
+def test_real_files_read_with_expected_counts(name, real_dir):
+    if not (real_dir / name).exists():
+        pytest.skip(f"real sample {name} not present at {real_dir}")
+    s = read_gaussians(real_dir / name)
     n, deg = REAL[name]
     assert len(s) == n and s.sh_degree == deg
     clean, rep = sanitize(s, name)
@@ -40,20 +50,20 @@ def test_real_files_read_with_expected_counts(name):
     assert np.isfinite(clean.means).all()
 
 
-def test_real_inria_sh3_rest_layout():
+def test_real_inria_sh3_rest_layout(real_dir):
     """f_rest is channel-major in INRIA files: sh[:, 1:, c] == f_rest[c*15:(c+1)*15]."""
-    from stages.gaussians.formats.ply import _read_elements
+    from navcore.gaussians.formats.ply import read_elements
 
-    p = REAL_DIR / "inria_sh3_small.ply"
+    p = real_dir / "inria_sh3_small.ply"
     if not p.exists():
         pytest.skip("real sample missing")
-    v = _read_elements(p)["vertex"]
+    v = read_elements(p)["vertex"]
     s = read_gaussians(p)
     assert np.array_equal(s.sh[:, 1:, 1], np.stack([v[f"f_rest_{15 + j}"] for j in range(15)], 1))
 
 
-def test_supersplat_decodes_to_plausible_values():
-    p = REAL_DIR / "supersplat_guitar.compressed.ply"
+def test_supersplat_decodes_to_plausible_values(real_dir):
+    p = real_dir / "supersplat_guitar.compressed.ply"
     if not p.exists():
         pytest.skip("real sample missing")
     s = read_gaussians(p)
@@ -181,8 +191,8 @@ def test_ascii_ply_and_not_a_ply(tmp_path):
 
 def test_transform_rotates_view_dependent_colour():
     """Colour seen from direction d before == colour seen from R d after (SH degree 3)."""
-    from stages.gaussians.model import quat_to_rotmat
-    from stages.gaussians.sh import sh_basis
+    from navcore.gaussians.model import quat_to_rotmat
+    from navcore.gaussians.sh import sh_basis
 
     s = random_scene(n=50, deg=3)
     q = np.array([0.8, 0.2, -0.5, 0.3])
@@ -305,12 +315,12 @@ def test_bad_sog_inputs(tmp_path):
         read_gaussians(tmp_path / "f")
 
 
-def test_shared_sog_folder_and_spz_agree():
+def test_shared_sog_folder_and_spz_agree(real_indoor_dir):
     """The shared streamed SOG (level 3) and the SPZ decoded independently from it: the same
     Gaussians in the same order, within the two formats' quantization."""
-    sog, spz = REAL_INDOOR_DIR / "fungi_room_sog_lod", REAL_INDOOR_DIR / "fungi_room_lod3.spz"
+    sog, spz = real_indoor_dir / "fungi_room_sog_lod", real_indoor_dir / "fungi_room_lod3.spz"
     if not (sog.exists() and spz.exists()):
-        pytest.skip(f"real indoor scenes not present at {REAL_INDOOR_DIR}")
+        pytest.skip(f"real indoor scenes not present at {real_indoor_dir}")
     with pytest.raises(SceneFormatError, match="level 0 lacks"):
         read_sog(sog, level=0)  # lod-meta.json lists levels 0-2, whose folders are absent
     a, b = read_gaussians(sog), read_gaussians(spz)

@@ -7,9 +7,9 @@ import pytest
 import zarr
 from hydra import compose, initialize_config_dir
 
+from navcore.io.datasets import CostmapDataset
 from pipeline.config import CONF_DIR, register_configs
 from pipeline.executor import execute
-from tests.conftest import PROJECT
 
 register_configs()
 
@@ -24,25 +24,42 @@ def statuses(summary):
     return {r["stage"]: r["status"] for r in summary["results"]}
 
 
-def test_full_run_then_cached_then_partial_recompute(tmp_path):
+def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
     cfg = make_cfg(tmp_path)
     s1 = execute(cfg)
     assert set(statuses(s1).values()) == {"done"} and not s1["failures"]
     sid = s1["results"][0]["scene_id"]
     asset = next((tmp_path / "09_assets" / "synthetic").iterdir())
-    for f in ("manifest.json", "aligned.ply", "source.ply", "nav_map.pgm", "nav_map.yaml", "nav_mask.png",
-              "labels.json", "compressed.splat", "costmap_topdown.png"):
-        assert (asset / f).exists(), f
     man = json.loads((asset / "manifest.json").read_text())
     assert man["scene_id"] == sid and man["map_info"]["resolution"] == 0.05
-    # the exported map is the stored costmap (PGM rows flipped, 0 = occupied)
-    from stages.asset import read_pgm
+    # every file of the asset holds what the stores hold
+    from PIL import Image
 
-    occ = np.asarray(zarr.open_group(str(tmp_path / "03_costmaps" / f"{sid}.zarr"))["locobot"]["occ"][...])
-    assert np.array_equal(read_pgm(asset / "nav_map.pgm"), occ)
+    from navcore.gaussians.formats import read_gaussians
+    from navcore.io.datasets import GaussianDataset
+    from stages.asset.stage import read_pgm
+
+    aligned, _ = GaussianDataset(tmp_path / "01_scenes" / sid / "aligned.zarr").load()
+    source, _ = GaussianDataset(tmp_path / "01_scenes" / sid / "gaussians.zarr").load()
+    ply = read_gaussians(asset / "aligned.ply")
+    assert len(ply) == len(aligned) and np.allclose(ply.means, aligned.means, atol=1e-6)
+    assert len(read_gaussians(asset / "source.ply")) == len(source)
+    splat = read_gaussians(asset / "compressed.splat")
+    assert len(splat) == len(aligned) and np.allclose(splat.means, aligned.means, atol=1e-5)
+    g = zarr.open_group(str(tmp_path / "03_costmaps" / f"{sid}.zarr"))["locobot"]
+    occ, sup = np.asarray(g["occ"][...]), np.asarray(g["support"][...])
+    assert np.array_equal(read_pgm(asset / "nav_map.pgm"), occ)  # PGM rows flipped, 0 = occupied
+    assert np.array_equal(np.asarray(Image.open(asset / "nav_mask.png"))[::-1] > 0, sup)
+    assert np.asarray(Image.open(asset / "costmap_topdown.png")).shape[:2] == occ.shape
     assert man["map_info"]["size"] == [occ.shape[1], occ.shape[0]]
-    for stage in ("ingest", "voxelize", "align", "costmap", "asset"):
-        assert (tmp_path / "_markers" / stage / f"{sid}.json").exists()
+    ros = (asset / "nav_map.yaml").read_text()
+    assert "image: nav_map.pgm" in ros and f"resolution: {man['map_info']['resolution']}" in ros
+    labels = json.loads((asset / "labels.json").read_text())["labels"]
+    assert labels and all({"instance_id", "category", "position"} <= set(lab) for lab in labels)
+    assert man["files"]["labels"] == "labels.json" and man["files"]["compressed_ply"] == "compressed.splat"
+    for stage in ("ingest", "voxelize", "align", "costmap", "asset"):  # markers vouch for this config
+        m = json.loads((tmp_path / "_markers" / stage / f"{sid}.json").read_text())
+        assert m["stage"] == stage and m["config_hash"] == s1["config_hashes"][stage]
 
     assert set(statuses(execute(cfg)).values()) == {"cached"}
     # a changed costmap parameter recomputes costmap and what depends on it, nothing upstream
@@ -58,7 +75,7 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path):
     assert latest["counts"]["align"] == {"done": 1}
 
 
-def test_failing_scene_is_recorded_and_others_complete(tmp_path):
+def test_failing_scene_is_recorded_and_others_complete(tmp_path, make_cfg):
     bad = tmp_path / "bad.ply"
     bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 1000\nproperty float x\nend_header\n")
     cat = tmp_path / "cat.yaml"
@@ -75,7 +92,7 @@ def test_failing_scene_is_recorded_and_others_complete(tmp_path):
     assert not (tmp_path / "d" / "_markers" / "ingest" / f"{by_scene['broken']['ingest']['scene_id']}.json").exists()
 
 
-def test_same_config_same_bytes_whatever_the_workers(tmp_path):
+def test_same_config_same_bytes_whatever_the_workers(tmp_path, make_cfg):
     """Sync and a 2-process Dask LocalCluster produce byte-identical stores."""
     execute(make_cfg(tmp_path / "a", "stages=[costmap]"))
     execute(make_cfg(tmp_path / "b", "stages=[costmap]", "executor=local", "executor.n_workers=2",
@@ -87,16 +104,16 @@ def test_same_config_same_bytes_whatever_the_workers(tmp_path):
         assert (tmp_path / "a" / rel).read_bytes() == (tmp_path / "b" / rel).read_bytes(), rel
 
 
-def test_shards_are_disjoint_and_cover(tmp_path):
+def test_shards_are_disjoint_and_cover(tmp_path, project_root):
     from pipeline.catalog import Catalog
 
-    cat = Catalog(PROJECT / "catalogs" / "synthetic_large.yaml", tmp_path)
+    cat = Catalog(project_root / "catalogs" / "synthetic_large.yaml", tmp_path)
     shards = [cat.select(k, 3) for k in range(3)]
     ids = [s.scene_id for sh in shards for s in sh]
     assert len(ids) == len(set(ids)) == len(cat.scenes)
 
 
-def test_several_embodiments_and_existing_scheduler(tmp_path):
+def test_several_embodiments_and_existing_scheduler(tmp_path, make_cfg):
     """costmap.embodiments adds maps per scene; executor.address runs on a given scheduler."""
     from dask.distributed import LocalCluster
 
@@ -113,16 +130,16 @@ def test_several_embodiments_and_existing_scheduler(tmp_path):
     assert len({g[k]["occ"].shape for k in g.group_keys()}) == 1
 
 
-def test_batch_submission_scripts():
+def test_batch_submission_scripts(project_root, make_cfg):
     """The sharded array job and the dask-jobqueue worker jobs carry what the config says."""
     from pipeline.submit import array_script
 
     s = array_script("slurm", 16, ["scenes=synthetic_large", "costmap.resolution=0.02"], 8, "32G", "02:00:00",
-                     "cpu", None, "/venv/bin/python", PROJECT)
+                     "cpu", None, "/venv/bin/python", project_root)
     assert "#SBATCH --array=0-15" in s and "#SBATCH --partition=cpu" in s
     assert "scenes.shard=$SLURM_ARRAY_TASK_ID scenes.num_shards=16" in s and s.rstrip().endswith(
         "scenes=synthetic_large costmap.resolution=0.02")
-    p = array_script("pbs", 4, [], 4, "16gb", "01:00:00", None, "acct", "python", PROJECT)
+    p = array_script("pbs", 4, [], 4, "16gb", "01:00:00", None, "acct", "python", project_root)
     assert "#PBS -J 0-3" in p and "$PBS_ARRAY_INDEX" in p and "#PBS -A acct" in p
     pytest.importorskip("dask_jobqueue")
     from pipeline.executor import jobqueue_cluster
@@ -157,9 +174,9 @@ def test_cli_composes_the_config(cmd, tmp_path):
     assert "name: stretch" in out.stdout and "resolution: 0.02" in out.stdout
 
 
-def test_interrupted_write_leaves_nothing_trusted(tmp_path, monkeypatch):
+def test_interrupted_write_leaves_nothing_trusted(tmp_path, monkeypatch, make_cfg):
     """A stage dying mid-write leaves neither output nor marker; the rerun recomputes it."""
-    from pipeline.atomic import atomic_path
+    from navcore.io.atomic import atomic_path
 
     final = tmp_path / "out.zarr"
     with pytest.raises(RuntimeError):
@@ -195,13 +212,12 @@ def test_interrupted_write_leaves_nothing_trusted(tmp_path, monkeypatch):
         "voxelize"] == "done"
 
 
-def test_stored_costmap_loads_into_the_same_queries(tmp_path):
-    from stages.costmap.query import Costmap
+def test_stored_costmap_loads_into_the_same_queries(tmp_path, make_cfg):
 
     s = execute(make_cfg(tmp_path, "stages=[costmap]"))
     sid = s["results"][0]["scene_id"]
     path = tmp_path / "03_costmaps" / f"{sid}.zarr"
-    cm = Costmap.load(path, "locobot")
+    cm = CostmapDataset(path).load("locobot")
     g = zarr.open_group(str(path))["locobot"]
     occ = np.asarray(g["occ"][...])
     assert np.array_equal(cm.occupancy | ~np.asarray(g["support"][...]), occ)
@@ -211,7 +227,7 @@ def test_stored_costmap_loads_into_the_same_queries(tmp_path):
     assert (cm.component_at(xy) > 0).all()
 
 
-def test_catalog_paths_ids_and_layout(tmp_path):
+def test_catalog_paths_ids_and_layout(tmp_path, project_root):
     from pipeline.catalog import Catalog, scene_id_for
 
     (tmp_path / "cats").mkdir()
@@ -227,5 +243,49 @@ def test_catalog_paths_ids_and_layout(tmp_path):
     assert a.scene_id == hashlib.sha256(b"g:a").hexdigest()[:8] == scene_id_for("g", "a")
     assert c.path("costmaps", a) == tmp_path / "data" / "maps" / "g" / f"{a.scene_id}.zarr"
     assert c.path("markers", a, stage="align") == tmp_path / "data" / "_markers" / "align" / f"{a.scene_id}.json"
-    real = Catalog(PROJECT / "catalogs" / "real_samples.yaml", tmp_path)
-    assert all(Path(s.path).parent == (PROJECT.parent / "shared" / "data" / "real").resolve() for s in real.scenes)
+    real = Catalog(project_root / "catalogs" / "real_samples.yaml", tmp_path)
+    assert all(Path(s.path).parent == (project_root.parent / "shared" / "data" / "real").resolve() for s in real.scenes)
+
+
+def test_catalog_datasets_round_trip_atomically_and_find_partitions(tmp_path, project_root):
+    import pyarrow as pa
+
+    from navcore.gaussians import GaussianScene
+    from navcore.io.datasets import GaussianDataset, JSONDataset, ParquetDataset
+    from pipeline.catalog import Catalog
+
+    cat = Catalog(project_root / "catalogs" / "synthetic.yaml", tmp_path)
+    scene = cat.scenes[0]
+    rep = cat.dataset("ingest_report", scene)
+    assert isinstance(rep, JSONDataset) and rep.path == tmp_path / "01_scenes" / scene.scene_id / "ingest.json"
+    rep.save({"a": [1, 2.5, None]})
+    assert rep.load() == {"a": [1, 2.5, None]}
+    # a failed save leaves the previous content and no temporary behind
+    with pytest.raises(TypeError):
+        rep.save({"a": object()})
+    assert rep.load() == {"a": [1, 2.5, None]}
+    assert sorted(p.name for p in rep.path.parent.iterdir()) == ["ingest.json"]
+    tables = {}
+    for task in ("pointnav", "objectnav"):
+        ds = cat.dataset("episodes", scene, task=task)
+        assert isinstance(ds, ParquetDataset)
+        tables[task] = pa.table({"episode_id": [f"{task}-0", f"{task}-1"], "x": [0.5, 1.5]})
+        ds.save(tables[task])
+    found = cat.find("episodes", scene)
+    assert list(found) == ["objectnav", "pointnav"]
+    assert all(found[t].load().equals(tables[t]) for t in found)
+    found["objectnav"].delete()
+    assert list(cat.find("episodes", scene)) == ["pointnav"]
+    g = cat.dataset("scene", scene)
+    assert isinstance(g, GaussianDataset)
+    rng = np.random.default_rng(0)
+    q = rng.normal(size=(50, 4))
+    gs = GaussianScene.from_colors(rng.normal(size=(50, 3)), q / np.linalg.norm(q, axis=1, keepdims=True),
+                                   rng.uniform(0.01, 0.1, (50, 3)), rng.uniform(0.1, 0.9, 50), rng.uniform(size=(50, 3)))
+    g.save(gs, {"scene_id": scene.scene_id})
+    back, attrs = g.load()
+    assert np.array_equal(back.means, gs.means) and np.array_equal(back.sh, gs.sh) and attrs["n_gaussians"] == 50
+    with pytest.raises(KeyError, match="needs the field 'task'"):
+        cat.dataset("episodes", scene)
+    with pytest.raises(KeyError, match="folder of datasets"):
+        cat.dataset("episodes_root")

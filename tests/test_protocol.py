@@ -12,10 +12,16 @@ import pytest
 from stages.evaluate.agents import make_agent
 from stages.evaluate.env import EnvConfig
 from stages.evaluate.loop import run_episodes, run_episodes_batched
-from stages.evaluate.protocol import (ProtocolError, RemoteAgent, RemoteBatchAgent, decode_value, encode_array, encode_image, pack,
-                                      parse_action, unpack)
-from tests.conftest import PROJECT
-from tests.test_evaluate import ctx, episode  # noqa: F401 (fixture)
+from stages.evaluate.protocol.client import RemoteAgent, RemoteBatchAgent
+from stages.evaluate.protocol.codec import (
+    ProtocolError,
+    decode_value,
+    encode_array,
+    encode_image,
+    pack,
+    parse_action,
+    unpack,
+)
 
 
 def test_encodings_round_trip():
@@ -49,10 +55,10 @@ def test_frames_are_checked():
         parse_action({"dance": 1})
 
 
-def start_server_process(tmp_path, agent="depth_reactive"):
+def start_server_process(tmp_path, cwd, agent="depth_reactive"):
     port_file = tmp_path / "port"
     proc = subprocess.Popen([sys.executable, "-m", "stages.evaluate.protocol", "--agent", agent, "--port", "0",
-                             "--port-file", str(port_file)], cwd=PROJECT)
+                             "--port-file", str(port_file)], cwd=cwd)
     for _ in range(300):
         if port_file.exists() and port_file.read_text():
             return proc, int(port_file.read_text())
@@ -61,12 +67,12 @@ def start_server_process(tmp_path, agent="depth_reactive"):
     raise RuntimeError("agent server did not start")
 
 
-def test_remote_agent_gives_the_same_metrics_as_in_process(ctx, tmp_path):  # noqa: F811
-    eps = [episode(start=(1.0, 0.5, a), goal=(3.0, 0.5), geodesic=2.3, max_steps=120) for a in (0.0, 1.0, -2.0)]
+def test_remote_agent_gives_the_same_metrics_as_in_process(ctx, tmp_path, make_episode, project_root):
+    eps = [make_episode(start=(1.0, 0.5, a), goal=(3.0, 0.5), geodesic=2.3, max_steps=120) for a in (0.0, 1.0, -2.0)]
     for i, e in enumerate(eps):
         e.episode_id = f"e{i}"
     local = run_episodes(ctx, eps, make_agent("depth_reactive"), EnvConfig(render=False))
-    proc, port = start_server_process(tmp_path)
+    proc, port = start_server_process(tmp_path, project_root)
     try:
         remote_agent = RemoteAgent(f"ws://127.0.0.1:{port}", timeout=10)
         remote = run_episodes(ctx, eps, remote_agent, EnvConfig(render=False))
@@ -112,9 +118,9 @@ def bad_server(behaviour: str):
 @pytest.mark.parametrize("behaviour,reason", [("malformed", "ProtocolError"), ("slow", "TimeoutError"),
                                               ("crash", "Connection"), ("error", "policy exploded"),
                                               ("wrong_seq", "answers observation")])
-def test_misbehaving_servers_fail_their_episodes_and_the_run_goes_on(ctx, behaviour, reason):  # noqa: F811
+def test_misbehaving_servers_fail_their_episodes_and_the_run_goes_on(ctx, behaviour, reason, make_episode):
     url, stop = bad_server(behaviour)
-    eps = [episode(max_steps=20), episode(max_steps=20)]
+    eps = [make_episode(max_steps=20), make_episode(max_steps=20)]
     try:
         rows = run_episodes(ctx, eps, RemoteAgent(url, timeout=0.5, retries=2), EnvConfig(render=False))
     finally:
@@ -124,7 +130,7 @@ def test_misbehaving_servers_fail_their_episodes_and_the_run_goes_on(ctx, behavi
         assert r["end_reason"] == "agent_error" and r["sr"] == 0 and reason in r["error"], r["error"]
 
 
-def test_unreachable_server_is_an_episode_failure(ctx):  # noqa: F811
-    rows = run_episodes(ctx, [episode()], RemoteAgent("ws://127.0.0.1:9", timeout=0.5, retries=2),
+def test_unreachable_server_is_an_episode_failure(ctx, make_episode):
+    rows = run_episodes(ctx, [make_episode()], RemoteAgent("ws://127.0.0.1:9", timeout=0.5, retries=2),
                         EnvConfig(render=False))
     assert rows[0]["end_reason"] == "agent_error" and "unreachable" in rows[0]["error"]

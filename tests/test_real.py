@@ -4,16 +4,16 @@ shared real indoor scenes (skipped with the reason when ../shared is absent)."""
 import numpy as np
 import pytest
 
+from navcore.gaussians import GaussianScene
+from navcore.gaussians.cameras import cameras_from_json
+from navcore.gaussians.content import content_mask
+from navcore.nav.embodiment import Embodiment
+from navcore.voxels import VoxelizeConfig
+from navcore.voxels.grid import grid_for_points
 from stages.align.floor import AlignConfig, axis_name, fit_floor, floor_transform
-from stages.costmap.build import CostmapConfig, Embodiment, build_costmap, obstacle_candidates
-from stages.gaussians import GaussianScene
-from stages.gaussians.cameras import cameras_from_json
-from stages.gaussians.content import content_mask
-from stages.synthetic.generate import SyntheticConfig, generate_scene
-from stages.synthetic.realism import AXES, RealismConfig
-from stages.voxelize import VoxelizeConfig
-from stages.voxelize.grid import grid_for_points
-from tests.conftest import REAL_INDOOR_DIR
+from stages.costmap.build import CostmapConfig, build_costmap, obstacle_candidates
+from stages.synthesize.generate import SyntheticConfig, generate_scene
+from stages.synthesize.realism import AXES, RealismConfig
 
 
 def realistic(seed, n=60_000, **knobs):
@@ -188,14 +188,14 @@ def test_haze_is_not_an_obstacle_but_an_opaque_wall_is():
     assert hazy.raw[row, col(1.5)]  # without the rule the haze is a wall 30 cm in front of the wall
 
 
-def test_shared_real_scenes_align_with_minus_y_up():
+def test_shared_real_scenes_align_with_minus_y_up(real_indoor_dir):
     """Both shared scenes are -y up (their README); the chosen floor sits on the density peak of
     the flat Gaussians facing up."""
-    from stages.gaussians.formats import read_gaussians
+    from navcore.gaussians.formats import read_gaussians
 
-    paths = [REAL_INDOOR_DIR / "fungi_room_lod3.spz", REAL_INDOOR_DIR / "wangsha_hall_lod3.spz"]
+    paths = [real_indoor_dir / "fungi_room_lod3.spz", real_indoor_dir / "wangsha_hall_lod3.spz"]
     if not all(p.exists() for p in paths):
-        pytest.skip(f"real indoor scenes not present at {REAL_INDOOR_DIR}")
+        pytest.skip(f"real indoor scenes not present at {real_indoor_dir}")
     for p in paths:
         g = read_gaussians(p)
         mask, info = content_mask(g.means)
@@ -217,8 +217,8 @@ class _Scene:
 
 
 def test_scenesplat_per_gaussian_labels_become_the_ground_truth_table(tmp_path):
-    from stages.gaussians.formats import read_gaussians, write_npy_folder
-    from stages.instances import shipped_instances
+    from navcore.gaussians.formats import read_gaussians, write_npy_folder
+    from navcore.instances import shipped_instances
 
     rng = np.random.default_rng(0)
     boxes = {1: ([1, 1, 0], [2, 1.5, 0.8], 3), 2: ([4, 0, 0], [5, 2, 0.5], 7), 3: ([0, 3, 0], [0.5, 3.5, 1], 3)}
@@ -250,7 +250,7 @@ def test_scenesplat_per_gaussian_labels_become_the_ground_truth_table(tmp_path):
 
 
 def test_interiorgs_labels_json_beside_the_scene(tmp_path):
-    from stages.instances import read_label_file, shipped_instances
+    from navcore.instances import read_label_file, shipped_instances
 
     corners = [{"x": x, "y": y, "z": z} for x in (1.0, 2.0) for y in (3.0, 3.5) for z in (0.0, 0.9)]
     (tmp_path / "labels.json").write_text(__import__("json").dumps(

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 import torch
 
-from stages.gaussians.model import GaussianScene
-from stages.gaussians.sh import C0
-from stages.render import Renderer
-from stages.render.camera import camera_to_world, intrinsics, viewmats
+from navcore.gaussians.model import GaussianScene
+from navcore.gaussians.sh import C0
+from navcore.render import Renderer
+from navcore.render.camera import camera_to_world, intrinsics, viewmats
 
 W, H, HFOV = 64, 48, 90.0
 
@@ -105,8 +105,8 @@ def test_cpu_renderer_matches_gsplat(small_scene):
     pytest.importorskip("gsplat")
     if not torch.cuda.is_available():
         pytest.skip("needs CUDA")
-    from stages.render.camera import embodiment_camera
-    from stages.costmap.build import Embodiment
+    from navcore.nav.embodiment import Embodiment
+    from navcore.render.camera import embodiment_camera
 
     gs = small_scene.gaussians.transformed(np.linalg.inv(small_scene.transform))
     rooms = np.array(small_scene.layout.rooms)

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from stages.render.camera import camera_to_world, intrinsics
+from navcore.render.camera import camera_to_world, intrinsics
 from stages.semantics.lifting import LiftingConfig, back_project, lift, vote
 
 W, H = 160, 120
@@ -117,10 +117,10 @@ def test_corruption_model_rates_and_effects():
 
 
 def test_oracle_segmenter_masks_follow_instance_labels():
-    from stages.gaussians.model import GaussianScene
-    from stages.gaussians.sh import C0
-    from stages.render import Renderer
-    from stages.render.camera import viewmats
+    from navcore.gaussians.model import GaussianScene
+    from navcore.gaussians.sh import C0
+    from navcore.render import Renderer
+    from navcore.render.camera import viewmats
     from stages.semantics.segmenters import OracleSegmenter
 
     rng = np.random.default_rng(1)
@@ -141,11 +141,10 @@ def test_oracle_segmenter_masks_follow_instance_labels():
     assert cols[chair.any(0)].mean() < W / 2 < cols[table.any(0)].mean() and not (chair & table).any()
 
 
-def test_free_space_poses_cover_the_free_cells():
+def test_free_space_poses_cover_the_free_cells(room_with_door):
     from stages.semantics.poses import free_space_poses, yaw_coverage
-    from tests.test_episodes import room_with_door
 
-    cm = room_with_door()
+    cm = room_with_door
     valid = ~cm.occupancy
     poses = free_space_poses(cm, valid, spacing=1.0, yaw_step_deg=45)
     pts = np.unique(poses[:, :2], axis=0)
@@ -163,9 +162,8 @@ def test_free_space_poses_cover_the_free_cells():
 # ---- the stage on a generated scene ---------------------------------------------------------------
 
 @pytest.fixture(scope="module")
-def semantics_run(tmp_path_factory):
+def semantics_run(tmp_path_factory, make_cfg):
     from pipeline.executor import execute
-    from tests.test_pipeline import make_cfg
 
     root = tmp_path_factory.mktemp("semantics")
     over = ["stages=[asset]", "semantics.max_views=40"]
@@ -179,7 +177,7 @@ def test_stage_predicts_valid_instances_into_the_table_and_the_asset(semantics_r
 
     import pyarrow.parquet as pq
 
-    from stages.instances import INSTANCE_SCHEMA, table_to_labels
+    from navcore.instances import INSTANCE_SCHEMA, table_to_labels
     from stages.semantics.precision import ground_truth_objects, score
 
     root, _, summary = semantics_run
@@ -200,14 +198,13 @@ def test_stage_predicts_valid_instances_into_the_table_and_the_asset(semantics_r
     assert json.loads((asset / "labels.json").read_text())["labels"] == labels
 
 
-def test_stage_is_deterministic_and_reads_its_config(semantics_run, tmp_path):
+def test_stage_is_deterministic_and_reads_its_config(semantics_run, tmp_path, make_cfg):
     import json
     import shutil
 
     import pyarrow.parquet as pq
 
     from pipeline.executor import execute
-    from tests.test_pipeline import make_cfg
 
     root, over, summary = semantics_run
     sid = summary["results"][0]["scene_id"]
@@ -232,7 +229,7 @@ def test_stage_is_deterministic_and_reads_its_config(semantics_run, tmp_path):
 
 
 def test_cameras_in_both_layouts():
-    from stages.gaussians.cameras import cameras_from_json
+    from navcore.gaussians.cameras import cameras_from_json
 
     r = np.array([[math.cos(0.8), -math.sin(0.8), 0], [math.sin(0.8), math.cos(0.8), 0], [0, 0, 1]])  # about z
     ours = {"hfov_deg": 90.0, "poses": [{"position": [1, 2, 3], "quat_wxyz": [math.cos(0.4), 0, 0, math.sin(0.4)]}]}
@@ -246,7 +243,7 @@ def test_cameras_in_both_layouts():
 
 
 def test_instance_table_round_trip_and_oracle_levels():
-    from stages.instances import labels_to_table, table_to_labels
+    from navcore.instances import labels_to_table, table_to_labels
     from stages.semantics.config import OracleConfig
 
     labels = [{"instance_id": 1, "category": "chair", "position": [1.0, 2.0, 0.4],

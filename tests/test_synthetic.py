@@ -1,11 +1,10 @@
 """The procedural generator and its ground truth."""
-import json
-
 import numpy as np
 
-from stages.gaussians.formats import read_gaussians
-from stages.synthetic.generate import SOURCE_FILE, SyntheticConfig, generate_scene, load_ground_truth, write_synthetic
-from stages.synthetic.layout import CATEGORIES
+from navcore.gaussians.formats import read_gaussians
+from navcore.io.datasets import SyntheticSourceDataset
+from stages.synthesize.generate import SyntheticConfig, generate_scene, load_ground_truth, write_synthetic
+from stages.synthesize.layout import CATEGORIES
 
 
 def test_same_seed_same_scene_other_seed_other_scene():
@@ -20,7 +19,7 @@ def test_ground_truth_is_consistent_with_the_gaussians(tmp_path, small_scene):
     s = small_scene
     write_synthetic(tmp_path, s, "t")
     gt = load_ground_truth(tmp_path)
-    src = read_gaussians(tmp_path / SOURCE_FILE)
+    src = read_gaussians(SyntheticSourceDataset(tmp_path).source_file)
     assert len(src) == len(gt["instance_ids"]) == len(s.gaussians)
     t = gt["canonical_to_source"]
     assert np.allclose(t[:3, :3] @ t[:3, :3].T, np.eye(3)) and np.linalg.det(t[:3, :3]) > 0
@@ -40,6 +39,6 @@ def test_ground_truth_is_consistent_with_the_gaussians(tmp_path, small_scene):
     # the mesh holds one face label per face and covers every object
     assert len(gt["face_instance"]) == len(gt["mesh"].faces)
     assert set(np.unique(gt["face_instance"])) == {0} | {o["instance_id"] for o in gt["objects"]}
-    labels = json.loads((tmp_path / "ground_truth" / "labels.json").read_text())["labels"]
+    labels = SyntheticSourceDataset(tmp_path).read_ground_truth("labels.json")["labels"]
     assert {lab["source"] for lab in labels} == {"ground_truth"} and len(labels) == len(gt["objects"])
     assert len(gt["cameras"]["poses"]) > 8

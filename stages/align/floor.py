@@ -36,7 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
-from stages.gaussians.model import GaussianScene, quat_to_rotmat
+from navcore.gaussians.model import GaussianScene
+from navcore.gaussians.surfaces import surface_normals
 
 
 @dataclass
@@ -82,22 +83,6 @@ def _plane_svd(points: np.ndarray, weights: np.ndarray | None = None) -> tuple[n
     _, _, vt = np.linalg.svd(q, full_matrices=False)
     n = vt[-1]
     return n, -float(n @ c)
-
-
-def surface_normals(scene: GaussianScene, flat_ratio: float) -> tuple[np.ndarray, np.ndarray]:
-    """([N, 3] unit normal = smallest axis of each Gaussian, [N] bool flat)."""
-    s = np.sort(scene.log_scales, axis=1)
-    flat = s[:, 0] < s[:, 1] + np.log(flat_ratio)
-    rot = quat_to_rotmat(scene.quats.astype(np.float64))
-    k = np.argmin(scene.log_scales, axis=1)
-    return np.take_along_axis(rot, k[:, None, None], axis=2)[..., 0], flat
-
-
-def horizontal_surfaces(scene: GaussianScene, flat_ratio: float, tol_deg: float) -> np.ndarray:
-    """[N] bool: flat Gaussians whose normal is within tol_deg of vertical (aligned frame: floor,
-    ceiling, table tops)."""
-    normals, flat = surface_normals(scene, flat_ratio)
-    return flat & (np.abs(normals[:, 2]) > np.cos(np.radians(tol_deg)))
 
 
 def _canonical(d: np.ndarray) -> np.ndarray:

@@ -6,17 +6,14 @@ two sides with the chosen floor. The voxel field in the aligned frame is re-eval
 transformed Gaussians by the costmap stage (exact, unlike resampling the source grid)."""
 from __future__ import annotations
 
-import json
-
 import numpy as np
 from omegaconf import OmegaConf
 
-from pipeline.atomic import atomic_path, write_text_atomic
-from stages.align.floor import AlignConfig, axis_name, fit_floor, floor_transform, horizontal_surfaces, nearest_axis
-from stages.gaussians.cameras import camera_file, read_cameras
-from stages.gaussians.content import content_of
-from stages.gaussians.model import GaussianScene
-from stages.gaussians.store import read_scene_zarr, write_scene_zarr
+from navcore.gaussians.cameras import camera_file, read_cameras
+from navcore.gaussians.content import content_of
+from navcore.gaussians.model import GaussianScene
+from navcore.gaussians.surfaces import horizontal_surfaces
+from stages.align.floor import AlignConfig, axis_name, fit_floor, floor_transform, nearest_axis
 
 
 def ceiling_height(aligned: GaussianScene, cfg: AlignConfig) -> tuple[float, str]:
@@ -39,7 +36,7 @@ def ceiling_height(aligned: GaussianScene, cfg: AlignConfig) -> tuple[float, str
     return float((b[np.argmax(area)] + 0.5) * 0.1), "flat_peak"
 
 
-def side_view(aligned: GaussianScene, path, title: str) -> None:
+def side_view(aligned: GaussianScene, title: str):
     """Picture of the Gaussian density seen along y and along x (log scale), floor at z = 0 marked."""
     import matplotlib
 
@@ -60,22 +57,26 @@ def side_view(aligned: GaussianScene, path, title: str) -> None:
         ax.legend(loc="upper right", fontsize=8)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path)
+    return fig
+
+
+def plt_close(fig) -> None:
+    import matplotlib.pyplot as plt
+
     plt.close(fig)
 
 
 def run(scene, cfg, catalog) -> dict:
     acfg: AlignConfig = OmegaConf.to_object(cfg.align)
-    gs, attrs = read_scene_zarr(catalog.path("scene", scene))
+    gs, attrs = catalog.dataset("scene", scene).load()
     content = content_of(gs)
     cams = camera_file(scene, catalog)
     c2w = read_cameras(cams, 64, 48)[0] if cams is not None else None
     n, d, info = fit_floor(content, acfg, c2w)
     t = floor_transform(n, d)
     aligned = gs.transformed(t)
-    out = catalog.path("aligned", scene)
-    with atomic_path(out) as tmp:
-        write_scene_zarr(tmp, aligned, {**attrs, "frame": "aligned", "source_to_aligned": t.tolist()})
+    out = catalog.dataset("aligned", scene)
+    out.save(aligned, {**attrs, "frame": "aligned", "source_to_aligned": t.tolist()})
     aligned_content = content_of(aligned)
     ceiling, how = ceiling_height(aligned_content, acfg)
     tilt = nearest_axis(n)[1]
@@ -83,10 +84,9 @@ def run(scene, cfg, catalog) -> dict:
     summary = {"up_axis": up, "floor_normal_source": list(map(float, n)), "floor_offset": d,
                "tilt_from_nearest_axis_deg": tilt, "floor_to_ceiling_m": round(ceiling, 3), "ceiling_from": how,
                "cameras": str(cams) if cams is not None else None}
-    write_text_atomic(catalog.path("alignment", scene), json.dumps(
-        {"source_to_aligned": t.tolist(), **summary, "candidates": info}, indent=1))
-    with atomic_path(catalog.path("floor_side_view", scene)) as tmp:
-        side_view(aligned_content, tmp, f"{scene.name}: up axis {up}, floor-to-ceiling "
-                                        f"{ceiling:.2f} m ({how})")
-    return {"outputs": [str(out)], **{k: summary[k] for k in ("up_axis", "tilt_from_nearest_axis_deg",
+    catalog.dataset("alignment", scene).save({"source_to_aligned": t.tolist(), **summary, "candidates": info})
+    fig = side_view(aligned_content, f"{scene.name}: up axis {up}, floor-to-ceiling {ceiling:.2f} m ({how})")
+    catalog.dataset("floor_side_view", scene).save(fig)
+    plt_close(fig)
+    return {"outputs": [str(out.path)], **{k: summary[k] for k in ("up_axis", "tilt_from_nearest_axis_deg",
                                                                 "floor_to_ceiling_m")}}

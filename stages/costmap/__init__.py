@@ -1,5 +1,4 @@
-"""2D navigation costmap from the aligned opacity field, and the query API every later stage uses."""
-from stages.costmap.build import CostmapConfig, Embodiment, CostmapLayers, build_costmap
-from stages.costmap.query import Costmap
+"""2D navigation costmap from the aligned opacity field (its query API: navcore.nav.costmap)."""
+from stages.costmap.build import CostmapConfig, CostmapLayers, build_costmap
 
-__all__ = ["CostmapConfig", "Embodiment", "CostmapLayers", "build_costmap", "Costmap"]
+__all__ = ["CostmapConfig", "CostmapLayers", "build_costmap"]

@@ -23,8 +23,9 @@ For an embodiment with radius r and body interval [h_min, h_max] above the floor
 - M_occ = (clearance < r + margin) OR NOT M_sup, i.e. Dilate(M_raw, disk(r)) OR NOT M_sup with
   the dilation done exactly by the distance transform.
 ``margin`` bounds the error of bilinear interpolation of the clearance between cell centres
-(h^2 / (4 (r - h / sqrt 2)) for a distance field, h the map resolution), so the continuous
-query ``clearance(p) >= r + margin`` never accepts a pose closer than r to an obstacle cell.
+(h^2 (1 + sqrt2 h / rho) / (8 rho) with rho = max(r - h / sqrt2, h), h the map resolution; see
+interpolation_margin), so the continuous query ``clearance(p) >= r + margin`` never accepts a
+pose closer than r to an obstacle cell.
 """
 from __future__ import annotations
 
@@ -34,41 +35,10 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import Delaunay
 
+from navcore.gaussians.model import GaussianScene
+from navcore.nav.embodiment import Embodiment
+from navcore.voxels import VoxelGrid, VoxelizeConfig, column_max_opacity, opacity_field
 from stages.costmap.kernels import rasterize_triangles
-from stages.gaussians.model import GaussianScene
-from stages.voxelize import VoxelGrid, VoxelizeConfig, column_max_opacity, opacity_field
-
-
-@dataclass
-class Embodiment:
-    """A robot body for the costmap and, later, the camera and kinematic limits."""
-
-    name: str = "locobot"
-    """Name used in output paths."""
-    radius: float = 0.18
-    """Footprint radius, metres."""
-    h_min: float = 0.05
-    """Lowest point of the body above the floor that collides, metres (lower things are stepped over)."""
-    h_max: float = 0.9
-    """Highest point of the body, metres."""
-    camera_height: float = 0.88
-    """Camera height above the floor, metres."""
-    camera_pitch_deg: float = 0.0
-    """Camera pitch, degrees (negative looks down)."""
-    hfov_deg: float = 90.0
-    """Horizontal field of view, degrees."""
-    image_width: int = 640
-    """Camera image width, pixels."""
-    image_height: int = 480
-    """Camera image height, pixels."""
-    max_linear_velocity: float = 0.45
-    """m/s."""
-    max_angular_velocity: float = 0.8
-    """rad/s."""
-    max_linear_acceleration: float = 0.25
-    """m/s^2."""
-    max_angular_acceleration: float = 0.6
-    """rad/s^2."""
 
 
 @dataclass
@@ -173,7 +143,7 @@ def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, d
     The local floor height is the median height of the flat, horizontal Gaussians within
     ``floor_search`` of z = 0 in each ``floor_cell`` (3x3-cell median-filtered; 0 where none),
     the half-thickness 2.5 x their local robust spread (MAD), clipped to the configured range."""
-    from stages.align.floor import horizontal_surfaces
+    from navcore.gaussians.surfaces import horizontal_surfaces
 
     z = scene.means[:, 2].astype(np.float64)
     near = horizontal_surfaces(scene, 0.5, 20.0) & (np.abs(z) < cfg.floor_search)
@@ -347,8 +317,12 @@ def build_costmap(scene: GaussianScene, emb: Embodiment, cfg: CostmapConfig, vcf
     return layers, info
 
 
+GAP_WIDTHS = tuple(np.arange(0.3, 2.05, 0.05))
+"""Required widths tried by doorway_gaps, metres."""
+
+
 def doorway_gaps(clearance: np.ndarray, res: float, min_area_m2: float = 2.0,
-                 widths=np.arange(0.3, 2.05, 0.05)) -> list[float]:
+                 widths=GAP_WIDTHS) -> list[float]:
     """Widths (metres) of the narrowest doorway-like gaps: growing the required width w, the
     supported free space {clearance >= w / 2} splits into more regions of at least min_area_m2 at
     each width that closes a passage between two such regions. Returns the widths at which the

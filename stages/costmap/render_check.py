@@ -16,8 +16,9 @@ Expected depth reads splats seen obliquely near the camera short (the splats' ce
 ray's hit): by up to about two splat sigmas at 10 cm from a wall. The visible clearance is therefore
 corrected by ``bias_sigmas`` times the median largest sigma of the opaque splats around the pose
 (1.2, calibrated on synthetic seeds 100-101 against the mesh; bench-real validates it on others),
-which makes it right near the robot radius, where the verdict is decided. A pose is blocked by the render when its visible clearance is below
-the robot radius, blocked by the costmap when its clearance query says so; the estimated rates are
+which makes it right near the robot radius, where the verdict is decided. A pose is blocked by the
+render when its visible clearance is below the robot radius, blocked by the costmap when its
+clearance query says so; the estimated rates are
   FP = costmap-blocked and render-free / render-free,  FN = costmap-free and render-blocked / render-blocked,
 the definitions bench-spatial uses against the mesh. What a camera cannot see (closer than the
 near plane, hidden behind a nearer surface) the estimate cannot know; bench-real validates it on
@@ -64,7 +65,7 @@ class RenderCheckConfig:
 def pose_cameras(xy: np.ndarray, emb, cfg: RenderCheckConfig) -> tuple[np.ndarray, np.ndarray, int]:
     """Camera -> world [P * H * D, 4, 4], intrinsics [3, 3] and image height for poses xy [P, 2]
     (pose-major)."""
-    from stages.render.camera import camera_to_world, intrinsics
+    from navcore.render.camera import camera_to_world, intrinsics
 
     hs = [emb.h_min + f * (emb.h_max - emb.h_min) for f in cfg.heights]
     yaws = 2 * np.pi * np.arange(cfg.n_dirs) / cfg.n_dirs
@@ -85,7 +86,7 @@ def visible_clearance(scene, xy: np.ndarray, emb, cfg: RenderCheckConfig, backen
     """
     from scipy.spatial import cKDTree
 
-    from stages.render import Renderer
+    from navcore.render import Renderer
 
     c2w, k, height = pose_cameras(xy, emb, cfg)
     per_pose = len(cfg.heights) * cfg.n_dirs

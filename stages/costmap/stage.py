@@ -3,21 +3,16 @@
 once and shared, as all embodiments use one grid)."""
 from __future__ import annotations
 
-import json
-
 import numpy as np
-import zarr
 from omegaconf import OmegaConf
 
-from pipeline.atomic import atomic_path
+from navcore.gaussians.content import content_of
 from stages.costmap.build import CostmapConfig, build_costmap, doorway_gaps, map_extent, scale_warnings, support_mask
-from stages.gaussians.content import content_of
-from stages.gaussians.store import read_scene_zarr
 
 
 def embodiments(cfg) -> list:
     """The main embodiment, then costmap.embodiments (loaded from conf/embodiment)."""
-    from pipeline.config import load_embodiment
+    from navcore.nav.embodiment import load_embodiment
 
     main = OmegaConf.to_object(cfg.embodiment)
     extra = [load_embodiment(n) for n in cfg.costmap.embodiments if n != main.name]
@@ -33,24 +28,16 @@ def hashed_inputs(cfg) -> list[dict]:
 def run(scene, cfg, catalog) -> dict:
     ccfg: CostmapConfig = OmegaConf.to_object(cfg.costmap)
     vcfg = OmegaConf.to_object(cfg.voxelize)
-    gs, _ = read_scene_zarr(catalog.path("aligned", scene))
+    gs, _ = catalog.dataset("aligned", scene).load()
     gs = content_of(gs)  # floaters stay out of the maps
     extent = map_extent(gs, ccfg)
     support = support_mask(gs, *extent, ccfg, vcfg)
-    out = catalog.path("costmaps", scene)
-    result = {"outputs": [str(out)], "embodiments": {}}
-    with atomic_path(out) as tmp:
-        root = zarr.open_group(str(tmp), mode="w")
+    out = catalog.dataset("costmaps", scene)
+    result = {"outputs": [str(out.path)], "embodiments": {}}
+    with out.writing() as root:
         for emb in embodiments(cfg):
             layers, info = build_costmap(gs, emb, ccfg, vcfg, support=support, extent=extent)
-            g = root.create_group(emb.name)
-            for name in ("raw", "support", "occ", "clearance", "components"):
-                arr = getattr(layers, name)
-                g.create_array(name, data=arr, chunks=arr.shape)
-            g.attrs.update({"origin": list(layers.origin), "resolution": layers.resolution, "radius": emb.radius,
-                            "margin": layers.margin, "h_min": emb.h_min, "h_max": emb.h_max,
-                            "layout": "[ny, nx], row = y; cell (i, j) centre = origin + ((j+.5) res, (i+.5) res)",
-                            "info": info})
+            g = out.write_layers(root, emb, layers, {"info": info})
             if emb.name == cfg.embodiment.name:
                 gaps = doorway_gaps(layers.clearance, layers.resolution)  # -1 where unsupported
                 g.attrs["doorway_gaps_m"] = gaps
@@ -58,7 +45,7 @@ def run(scene, cfg, catalog) -> dict:
                                                "main_component_area_m2": round(info["main_component_area_m2"], 2),
                                                "free_components": info["free_components"]}
         root.attrs["main_embodiment"] = cfg.embodiment.name
-        ceiling = json.loads(catalog.path("alignment", scene).read_text()).get("floor_to_ceiling_m")
+        ceiling = catalog.dataset("alignment", scene).load().get("floor_to_ceiling_m")
         root.attrs["scale"] = result["scale"] = {"floor_to_ceiling_m": ceiling, "narrowest_gaps_m": gaps[:5]}
         warnings = scale_warnings(ceiling, gaps)
         if warnings:

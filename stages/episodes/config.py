@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-TASK_TYPES = ("pointnav", "imagenav", "objectnav")
-OBJECTNAV_CATEGORIES = ["chair", "bed", "sofa", "toilet", "tv_monitor", "plant", "table", "cabinet"]
+from navcore.nav.actions import ActionSpace
+from navcore.nav.tasks import OBJECTNAV_CATEGORIES
 
 
 @dataclass
@@ -106,10 +106,8 @@ class EpisodesConfig:
     distance by at most 0.34 % (1 = 8-connected: 8.2 %)."""
     dt: float = 0.05
     """Expert rollout time step, seconds (20 Hz)."""
-    forward_step: float = 0.25
-    """Discrete expert: forward step, metres."""
-    turn_angle_deg: float = 15.0
-    """Discrete expert: turn step, degrees."""
+    actions: ActionSpace = field(default_factory=ActionSpace)
+    """Step sizes of the discrete actions (the oracle's stored actions; evaluate uses the same)."""
     oracle: bool = True
     """Also store the discrete-action expert's action sequence per episode."""
     max_attempts_factor: int = 20

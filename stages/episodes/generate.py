@@ -11,17 +11,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from navcore.nav.actions import ACTION_NAMES, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
+from navcore.nav.embodiment import Limits
+from navcore.nav.oracle import discrete_expert
+from navcore.nav.poses import in_region, relative_waypoints
 from stages.episodes.config import DifficultyConfig, EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.planner import ScenePlanner, seed_ompl
-from stages.episodes.rollout import (ACTION_NAMES, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, Limits,
-                                     discrete_expert, in_region, relative_waypoints, rollout)
+from stages.episodes.rollout import rollout
 from stages.episodes.validity import check_trajectory
-
-
-def stream_seed(seed: int, scene_id: str, task: str) -> int:
-    """The random stream of one (scene, task): independent of which worker runs it."""
-    h = hashlib.sha256(f"{seed}:{scene_id}:{task}".encode()).digest()
-    return int.from_bytes(h[:8], "little") & (2**63 - 1)
 
 
 def difficulty_of(geodesic: float, cfg: DifficultyConfig) -> int:
@@ -202,8 +199,8 @@ class EpisodeGenerator:
         if self.ecfg.oracle:
             oracle = discrete_expert(fld.grid, cm, (start_xy[0], start_xy[1], start_yaw), centres, t.success_radius,
                                      goal_yaw if goal.kind == "image" else None,
-                                     math.radians(t.heading_tolerance_deg), self.ecfg.forward_step,
-                                     math.radians(self.ecfg.turn_angle_deg), difficulty_budget)
+                                     math.radians(t.heading_tolerance_deg), self.ecfg.actions.forward_step,
+                                     self.ecfg.actions.turn, difficulty_budget)
             if oracle is None:
                 self.rejections["oracle_failed"] += 1
                 return None

@@ -15,26 +15,23 @@ from ompl import base as ob
 from ompl import geometric as og
 from ompl import util as ou
 
+from navcore.registry import Registry
 from stages.episodes.config import PlannerConfig
-
 
 YAW_WEIGHT = 0.01
 """Weight of heading (radians) against position (metres) in the SE(2) metric."""
 
 
-def _planner_registry() -> dict[str, tuple]:
-    """key -> (OMPL class, asymptotically optimal). Not registered, see design.md: AORRTC (crashes in
-    these bindings) and PRM* (its solve() checks for solutions on a second thread, which deadlocks on
-    the Python validity callback)."""
-    return {
-        "rrtconnect": (og.RRTConnect, False),
-        "rrtstar": (og.RRTstar, True),
-        "informed_rrtstar": (og.InformedRRTstar, True),
-        "bitstar": (og.BITstar, True),
-    }
-
-
-PLANNERS = tuple(_planner_registry())
+PLANNERS = Registry("planner", {
+    "rrtconnect": "ompl.geometric:RRTConnect",
+    "rrtstar": "ompl.geometric:RRTstar",
+    "informed_rrtstar": "ompl.geometric:InformedRRTstar",
+    "bitstar": "ompl.geometric:BITstar",
+})
+"""OMPL planners by key. Not registered, see design.md: AORRTC (crashes in these bindings) and
+PRM* (its solve() checks for solutions on a second thread, which deadlocks on the Python validity
+callback)."""
+ASYMPTOTICALLY_OPTIMAL = frozenset({"rrtstar", "informed_rrtstar", "bitstar"})
 
 
 @contextlib.contextmanager
@@ -70,10 +67,9 @@ class ScenePlanner:
     """
 
     def __init__(self, costmap, cfg: PlannerConfig):
-        reg = _planner_registry()
-        if cfg.name not in reg:
-            raise ValueError(f"unknown planner {cfg.name!r}; registered: {', '.join(reg)}")
-        cls, self.optimizing = reg[cfg.name]
+        if cfg.name not in PLANNERS:
+            raise ValueError(f"unknown planner {cfg.name!r}; registered: {', '.join(PLANNERS)}")
+        cls, self.optimizing = PLANNERS[cfg.name], cfg.name in ASYMPTOTICALLY_OPTIMAL
         self.cfg = cfg
         self.costmap = costmap
         ny, nx = costmap.clearance.shape

@@ -2,40 +2,36 @@
 hive-partitioned Parquet (05_episodes, 06_trajectories)."""
 from __future__ import annotations
 
-import shutil
 import time
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 from omegaconf import OmegaConf
 
-from pipeline.atomic import atomic_path
-from stages.costmap.query import Costmap
+from navcore.instances import load_instances
+from navcore.nav.geodesic import NavGraph, eligible_cells
+from navcore.seeds import stream_seed
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
-from stages.episodes.generate import EpisodeGenerator, scene_split, stream_seed
-from stages.episodes.geodesic import NavGraph, eligible_cells
+from stages.episodes.generate import EpisodeGenerator, scene_split
 from stages.episodes.schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA
-from stages.instances import load_instances
 
 
-def write_table(rows_or_cols, schema: pa.Schema, path) -> None:
-    """Write one Parquet file atomically (zstd, no pandas metadata: same rows, same bytes)."""
+def write_table(rows_or_cols, schema: pa.Schema, dataset) -> None:
+    """Write one Parquet dataset (zstd, no pandas metadata: same rows, same bytes)."""
     if isinstance(rows_or_cols, list):
         table = pa.Table.from_pylist(rows_or_cols, schema=schema)
     else:
         table = pa.table({f.name: pa.array(np.concatenate(rows_or_cols[f.name]) if rows_or_cols else [], type=f.type)
                           for f in schema}, schema=schema)
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp, compression="zstd", row_group_size=1 << 20)
+    dataset.save(table, row_group_size=1 << 20)
 
 
 def remove_scene_partitions(catalog, scene) -> None:
     """Delete this scene's previous shards of every task (a task dropped from the config must not
     leave stale episodes behind)."""
-    for root in ("episodes_root", "trajectories_root"):
-        for d in catalog.path(root).glob(f"task=*/scene_id={scene.scene_id}"):
-            shutil.rmtree(d, ignore_errors=True)
+    for name in ("episodes", "trajectories"):
+        for ds in catalog.find(name, scene).values():
+            ds.delete()
 
 
 def run(scene, cfg, catalog) -> dict:
@@ -43,7 +39,7 @@ def run(scene, cfg, catalog) -> dict:
     ecfg: EpisodesConfig = OmegaConf.to_object(cfg.episodes)
     pcfg: PlannerConfig = OmegaConf.to_object(cfg.planner)
     emb = OmegaConf.to_object(cfg.embodiment)
-    cm = Costmap.load(catalog.path("costmaps", scene), emb.name)
+    cm = catalog.dataset("costmaps", scene).load(emb.name)
     graph = NavGraph(cm, eligible_cells(cm, ecfg), ecfg.geodesic_neighbourhood)
     remove_scene_partitions(catalog, scene)
     held_out = scene_split(scene.scene_id, ecfg.scene_splits)
@@ -62,9 +58,9 @@ def run(scene, cfg, catalog) -> dict:
         res = gen.generate()
         for ds, data, schema in (("episodes", res.episodes, EPISODE_SCHEMA),
                                  ("trajectories", res.trajectories, TRAJECTORY_SCHEMA)):
-            path = catalog.path(ds, scene, task=name)
-            write_table(data, schema, path)
-            result["outputs"].append(str(path))
+            out = catalog.dataset(ds, scene, task=name)
+            write_table(data, schema, out)
+            result["outputs"].append(str(out.path))
         result["tasks"][name] = {
             "episodes": len(res.episodes), "requested": res.requested,
             "trajectory_rows": int(sum(len(a) for a in res.trajectories.get("step", []))),

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from stages.episodes.rollout import Limits, integrate, wrap_angle
+from navcore.nav.embodiment import Limits
+from navcore.nav.poses import integrate, wrap_angle
 
 # Slack for float round-off in the checks (relative to the limits), and the pose tolerance of
 # the control-consistency check, metres / radians (controls are stored as float32: integrating

@@ -13,15 +13,19 @@ import math
 
 import numpy as np
 
-from stages.episodes.rollout import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, DiscreteOracle
-from stages.registry import Registry
+from navcore.nav.actions import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
+from navcore.nav.oracle import DiscreteOracle
+from navcore.registry import Registry
 
-AGENTS = Registry("agent")
-register_agent = AGENTS.register
+AGENTS = Registry("agent", {
+    "random": "stages.evaluate.agents:RandomAgent",
+    "oracle": "stages.evaluate.agents:OracleAgent",
+    "noisy_oracle": "stages.evaluate.agents:NoisyOracleAgent",
+    "depth_reactive": "stages.evaluate.agents:DepthReactiveAgent",
+})
 make_agent = AGENTS.make
 
 
-@register_agent("random")
 class RandomAgent:
     """Uniform over forward / left / right; never stops (seeded)."""
 
@@ -35,7 +39,6 @@ class RandomAgent:
         return int(self.rng.choice([MOVE_FORWARD, TURN_LEFT, TURN_RIGHT]))
 
 
-@register_agent("oracle")
 class OracleAgent:
     """Follows the costmap geodesic with the discrete actions (stages.episodes.rollout.DiscreteOracle);
     stops inside the success region (ImageNav: after turning to the goal heading)."""
@@ -50,7 +53,7 @@ class OracleAgent:
         self.env = env
         ep = env.state.ep
         self.oracle = DiscreteOracle(env.ctx.field(ep).grid, env.ctx.costmap, ep.centres, ep.success_radius,
-                                     ep.goal_yaw, ep.heading_tolerance, env.cfg.forward_step, env.turn)
+                                     ep.goal_yaw, ep.heading_tolerance, env.cfg.actions.forward_step, env.turn)
 
     def act(self, obs: dict):
         s = self.env.state
@@ -58,7 +61,6 @@ class OracleAgent:
         return STOP if a < 0 else a
 
 
-@register_agent("noisy_oracle")
 class NoisyOracleAgent(OracleAgent):
     """The oracle, but each step a uniformly random move with probability `noise` (seeded)."""
 
@@ -72,7 +74,6 @@ class NoisyOracleAgent(OracleAgent):
         return super().act(obs)
 
 
-@register_agent("depth_reactive")
 class DepthReactiveAgent:
     """PointNav from its own sensors only: the rendered depth and the goal vector. Turns towards the
     goal, moves forward when the central band of the depth image is clear, otherwise turns to the

@@ -3,10 +3,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from stages.evaluate.env import EnvSettings
+
 
 @dataclass
-class EvaluateConfig:
-    """Closed-loop evaluation of one agent on stored episodes."""
+class EvaluateConfig(EnvSettings):
+    """Closed-loop evaluation of one agent on stored episodes (protocol, width, height, render:
+    EnvSettings; step sizes: episodes.actions, the dataset's)."""
 
     run: str = "${evaluate.agent}_${evaluate.protocol}"
     """Run name: outputs go to data/07_eval/{run}/ (default: agent and protocol)."""
@@ -15,16 +18,8 @@ class EvaluateConfig:
     ws://host:port agent server speaking the NavArena protocol."""
     agent_args: dict = field(default_factory=dict)
     """Keyword arguments of the agent's constructor."""
-    protocol: str = "distance"
-    """distance | explicit_stop."""
     renderer: str = "auto"
     """auto (gsplat on CUDA, else CPU) | cpu | gsplat."""
-    render: bool = True
-    """Render RGB-D observations (false for agents that do not look: oracle, random)."""
-    width: int | None = None
-    """Image width (null = the embodiment's)."""
-    height: int | None = None
-    """Image height (null = the embodiment's)."""
     tasks: list[str] = field(default_factory=lambda: ["pointnav", "imagenav", "objectnav"])
     """Tasks to evaluate."""
     split: str | None = None

@@ -2,7 +2,7 @@
 rendered RGB-D.
 
 Actions (any of):
-- discrete ids 0 STOP, 1 MOVE_FORWARD (forward_step), 2 TURN_LEFT, 3 TURN_RIGHT (turn_angle);
+- discrete ids 0 STOP, 1 MOVE_FORWARD (actions.forward_step), 2 TURN_LEFT, 3 TURN_RIGHT (actions.turn);
 - {"stop": true} (how STOP is sent in every form);
 - waypoints {"waypoints": [{"x", "y", "yaw"}, ...]}: relative moves in the robot frame (ROS: x
   forward, y left, yaw counter-clockwise, metres / radians), applied in order within one step;
@@ -18,32 +18,41 @@ inside the region). Either way the episode ends after its step budget (max_steps
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from stages.episodes.rollout import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, wrap_angle
+from navcore.nav.actions import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, ActionSpace
+from navcore.nav.oracle import geodesic_potential
+from navcore.nav.poses import wrap_angle
 from stages.evaluate.episode import Episode
 
 PROTOCOLS = ("distance", "explicit_stop")
 
 
 @dataclass
-class EnvConfig:
-    """The environment's rules and sensors."""
+class EnvSettings:
+    """The environment's rules and sensors that a run chooses (also fields of EvaluateConfig)."""
 
     protocol: str = "distance"
     """distance | explicit_stop (see the module docstring)."""
-    forward_step: float = 0.25
-    """MOVE_FORWARD distance, metres."""
-    turn_angle_deg: float = 15.0
-    """TURN_LEFT / TURN_RIGHT angle, degrees."""
     width: int | None = None
     """Image width, pixels (null = the embodiment's)."""
     height: int | None = None
     """Image height, pixels (null = the embodiment's)."""
     render: bool = True
     """Render RGB-D observations (false: pose and goal only, for metric-only runs)."""
+
+
+@dataclass
+class EnvConfig(EnvSettings):
+    """EnvSettings plus the dataset's action space (the evaluate stage takes episodes.actions)."""
+
+    actions: ActionSpace = field(default_factory=ActionSpace)
+
+    @classmethod
+    def of(cls, settings: EnvSettings, actions: ActionSpace) -> "EnvConfig":
+        return cls(**{f.name: getattr(settings, f.name) for f in fields(EnvSettings)}, actions=actions)
 
 
 class SceneContext:
@@ -53,7 +62,7 @@ class SceneContext:
         self.costmap, self.graph, self.emb = costmap, graph, emb
         self.renderer = None
         if gaussians is not None:
-            from stages.render import Renderer
+            from navcore.render import Renderer
 
             self.renderer = Renderer(gaussians, backend)
         self._fields: dict[str, object] = {}
@@ -75,7 +84,7 @@ class SceneContext:
         or (on_device) torch tensors left on the renderer's device for GPU-side policies."""
         import torch
 
-        from stages.render.camera import embodiment_camera
+        from navcore.render.camera import embodiment_camera
 
         vm, k, w, h = embodiment_camera(self.emb, poses, width, height)
         out = self.renderer.render(vm, k, w, h)
@@ -121,7 +130,7 @@ class NavEnv:
             raise ValueError(f"unknown protocol {self.cfg.protocol!r}; choose one of {PROTOCOLS}")
         self.w = int(self.cfg.width or ctx.emb.image_width)
         self.h = int(self.cfg.height or ctx.emb.image_height)
-        self.turn = math.radians(self.cfg.turn_angle_deg)
+        self.turn = self.cfg.actions.turn
         self.state: EpisodeState | None = None
         self._goal_image = None
 
@@ -169,11 +178,10 @@ class NavEnv:
 
     def geodesic_to_goal(self) -> float:
         """Geodesic distance from the current pose to the goal (set), metres."""
-        from stages.episodes.rollout import _potential
 
         f = self.ctx.field(self.state.ep)
         cm = self.ctx.costmap
-        return float(_potential(f.grid, cm.origin[0], cm.origin[1], cm.resolution, self.state.x, self.state.y))
+        return float(geodesic_potential(f.grid, cm.origin[0], cm.origin[1], cm.resolution, self.state.x, self.state.y))
 
     def _decode(self, action) -> tuple[bool, list[tuple[float, float, float]]]:
         if isinstance(action, dict):
@@ -190,7 +198,7 @@ class NavEnv:
         if a == STOP:
             return True, []
         if a == MOVE_FORWARD:
-            return False, [(self.cfg.forward_step, 0.0, 0.0)]
+            return False, [(self.cfg.actions.forward_step, 0.0, 0.0)]
         if a in (TURN_LEFT, TURN_RIGHT):
             return False, [(0.0, 0.0, self.turn if a == TURN_LEFT else -self.turn)]
         raise ValueError(f"unknown discrete action {a} (0 stop, 1 forward, 2 left, 3 right)")

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from stages.episodes.rollout import in_region
+from navcore.nav.poses import in_region
 
 
 @dataclass

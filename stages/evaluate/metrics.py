@@ -18,14 +18,24 @@ import math
 import numba
 import numpy as np
 
-from stages.episodes.rollout import wrap_angle
+from navcore.nav.poses import wrap_angle
+from navcore.registry import Registry
 
-METRICS: dict[str, type] = {}
-
-
-def register_metric(cls):
-    METRICS[cls.name] = cls
-    return cls
+METRICS = Registry("metric", {
+    "distance_sr": "stages.evaluate.metrics:DistanceSR",
+    "stop_sr": "stages.evaluate.metrics:StopSR",
+    "sr": "stages.evaluate.metrics:SR",
+    "spl": "stages.evaluate.metrics:SPL",
+    "soft_spl": "stages.evaluate.metrics:SoftSPL",
+    "ne": "stages.evaluate.metrics:NE",
+    "collision_rate": "stages.evaluate.metrics:CollisionRate",
+    "steps": "stages.evaluate.metrics:Steps",
+    "pose_sr": "stages.evaluate.metrics:PoseSR",
+    "osr": "stages.evaluate.metrics:OSR",
+    "dtw": "stages.evaluate.metrics:DTW",
+    "ndtw": "stages.evaluate.metrics:NDTW",
+})
+"""Every metric, in the order of the result tables."""
 
 
 @numba.njit(cache=True)
@@ -50,7 +60,6 @@ class Metric:
         raise NotImplementedError
 
 
-@register_metric
 class DistanceSR(Metric):
     name = "distance_sr"
 
@@ -58,7 +67,6 @@ class DistanceSR(Metric):
         return float(s.ever_in_region)
 
 
-@register_metric
 class StopSR(Metric):
     name = "stop_sr"
 
@@ -66,7 +74,6 @@ class StopSR(Metric):
         return float(s.stopped and s.stop_in_region)
 
 
-@register_metric
 class SR(Metric):
     name = "sr"
 
@@ -74,7 +81,6 @@ class SR(Metric):
         return float(s.success)
 
 
-@register_metric
 class SPL(Metric):
     name = "spl"
 
@@ -83,7 +89,6 @@ class SPL(Metric):
         return float(s.success) * l / max(s.path_length, l, 1e-9)
 
 
-@register_metric
 class SoftSPL(Metric):
     name = "soft_spl"
 
@@ -93,7 +98,6 @@ class SoftSPL(Metric):
         return progress * l / max(s.path_length, l, 1e-9)
 
 
-@register_metric
 class NE(Metric):
     name = "ne"
 
@@ -101,7 +105,6 @@ class NE(Metric):
         return s.ep.distance_to_centres(s.x, s.y)
 
 
-@register_metric
 class CollisionRate(Metric):
     name = "collision_rate"
 
@@ -109,7 +112,6 @@ class CollisionRate(Metric):
         return s.collisions / s.moves if s.moves else 0.0
 
 
-@register_metric
 class Steps(Metric):
     name = "steps"
 
@@ -117,7 +119,6 @@ class Steps(Metric):
         return float(s.steps)
 
 
-@register_metric
 class PoseSR(Metric):
     name = "pose_sr"
 
@@ -128,7 +129,6 @@ class PoseSR(Metric):
         return float(s.success and ok)
 
 
-@register_metric
 class OSR(Metric):
     name = "osr"
 
@@ -136,7 +136,6 @@ class OSR(Metric):
         return float(s.ever_in_region)
 
 
-@register_metric
 class DTW(Metric):
     name = "dtw"
 
@@ -147,7 +146,6 @@ class DTW(Metric):
         return float(dtw(np.asarray(s.positions, float), np.ascontiguousarray(ref, float)))
 
 
-@register_metric
 class NDTW(Metric):
     name = "ndtw"
 

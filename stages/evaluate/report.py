@@ -1,9 +1,7 @@
 """Evaluation reports: per-run summary.json and tables.md, and a cross-run plot."""
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 
 import pandas as pd
 
@@ -15,13 +13,15 @@ TABLE6 = [("distance_sr", "Dist. SR"), ("stop_sr", "Stop SR"), ("spl", "SPL"), (
           ("ne", "NE (m)"), ("collision_rate", "CR"), ("steps", "Steps")]
 
 
-def load_results(run_dir: Path) -> pd.DataFrame:
-    res = run_dir / "results"
-    if not res.exists():
-        return pd.DataFrame()
-    df = pd.read_parquet(res)
-    df["scene_id"] = df["scene_id"].astype(str)
-    return df
+def load_results(parts: dict[str, object]) -> pd.DataFrame:
+    """One run's per-scene result tables (scene id -> eval_results dataset) as one DataFrame with a
+    scene_id column."""
+    frames = []
+    for scene_id, ds in sorted(parts.items()):
+        df = ds.load().to_pandas()
+        df["scene_id"] = scene_id
+        frames.append(df)
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
 def summarize(df: pd.DataFrame) -> dict:
@@ -64,7 +64,7 @@ def tables(summaries: dict[str, dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def plot_sr_by_difficulty(summaries: dict[str, dict], path: Path) -> None:
+def plot_sr_by_difficulty(summaries: dict[str, dict]):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -85,24 +85,31 @@ def plot_sr_by_difficulty(summaries: dict[str, dict], path: Path) -> None:
     axes[0][0].set_ylabel("Distance SR")
     axes[0][-1].legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    return fig
 
 
-def write_reports(eval_root: Path, run: str) -> dict:
-    from pipeline.atomic import write_text_atomic
+def write_reports(catalog, run: str) -> dict:
+    """summary.json and tables.md of `run`, the tables of every run and the cross-run plot."""
+    import matplotlib.pyplot as plt
 
-    eval_root = Path(eval_root)
     summaries = {}
-    for d in sorted(p for p in eval_root.iterdir() if p.is_dir()):
-        df = load_results(d)
+    by_run: dict[str, dict] = {}
+    for key, ds in catalog.find("eval_results").items():  # run/scene_id
+        name, scene_id = key.split("/")
+        by_run.setdefault(name, {})[scene_id] = ds
+    for name, parts in sorted(by_run.items()):
+        df = load_results(parts)
         if len(df):
-            summaries[d.name] = summarize(df)
-            if d.name == run:
-                write_text_atomic(d / "summary.json", json.dumps(summaries[d.name], indent=1))
+            summaries[name] = summarize(df)
+    outputs = []
     if run in summaries:
-        write_text_atomic(eval_root / run / "tables.md", tables({run: summaries[run]}))
-    write_text_atomic(eval_root / "tables.md", tables(summaries))
-    plot_sr_by_difficulty(summaries, eval_root / "distance_sr_by_difficulty.png")
-    return {"outputs": [str(eval_root / run / "summary.json"), str(eval_root / "tables.md"),
-                        str(eval_root / "distance_sr_by_difficulty.png")]}
+        for ds, data in ((catalog.dataset("eval_summary", run=run), summaries[run]),
+                         (catalog.dataset("eval_tables", run=run), tables({run: summaries[run]}))):
+            ds.save(data)
+            outputs.append(str(ds.path))
+    all_tables, plot = catalog.dataset("eval_all_tables"), catalog.dataset("eval_sr_plot")
+    all_tables.save(tables(summaries))
+    fig = plot_sr_by_difficulty(summaries)
+    plot.save(fig, dpi=100)
+    plt.close(fig)
+    return {"outputs": outputs + [str(all_tables.path), str(plot.path)]}

@@ -11,13 +11,10 @@ import re
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 from omegaconf import OmegaConf
 
-from pipeline.atomic import atomic_path
-from stages.costmap.query import Costmap
-from stages.episodes.generate import stream_seed
-from stages.episodes.geodesic import NavGraph, eligible_cells
+from navcore.nav.geodesic import NavGraph, eligible_cells
+from navcore.seeds import stream_seed
 from stages.evaluate.config import EvaluateConfig
 from stages.evaluate.env import EnvConfig, NavEnv, SceneContext
 from stages.evaluate.episode import Episode
@@ -33,7 +30,7 @@ def run_name(ecfg: EvaluateConfig) -> str:
 
 def make_scene_agent(ecfg: EvaluateConfig, seed: int):
     if ecfg.agent.startswith(("ws://", "wss://")):
-        from stages.evaluate.protocol import RemoteAgent
+        from stages.evaluate.protocol.client import RemoteAgent
 
         return RemoteAgent(ecfg.agent, timeout=ecfg.timeout_s, **ecfg.agent_args)
     from stages.evaluate.agents import AGENTS, make_agent
@@ -47,10 +44,10 @@ def make_scene_agent(ecfg: EvaluateConfig, seed: int):
 def load_episodes(catalog, scene, ecfg: EvaluateConfig) -> list[Episode]:
     out = []
     for task in ecfg.tasks:
-        path = catalog.path("episodes", scene, task=task)
-        if not path.exists():
+        src = catalog.dataset("episodes", scene, task=task)
+        if not src.exists():
             continue
-        eps = pq.read_table(path).to_pandas()
+        eps = src.load().to_pandas()
         if ecfg.split:
             eps = eps[eps["split"] == ecfg.split]
         if ecfg.difficulty:
@@ -58,8 +55,8 @@ def load_episodes(catalog, scene, ecfg: EvaluateConfig) -> list[Episode]:
         eps = eps.sort_values("episode_id")
         if ecfg.episodes_per_scene is not None:
             eps = eps.head(ecfg.episodes_per_scene)
-        tr = pq.read_table(catalog.path("trajectories", scene, task=task),
-                           columns=["episode_id", "step", "position_x", "position_y"]).to_pandas()
+        tr = catalog.dataset("trajectories", scene, task=task).load(
+            ["episode_id", "step", "position_x", "position_y"]).to_pandas()
         refs = {eid: g.sort_values("step")[["position_x", "position_y"]].to_numpy()[::REFERENCE_STRIDE]
                 for eid, g in tr.groupby("episode_id")}
         for row in eps.to_dict("records"):
@@ -71,25 +68,23 @@ def load_episodes(catalog, scene, ecfg: EvaluateConfig) -> list[Episode]:
 def run(scene, cfg, catalog) -> dict:
     ecfg: EvaluateConfig = OmegaConf.to_object(cfg.evaluate)
     emb = OmegaConf.to_object(cfg.embodiment)
-    cm = Costmap.load(catalog.path("costmaps", scene), emb.name)
+    cm = catalog.dataset("costmaps", scene).load(emb.name)
     graph = NavGraph(cm, eligible_cells(cm, OmegaConf.to_object(cfg.episodes)), cfg.episodes.geodesic_neighbourhood)
     gs = None
     if ecfg.render:
-        from stages.gaussians.store import read_scene_zarr
-
-        gs, _ = read_scene_zarr(catalog.path("aligned", scene))
+        gs, _ = catalog.dataset("aligned", scene).load()
     ctx = SceneContext(cm, graph, emb, gs, ecfg.renderer)
-    env_cfg = EnvConfig(protocol=ecfg.protocol, width=ecfg.width, height=ecfg.height, render=ecfg.render)
+    env_cfg = EnvConfig.of(ecfg, OmegaConf.to_object(cfg.episodes).actions)
     episodes = load_episodes(catalog, scene, ecfg)
     seed = stream_seed(ecfg.seed, scene.scene_id, "evaluate") % 2**31
     remote = ecfg.agent.startswith(("ws://", "wss://"))
-    base = catalog.path("eval_root") / run_name(ecfg)
+    run = run_name(ecfg)
     videos = []
     if ecfg.batch_slots > 1:  # batched: no videos (frames of many slots interleave)
         from stages.evaluate.loop import InProcessBatch, run_episodes_batched
 
         if remote:
-            from stages.evaluate.protocol import RemoteBatchAgent
+            from stages.evaluate.protocol.client import RemoteBatchAgent
 
             client = RemoteBatchAgent(ecfg.agent, timeout=ecfg.timeout_s, **ecfg.agent_args)
         else:
@@ -101,22 +96,23 @@ def run(scene, cfg, catalog) -> dict:
             frames = [] if (ecfg.render and len(videos) < ecfg.videos) else None
             rows.append(run_episode(env, agent, ep, frames))
             if frames:
-                videos.append(write_video(frames, base / "videos" / f"{scene.scene_id}_{ep.task}_{ep.episode_id}.mp4"))
+                videos.append(write_video(frames, catalog.dataset("eval_video", scene, run=run, task=ep.task,
+                                                                  episode_id=ep.episode_id)))
         client = agent
     if hasattr(client, "close"):
         client.close()
     episode_of = {(e.task, e.episode_id): e for e in episodes}
     plots = [plot_trajectory(cm, r, episode_of[(r["task"], r["episode_id"])],
-                             base / "plots" / f"{scene.scene_id}_{r['task']}_{r['episode_id']}.png")
+                             catalog.dataset("eval_plot", scene, run=run, task=r["task"], episode_id=r["episode_id"]))
              for r in rows[:ecfg.trajectory_plots]]
-    out = base / "results" / f"scene_id={scene.scene_id}" / "part-0.parquet"
+    out = catalog.dataset("eval_results", scene, run=run)
     write_results(rows, out)
-    return {"outputs": [str(out), *videos, *plots], "episodes": len(rows),
+    return {"outputs": [str(out.path), *videos, *plots], "episodes": len(rows),
             "agent_errors": sum(bool(r["error"]) for r in rows),
-            "sr": float(np.mean([r["sr"] for r in rows])) if rows else None, "run": run_name(ecfg)}
+            "sr": float(np.mean([r["sr"] for r in rows])) if rows else None, "run": run}
 
 
-def write_results(rows: list[dict], path) -> None:
+def write_results(rows: list[dict], dataset) -> None:
     metric_cols = list(METRICS)
     # scene_id comes from the hive partition folder
     cols = {c: [r[c] for r in rows] for c in ("episode_id", "task", "difficulty", "protocol", "end_reason",
@@ -128,16 +124,15 @@ def write_results(rows: list[dict], path) -> None:
                       "seconds": pa.array([r["seconds"] for r in rows], pa.float64()),
                       "trajectory_x": pa.array([r["trajectory"][:, 0].tolist() for r in rows], pa.list_(pa.float32())),
                       "trajectory_y": pa.array([r["trajectory"][:, 1].tolist() for r in rows], pa.list_(pa.float32()))})
-    with atomic_path(path) as tmp:
-        pq.write_table(table, tmp, compression="zstd")
+    dataset.save(table)
 
 
-def write_video(frames: list[np.ndarray], path, fps: int = 10) -> str:
+def write_video(frames: list[np.ndarray], dataset, fps: int = 10) -> str:
     """Egocentric RGB frames -> mp4 (H.264 where the bundled FFmpeg has it, else MPEG-4)."""
     import av
 
     h, w = frames[0].shape[:2]
-    with atomic_path(path) as tmp:
+    with dataset.writing() as tmp:
         with av.open(str(tmp), mode="w", format="mp4") as container:
             try:
                 stream = container.add_stream("libx264", rate=fps)
@@ -150,10 +145,10 @@ def write_video(frames: list[np.ndarray], path, fps: int = 10) -> str:
                     container.mux(packet)
             for packet in stream.encode():
                 container.mux(packet)
-    return str(path)
+    return str(dataset.path)
 
 
-def plot_trajectory(cm: Costmap, row: dict, ep: Episode, path) -> str:
+def plot_trajectory(cm, row: dict, ep: Episode, dataset) -> str:
     """Top-down: free space, the expert's path, the executed path, start and success region."""
     import matplotlib
 
@@ -174,14 +169,13 @@ def plot_trajectory(cm: Costmap, row: dict, ep: Episode, path) -> str:
     ax.set_title(f"{ep.task} {ep.episode_id} ({ep.difficulty}): SPL {row['spl']:.2f}")
     ax.legend(loc="lower right", fontsize=7)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
+    dataset.save(fig, dpi=100)
     plt.close(fig)
-    return str(path)
+    return str(dataset.path)
 
 
 def finalize(cfg, catalog) -> dict:
     """summary.json and tables.md of this run (all its scenes on disk), and the cross-run plot."""
     from stages.evaluate.report import write_reports
 
-    return write_reports(catalog.path("eval_root"), run_name(OmegaConf.to_object(cfg.evaluate)))
+    return write_reports(catalog, run_name(OmegaConf.to_object(cfg.evaluate)))

@@ -4,7 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 from typing import Optional
 
-from stages.episodes.config import OBJECTNAV_CATEGORIES
+from navcore.nav.tasks import OBJECTNAV_CATEGORIES
 from stages.semantics.lifting import LiftingConfig
 from stages.semantics.segmenters import CORRUPTION_LEVELS, Corruption
 

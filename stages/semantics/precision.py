@@ -7,10 +7,11 @@ categories with at least one valid centre of their category inside.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
+
+from navcore.io.datasets import SyntheticSourceDataset
 
 
 def inside_objects(points: np.ndarray, objects: list[dict], tol: float = 0.0) -> np.ndarray:
@@ -41,6 +42,6 @@ def score(pred: list[dict], objects: list[dict], categories: list[str], to_canon
 
 def ground_truth_objects(source_dir: Path) -> tuple[list[dict], np.ndarray]:
     """(objects.json objects, canonical -> source 4x4) of a synthetic scene's source folder."""
-    gt = Path(source_dir) / "ground_truth"
-    objects = json.loads((gt / "objects.json").read_text())["objects"]
-    return objects, np.asarray(json.loads((gt / "transform.json").read_text())["canonical_to_source"])
+    src = SyntheticSourceDataset(source_dir)
+    return (src.read_ground_truth("objects.json")["objects"],
+            np.asarray(src.read_ground_truth("transform.json")["canonical_to_source"]))

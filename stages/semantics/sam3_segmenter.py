@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from stages.semantics.segmenters import Segmenter, register_segmenter
+from stages.semantics.segmenters import Segmenter
 
 BPE_FILE = "bpe_simple_vocab_16e6.txt.gz"
 _MODELS: dict = {}  # (checkpoint, bpe, device) -> model, shared by the scenes of one worker
@@ -52,7 +52,6 @@ def build_model(checkpoint: str | None, bpe_path: str | None, device: str):
                                   load_from_HF=False)
 
 
-@register_segmenter("sam3")
 class Sam3Segmenter(Segmenter):
     """Args: model (a built SAM3 image model) or checkpoint (+ bpe_path) to build one; device;
     confidence: detection threshold; resolution: model input size; batch: frames per forward."""

@@ -19,10 +19,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from stages.registry import Registry
+from navcore.registry import Registry
 
-SEGMENTERS = Registry("segmenter")
-register_segmenter = SEGMENTERS.register
+SEGMENTERS = Registry("segmenter", {
+    "oracle": "stages.semantics.segmenters:OracleSegmenter",
+    "sam3": "stages.semantics.sam3_segmenter:Sam3Segmenter",  # imports torch and sam3 when used
+})
 
 
 @dataclass
@@ -99,12 +101,11 @@ class Segmenter:
         return [self.segment(r, prompts, c) for r, c in zip(rgbs, contexts)]
 
 
-@register_segmenter("oracle")
 class OracleSegmenter(Segmenter):
     """Ground-truth masks rendered from per-Gaussian instance ids, then corrupted.
 
     Args:
-        renderer: stages.render.Renderer of the scene. instance_ids: [N] int per Gaussian (0 = none).
+        renderer: navcore.render.Renderer of the scene. instance_ids: [N] int per Gaussian (0 = none).
         categories: {instance id: category}. corruption: a Corruption or a level name. seed: rng seed.
     """
 
@@ -124,17 +125,15 @@ class OracleSegmenter(Segmenter):
     def from_scene(cls, scene, catalog, renderer, cfg, seed: int) -> "OracleSegmenter":
         """Ground truth of a synthetic scene (its per-Gaussian instance ids and labels.json); the
         corruption of `cfg.oracle`."""
-        import json
-
-        gt = catalog.path("source_synthetic", scene) / "ground_truth" if scene.synthetic else None
-        if gt is None or not (gt / "instance_ids.npy").exists():
+        src = catalog.dataset("source_synthetic", scene) if scene.synthetic else None
+        ids = src.read_ground_truth("instance_ids.npy") if src is not None else None
+        if ids is None:
             raise SegmenterUnavailable(f"scene {scene.scene_id!r} ({scene.name}): the oracle segmenter needs the per-Gaussian "
                              "ground truth of a synthetic scene; use semantics.segmenter=sam3 for this scene")
-        ids = np.load(gt / "instance_ids.npy")
         if len(ids) != renderer.num_gaussians:
-            raise SegmenterUnavailable(f"scene {scene.scene_id!r}: {gt / 'instance_ids.npy'} labels {len(ids)} Gaussians, the "
+            raise SegmenterUnavailable(f"scene {scene.scene_id!r}: {src.ground_truth('instance_ids.npy')} labels {len(ids)} Gaussians, the "
                              f"scene has {renderer.num_gaussians} (ingest dropped some); the oracle cannot align them")
-        labels = json.loads((gt / "labels.json").read_text())["labels"]
+        labels = src.read_ground_truth("labels.json")["labels"]
         return cls(renderer, ids, {int(lab["instance_id"]): cfg.prompt(lab["category"]) for lab in labels},
                    cfg.oracle.corruption(), seed, cfg.oracle.min_weight)
 
@@ -153,5 +152,3 @@ class OracleSegmenter(Segmenter):
         imap = self.instance_map(context["viewmat"], context["K"], w, h, context.get("extra"))
         return corrupt(imap, self.categories, prompts, self.c, self.rng)
 
-
-from stages.semantics import sam3_segmenter  # noqa: E402,F401  (registers "sam3"; imports sam3 only when built)

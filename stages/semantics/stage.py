@@ -11,15 +11,15 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import pyarrow.parquet as pq
-import torch
-from stages.gaussians.cameras import CAMERA_FILE, camera_file, read_cameras
-from stages.instances import labels_to_table, shipped_instances
-from stages.render.camera import camera_to_world, intrinsics
+
+from navcore.gaussians.cameras import CAMERA_FILE, camera_file, read_cameras
+from navcore.instances import labels_to_table, shipped_instances
+from navcore.render.camera import camera_to_world, intrinsics
 from stages.semantics.config import SemanticsConfig
 from stages.semantics.lifting import lift
 from stages.semantics.poses import free_space_poses
 from stages.semantics.segmenters import SEGMENTERS, SegmenterUnavailable
+
 
 def spread(n: int, k: int) -> np.ndarray:
     """Indices of k of n items spread evenly (all when k is 0 or >= n)."""
@@ -53,6 +53,8 @@ def render_views(renderer, c2w: np.ndarray, Ks: np.ndarray, scfg: SemanticsConfi
     """Yields per batch of `batch` views: (rgb uint8 [B, H, W, 3], depth [B, H, W] (0 where the
     accumulated opacity is under min_alpha), composited `features` [B, H, W, C] or B Nones,
     viewmats [B, 4, 4], Ks [B, 3, 3], camera -> world [B, 4, 4]), all numpy."""
+    import torch
+
     for s in range(0, len(c2w), scfg.batch):
         vm = np.linalg.inv(c2w[s:s + scfg.batch]).astype(np.float32)
         ks = Ks[s:s + scfg.batch]
@@ -113,27 +115,23 @@ def predict_instances(renderer, segmenter, c2w, Ks, means: np.ndarray, scfg: Sem
 def run(scene, cfg, catalog) -> dict:
     from omegaconf import OmegaConf
 
-    from pipeline.atomic import atomic_path
-    from stages.costmap.query import Costmap
-    from stages.episodes.generate import stream_seed
-    from stages.gaussians.store import read_scene_zarr
-    from stages.render import Renderer
+    from navcore.render import Renderer
+    from navcore.seeds import stream_seed
 
     scfg: SemanticsConfig = OmegaConf.to_object(cfg.semantics)
-    out = catalog.path("instances", scene)
+    out = catalog.dataset("instances", scene)
     if not scfg.enabled:
-        out.unlink(missing_ok=True)
+        out.delete()
         return {"outputs": [], "enabled": False}
     emb = OmegaConf.to_object(cfg.embodiment)
-    gs, attrs = read_scene_zarr(catalog.path("aligned", scene))
-    cm = Costmap.load(catalog.path("costmaps", scene), emb.name)
+    gs, attrs = catalog.dataset("aligned", scene).load()
+    cm = catalog.dataset("costmaps", scene).load(emb.name)
     shipped = shipped_instances(scene, gs, np.asarray(attrs["source_to_aligned"])) if scfg.shipped_labels else None
     if shipped is not None:  # the dataset's own truth beats any model
         table, origin = shipped
-        with atomic_path(out) as tmp:
-            pq.write_table(table, tmp, compression="zstd")
+        out.save(table)
         cats = table.column("category").to_pylist()
-        return {"outputs": [str(out)], "instances": len(cats), "labels_from": origin, "source": "ground_truth",
+        return {"outputs": [str(out.path)], "instances": len(cats), "labels_from": origin, "source": "ground_truth",
                 "by_category": {c: cats.count(c) for c in sorted(set(cats))}}
     c2w, ks, kind = covering_cameras(scene, catalog, scfg, emb, np.asarray(attrs["source_to_aligned"]), cm)
     if not len(c2w):
@@ -143,17 +141,15 @@ def run(scene, cfg, catalog) -> dict:
     try:
         seg = SEGMENTERS.get_class(scfg.segmenter).from_scene(scene, catalog, renderer, scfg, seed)
     except SegmenterUnavailable as e:  # an empty table: the scene's other tasks go on, the summary says why
-        with atomic_path(out) as tmp:
-            pq.write_table(labels_to_table([]), tmp, compression="zstd")
-        return {"outputs": [str(out)], "instances": 0, "segmenter": scfg.segmenter,
+        out.save(labels_to_table([]))
+        return {"outputs": [str(out.path)], "instances": 0, "segmenter": scfg.segmenter,
                 "shortfall": [{"task": "objectnav instances", "episodes": 0, "requested": None, "reason": str(e)}]}
     labels, support, timings = predict_instances(renderer, seg, c2w, ks, gs.means, scfg)
     table = labels_to_table(labels, support)
-    with atomic_path(out) as tmp:
-        pq.write_table(table, tmp, compression="zstd")
+    out.save(table)
     counts: dict = {}
     for lab in labels:
         counts[lab["category"]] = counts.get(lab["category"], 0) + 1
-    return {"outputs": [str(out)], "views": len(c2w), "poses": kind, "renderer": renderer.backend,
+    return {"outputs": [str(out.path)], "views": len(c2w), "poses": kind, "renderer": renderer.backend,
             "segmenter": scfg.segmenter, "instances": len(labels), "by_category": dict(sorted(counts.items())),
             "seconds": {k: round(v, 3) for k, v in timings.items()}}

@@ -4,25 +4,21 @@ Written x-block by x-block: memory stays bounded."""
 from __future__ import annotations
 
 import numpy as np
-import zarr
 from omegaconf import OmegaConf
 
-from pipeline.atomic import atomic_path
-from stages.gaussians.content import content_of
-from stages.gaussians.store import read_scene_zarr
-from stages.voxelize.field import VoxelizeConfig, log_transmittance_blocks
-from stages.voxelize.grid import grid_for_points
+from navcore.gaussians.content import content_of
+from navcore.voxels.field import VoxelizeConfig, log_transmittance_blocks
+from navcore.voxels.grid import grid_for_points
 
 
 def run(scene, cfg, catalog) -> dict:
     vcfg: VoxelizeConfig = OmegaConf.to_object(cfg.voxelize)
-    gs, _ = read_scene_zarr(catalog.path("scene", scene))
+    gs, _ = catalog.dataset("scene", scene).load()
     gs = content_of(gs)  # floaters neither size the grid nor fill it
     grid = grid_for_points(gs.means, vcfg.resolution, margin=2 * vcfg.resolution)
-    out = catalog.path("voxels", scene)
+    out = catalog.dataset("voxels", scene)
     n_occ = 0
-    with atomic_path(out) as tmp:
-        g = zarr.open_group(str(tmp), mode="w")
+    with out.writing() as g:
         chunks = (32, 64, 64)
         a_arr = g.create_array("A", shape=grid.shape, dtype="float16", chunks=chunks, fill_value=0)
         v_arr = g.create_array("V", shape=grid.shape, dtype="bool", chunks=chunks, fill_value=False)
@@ -34,6 +30,6 @@ def run(scene, cfg, catalog) -> dict:
             n_occ += int(occ.sum())
         g.attrs.update({**grid.as_dict(), "tau_occ": vcfg.tau_occ, "sample": vcfg.sample, "frame": "source"})
     content_voxels = int(np.prod(np.ceil((gs.means.max(0) - gs.means.min(0)) / vcfg.resolution)))
-    return {"outputs": [str(out)], "grid_shape": list(grid.shape), "grid_voxels": grid.n_voxels,
+    return {"outputs": [str(out.path)], "grid_shape": list(grid.shape), "grid_voxels": grid.n_voxels,
             "content_voxels": content_voxels, "occupied_voxels": n_occ}
 

@@ -1,0 +1,132 @@
+"""Numba kernels of the costmap queries (state and motion validity of a disk footprint).
+
+Queries read the clearance field F [ny, nx] (metres, -1 where unsupported) and interpolate it
+bilinearly between cell centres. A state (x, y) is valid when F(x, y) >= thr (thr = r + margin);
+a straight motion is valid when F >= thr along the whole segment, checked exactly: on each
+bilinear patch the segment's F is a quadratic in t, whose minimum is taken analytically.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, inline="always")
+def _field(f, u, v):
+    """Bilinear F at patch coordinates (u, v) (cell centre (j, i) at u = j, v = i); -1 outside."""
+    ny, nx = f.shape
+    if not (u >= 0.0 and v >= 0.0 and u <= nx - 1 and v <= ny - 1):
+        return -1.0
+    j = min(int(u), nx - 2) if nx > 1 else 0
+    i = min(int(v), ny - 2) if ny > 1 else 0
+    fu = u - j
+    fv = v - i
+    a = f[i, j]
+    b = f[i, j + 1] if nx > 1 else a
+    c = f[i + 1, j] if ny > 1 else a
+    d = f[i + 1, j + 1] if (nx > 1 and ny > 1) else a
+    return a + (b - a) * fu + (c - a) * fv + (a - b - c + d) * fu * fv
+
+
+@numba.njit(cache=True)
+def state_valid(f, ox, oy, inv_res, thr, x, y):
+    return _field(f, (x - ox) * inv_res - 0.5, (y - oy) * inv_res - 0.5) >= thr
+
+
+def _states_valid(f, ox, oy, inv_res, thr, xy):
+    n = xy.shape[0]
+    out = np.empty(n, dtype=np.bool_)
+    for k in numba.prange(n):
+        out[k] = _field(f, (xy[k, 0] - ox) * inv_res - 0.5, (xy[k, 1] - oy) * inv_res - 0.5) >= thr
+    return out
+
+
+@numba.njit(cache=True)
+def clearance_at(f, ox, oy, inv_res, xy):
+    n = xy.shape[0]
+    out = np.empty(n, dtype=np.float64)
+    for k in range(n):
+        out[k] = _field(f, (xy[k, 0] - ox) * inv_res - 0.5, (xy[k, 1] - oy) * inv_res - 0.5)
+    return out
+
+
+@numba.njit(cache=True, inline="always")
+def _first_crossing(c0, dc):
+    """Parameter t of the first integer crossing of c0 + t dc, and the t between crossings
+    (2.0, i.e. never within [0, 1], when dc == 0)."""
+    if dc > 0:
+        return (np.floor(c0) + 1.0 - c0) / dc, 1.0 / dc
+    if dc < 0:
+        return (np.ceil(c0) - 1.0 - c0) / dc, -1.0 / dc
+    return 2.0, 2.0
+
+
+@numba.njit(cache=True)
+def segment_clear(f, u0, v0, u1, v1, thr):
+    """Whether F >= thr along the segment between patch coordinates (u0, v0) and (u1, v1)."""
+    ny, nx = f.shape
+    # both end points and everything between must lie inside the map
+    if min(u0, u1) < 0.0 or min(v0, v1) < 0.0 or max(u0, u1) > nx - 1 or max(v0, v1) > ny - 1:
+        return False
+    du = u1 - u0
+    dv = v1 - v0
+    # walk the breakpoints where u or v crosses an integer (patch borders), in increasing t
+    tu, tu_step = _first_crossing(u0, du)
+    tv, tv_step = _first_crossing(v0, dv)
+    ta = 0.0
+    while ta < 1.0:
+        tb = min(tu, tv, 1.0)
+        tm = 0.5 * (ta + tb)
+        um = u0 + tm * du
+        vm = v0 + tm * dv
+        j = min(int(um), nx - 2) if nx > 1 else 0
+        i = min(int(vm), ny - 2) if ny > 1 else 0
+        a = f[i, j]
+        b = f[i, j + 1] if nx > 1 else a
+        c = f[i + 1, j] if ny > 1 else a
+        d = f[i + 1, j + 1] if (nx > 1 and ny > 1) else a
+        # F(t) = a + (b-a) fu + (c-a) fv + e fu fv with fu = pu + du t, fv = pv + dv t
+        e = a - b - c + d
+        pu = u0 - j
+        pv = v0 - i
+        c2 = e * du * dv
+        c1 = (b - a) * du + (c - a) * dv + e * (pu * dv + pv * du)
+        c0 = a + (b - a) * pu + (c - a) * pv + e * pu * pv
+        fa = c0 + c1 * ta + c2 * ta * ta
+        fb = c0 + c1 * tb + c2 * tb * tb
+        m = min(fa, fb)
+        if c2 > 0.0:
+            tv_ = -c1 / (2.0 * c2)
+            if ta < tv_ < tb:
+                m = min(m, c0 + c1 * tv_ + c2 * tv_ * tv_)
+        if m < thr:
+            return False
+        ta = tb
+        if tb == tu:
+            tu += tu_step
+        if tb == tv:
+            tv += tv_step
+    return True
+
+
+@numba.njit(cache=True)
+def motion_valid(f, ox, oy, inv_res, thr, x0, y0, x1, y1):
+    return segment_clear(f, (x0 - ox) * inv_res - 0.5, (y0 - oy) * inv_res - 0.5,
+                   (x1 - ox) * inv_res - 0.5, (y1 - oy) * inv_res - 0.5, thr)
+
+
+def _motions_valid(f, ox, oy, inv_res, thr, seg):
+    n = seg.shape[0]
+    out = np.empty(n, dtype=np.bool_)
+    for k in numba.prange(n):
+        out[k] = segment_clear(f, (seg[k, 0] - ox) * inv_res - 0.5, (seg[k, 1] - oy) * inv_res - 0.5,
+                         (seg[k, 2] - ox) * inv_res - 0.5, (seg[k, 3] - oy) * inv_res - 0.5, thr)
+    return out
+
+
+# Batched queries in two builds: threaded for large batches, serial for small ones (waking the
+# thread pool costs up to milliseconds when it has gone idle between calls).
+states_valid = numba.njit(cache=True, parallel=True)(_states_valid)
+states_valid_serial = numba.njit(cache=True)(_states_valid)
+motions_valid = numba.njit(cache=True, parallel=True)(_motions_valid)
+motions_valid_serial = numba.njit(cache=True)(_motions_valid)

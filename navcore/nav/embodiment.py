@@ -1,0 +1,72 @@
+"""The robot: footprint, body height band, camera and kinematic limits.
+
+The schema's defaults are LoCoBot's (conf/embodiment/locobot.yaml names it and nothing else);
+the other files of conf/embodiment/ override what differs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from omegaconf import OmegaConf
+
+EMBODIMENT_DIR = Path(__file__).resolve().parents[2] / "conf" / "embodiment"
+"""The embodiment files (Hydra config group `embodiment`)."""
+
+
+@dataclass
+class Embodiment:
+    """A robot body: footprint and body band (costmap), camera (rendering), kinematic limits."""
+
+    name: str = "locobot"
+    """Name used in output paths."""
+    radius: float = 0.18
+    """Footprint radius, metres."""
+    h_min: float = 0.05
+    """Lowest point of the body above the floor that collides, metres (lower things are stepped over)."""
+    h_max: float = 0.9
+    """Highest point of the body, metres."""
+    camera_height: float = 0.88
+    """Camera height above the floor, metres."""
+    camera_pitch_deg: float = 0.0
+    """Camera pitch, degrees (negative looks down)."""
+    hfov_deg: float = 90.0
+    """Horizontal field of view, degrees."""
+    image_width: int = 640
+    """Camera image width, pixels."""
+    image_height: int = 480
+    """Camera image height, pixels."""
+    max_linear_velocity: float = 0.45
+    """m/s."""
+    max_angular_velocity: float = 0.8
+    """rad/s."""
+    max_linear_acceleration: float = 0.25
+    """m/s^2."""
+    max_angular_acceleration: float = 0.6
+    """rad/s^2."""
+
+
+
+@dataclass
+class Limits:
+    """Kinematic limits of an embodiment (m/s, rad/s, m/s^2, rad/s^2)."""
+
+    v_max: float
+    w_max: float
+    a_max: float
+    alpha_max: float
+
+    @classmethod
+    def of(cls, emb) -> "Limits":
+        return cls(emb.max_linear_velocity, emb.max_angular_velocity, emb.max_linear_acceleration,
+                   emb.max_angular_acceleration)
+
+
+def load_embodiment(name: str) -> Embodiment:
+    """An embodiment from conf/embodiment/{name}.yaml (for costmap.embodiments)."""
+    path = EMBODIMENT_DIR / f"{name}.yaml"
+    if not path.exists():
+        known = sorted(p.stem for p in EMBODIMENT_DIR.glob("*.yaml"))
+        raise ValueError(f"unknown embodiment {name!r}; known: {', '.join(known)}")
+    node = OmegaConf.merge(OmegaConf.structured(Embodiment), OmegaConf.load(path))
+    return OmegaConf.to_object(node)

@@ -1,0 +1,89 @@
+"""Rendering of Gaussian scenes: one interface, two backends.
+
+    r = Renderer(gs, backend="auto")          # gsplat on CUDA when available, else the CPU renderer
+    out = r.render(viewmats, Ks, width, height)
+    out.rgb    # [B, H, W, 3] float32 in [0, 1]
+    out.depth  # [B, H, W] float32 expected depth sum(w z) / sum(w), metres along the optical axis
+               # (camera z, not the ray length); 0 where no Gaussian was hit
+    out.alpha  # [B, H, W] float32 accumulated opacity
+
+Cameras follow navcore/render/camera.py (OpenCV axes, world -> camera `viewmats`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # torch is imported when a renderer is built, not when cameras are
+    import torch
+
+BACKENDS = ("auto", "cpu", "gsplat")
+
+
+@dataclass
+class RenderOutput:
+    rgb: torch.Tensor    # [B, H, W, 3] float32, [0, 1]
+    depth: torch.Tensor  # [B, H, W] float32, metres (expected depth)
+    alpha: torch.Tensor  # [B, H, W] float32
+    extra: torch.Tensor | None = None  # [B, H, W, C] composited extra features (render(extra=...))
+
+
+def gsplat_available() -> bool:
+    import torch
+
+    if not torch.cuda.is_available():
+        return False
+    try:
+        import gsplat  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class Renderer:
+    """Renders one scene from batches of cameras.
+
+    Args:
+        gs: navcore.gaussians.model.GaussianScene (aligned frame).
+        backend: "gsplat" (CUDA), "cpu" (plain PyTorch, same rules as gsplat's classic mode) or
+            "auto" (gsplat when CUDA and gsplat are there).
+        sh_degree: SH degree to evaluate (None: all the scene has).
+    """
+
+    def __init__(self, gs, backend: str = "auto", sh_degree: int | None = None, device: str | None = None):
+        if backend not in BACKENDS:
+            raise ValueError(f"unknown renderer backend {backend!r}; choose one of {BACKENDS}")
+        if backend == "auto":
+            backend = "gsplat" if gsplat_available() else "cpu"
+        if backend == "gsplat" and not gsplat_available():
+            raise RuntimeError("renderer backend 'gsplat' needs CUDA and the gsplat package; use backend='cpu'")
+        self.backend = backend
+        self.sh_degree = sh_degree
+        self.num_gaussians = len(gs.means)
+        if backend == "cpu":
+            from navcore.render.cpu import gaussian_tensors
+
+            self._g = gaussian_tensors(gs)
+        else:
+            from navcore.render.gsplat_backend import gaussian_tensors
+
+            self._g = gaussian_tensors(gs, device or "cuda")
+
+    def render(self, viewmats: np.ndarray, Ks: np.ndarray, width: int, height: int, features=None,
+               extra=None) -> RenderOutput:
+        """viewmats [B, 4, 4] world -> camera, Ks [B, 3, 3]; returns tensors on the backend's device.
+        features: optional [N, C] per-Gaussian values composited instead of colour (rgb is then the
+        [B, H, W, C] composite, unclamped): e.g. one-hot labels for label masks.
+        extra: optional [N, C] per-Gaussian values composited in the same pass as the colour
+        (out.extra [B, H, W, C]): pixel-aligned labels at the cost of a few more channels."""
+        if self.backend == "cpu":
+            from navcore.render.cpu import render
+        else:
+            from navcore.render.gsplat_backend import render
+        rgb, depth, alpha = render(self._g, viewmats, Ks, width, height, self.sh_degree, features=features,
+                                   extra=extra)
+        if features is not None:
+            return RenderOutput(rgb, depth, alpha)
+        return RenderOutput(rgb[..., :3].clamp(0.0, 1.0), depth, alpha, rgb[..., 3:] if extra is not None else None)

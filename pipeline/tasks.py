@@ -1,0 +1,59 @@
+"""One task: a (stage, scene) run unless current, its marker written last. A task never raises:
+failures come back as results, so one bad scene cannot stop the run, and its downstream stages
+are skipped with the reason."""
+from __future__ import annotations
+
+import json
+import time
+import traceback
+
+from pipeline.catalog import Catalog, SceneEntry
+from pipeline.graph import BY_NAME
+from pipeline.markers import is_done, write_marker
+
+FAILED = ("failed", "skipped")
+
+
+def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_hash: str, force: bool,
+             *upstream: dict) -> dict:
+    """Run one (stage, scene) unless it is current; never raises."""
+    base = {"stage": stage_name, "scene_id": scene.scene_id, "scene": scene.name}
+    for up in upstream:
+        if up["status"] in FAILED:
+            return {**base, "status": "skipped", "error": f"upstream {up['stage']} {up['status']}"}
+    stage = BY_NAME[stage_name]
+    if stage.only_synthetic and not scene.synthetic:
+        return {**base, "status": "n/a"}
+    marker = catalog.path("markers", scene, stage=stage_name)
+    if not force and is_done(marker, config_hash):
+        return {**base, "status": "cached", **notes(json.loads(marker.read_text()).get("info", {}))}
+    marker.unlink(missing_ok=True)  # outputs are about to change: the old marker must not vouch for them
+    t0 = time.perf_counter()
+    try:
+        info = stage.run(scene, cfg, catalog) or {}
+    except Exception as e:  # noqa: BLE001 - recorded, the run goes on
+        return {**base, "status": "failed", "error": f"{type(e).__name__}: {e}",
+                "traceback": traceback.format_exc(limit=6), "duration_s": round(time.perf_counter() - t0, 3)}
+    duration = round(time.perf_counter() - t0, 3)
+    write_marker(marker, {"stage": stage_name, "scene_id": scene.scene_id, "config_hash": config_hash,
+                          "duration_s": duration, "info": info})
+    return {**base, "status": "done", "duration_s": duration, **notes(info)}
+
+
+def notes(info: dict) -> dict:
+    """What a stage's result says the run summary must show: shortfalls (outputs it could not
+    yield) and warnings (e.g. a scene whose scale is implausible for metres)."""
+    return {k: info[k] for k in ("shortfall", "warnings") if info.get(k)}
+
+
+def run_finalize(stage, cfg, catalog: Catalog) -> dict:
+    """A stage's dataset-level step, recorded like a task."""
+    base = {"stage": f"{stage.name}:finalize", "scene_id": "*", "scene": "dataset"}
+    t0 = time.perf_counter()
+    try:
+        info = stage.finalize(cfg, catalog) or {}
+        return {**base, "status": "done", "duration_s": round(time.perf_counter() - t0, 3),
+                "outputs": info.get("outputs", [])}
+    except Exception as e:  # noqa: BLE001 - recorded like a scene failure
+        return {**base, "status": "failed", "error": f"{type(e).__name__}: {e}",
+                "traceback": traceback.format_exc(limit=6)}

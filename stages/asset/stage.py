@@ -1,0 +1,118 @@
+"""Stage `asset`: the NavArena V1 scene asset directory (NAVARENA_FORMATS.md section 1) of the
+main embodiment: manifest.json, source.ply, aligned.ply, nav_map.pgm + nav_map.yaml (ROS
+map_server), nav_mask.png, labels.json (the semantics stage's predicted instances, or the ground
+truth of synthetic scenes: asset.labels; aligned frame), compressed.splat, costmap_topdown.png and
+floor_side_view.png (the chosen floor over the Gaussian density); manifest.json also holds the
+metric-scale evidence (floor-to-ceiling height, narrowest doorway-like gaps)."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from navcore.gaussians.formats import write_inria_ply, write_splat
+from navcore.instances import ground_truth_labels, load_instances, table_to_labels
+from navcore.io.stamps import build_time
+
+NORMALIZER_VERSION = "navarena-0.1"
+
+
+def write_pgm(path: Path, occ: np.ndarray) -> None:
+    """ROS map_server PGM (P5): 0 occupied, 255 free; rows flipped so the first row is max y."""
+    img = np.where(occ, 0, 255).astype(np.uint8)[::-1]
+    h, w = img.shape
+    path.write_bytes(f"P5\n{w} {h}\n255\n".encode() + img.tobytes())
+
+
+def read_pgm(path: Path) -> np.ndarray:
+    """Inverse of write_pgm: [ny, nx] bool occupancy, row = y ascending."""
+    data = Path(path).read_bytes()
+    parts = data.split(maxsplit=4)
+    w, h = int(parts[1]), int(parts[2])
+    img = np.frombuffer(parts[4][: w * h], dtype=np.uint8).reshape(h, w)
+    return (img[::-1] < 128)
+
+
+def topdown_image(raw, support, occ, components=None) -> np.ndarray:
+    """RGB picture of a costmap (north up): free white (islands not connected to the largest
+    free component light blue), obstacles black, inflation grey, unsupported pink."""
+    img = np.full(occ.shape + (3,), 255, np.uint8)
+    if components is not None:
+        img[components > 1] = (170, 205, 240)
+    img[occ & support] = (160, 160, 160)
+    img[raw] = (0, 0, 0)
+    img[~support] = (235, 190, 190)
+    return img[::-1]
+
+
+def asset_labels(scene, cfg, catalog) -> list[dict] | None:
+    """labels.json entries of the asset (None: no labels.json)."""
+    src = cfg.asset.labels
+    if src == "model_predicted":
+        return table_to_labels(load_instances(scene, catalog, src)) if cfg.semantics.enabled else None
+    if src == "ground_truth":
+        return ground_truth_labels(scene, catalog) if scene.synthetic else None
+    if src == "none":
+        return None
+    raise ValueError(f"asset.labels={src!r}; choose model_predicted | ground_truth | none")
+
+
+def run(scene, cfg, catalog) -> dict:
+    out = catalog.dataset("asset", scene)
+    src, _ = catalog.dataset("scene", scene).load()
+    aligned, aattrs = catalog.dataset("aligned", scene).load()
+    t = np.asarray(aattrs["source_to_aligned"])
+    emb = cfg.embodiment.name
+    layers, eattrs, root_attrs = catalog.dataset("costmaps", scene).load_layers(emb)
+    occ, sup, raw, comp = (layers[k] for k in ("occ", "support", "raw", "components"))
+    res, origin = float(eattrs["resolution"]), list(eattrs["origin"])
+    steps = []
+    for stage in ("ingest", "voxelize", "align", "costmap"):
+        m = catalog.dataset("markers", scene, stage=stage).load_or()
+        if m is not None:
+            steps.append({"name": stage, "status": "done", "duration_s": m.get("duration_s")})
+    labels_file = None
+    with out.writing() as tmp:
+        files = {"source_ply": None, "aligned_ply": "aligned.ply", "nav_map": "nav_map.pgm",
+                 "nav_map_config": "nav_map.yaml", "nav_mask": "nav_mask.png", "labels": None, "structure": None,
+                 "compressed_ply": None}
+        if cfg.asset.write_source_ply:
+            write_inria_ply(tmp / "source.ply", src)
+            files["source_ply"] = "source.ply"
+        write_inria_ply(tmp / "aligned.ply", aligned)
+        write_pgm(tmp / "nav_map.pgm", occ)
+        tmp.text("nav_map.yaml",
+            "image: nav_map.pgm\n" f"resolution: {res}\n" f"origin: [{origin[0]}, {origin[1]}, 0.0]\n"
+            "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n")
+        tmp.image("nav_mask.png", np.where(sup, 255, 0).astype(np.uint8)[::-1])
+        tmp.image("costmap_topdown.png", topdown_image(raw, sup, occ, comp))
+        side = catalog.dataset("floor_side_view", scene)
+        if side.exists():  # the floor the align stage chose, over the Gaussian density
+            shutil.copyfile(side.path, tmp / "floor_side_view.png")
+        if cfg.asset.write_compressed_splat:
+            write_splat(tmp / "compressed.splat", aligned)
+            files["compressed_ply"] = "compressed.splat"
+        labels = asset_labels(scene, cfg, catalog)
+        if labels is not None:
+            tmp.json("labels.json", {"schema_version": "1.0", "labels": labels})
+            files["labels"] = labels_file = "labels.json"
+        now = build_time()
+        manifest = {
+            "schema_version": "1.0", "scene_id": scene.scene_id,
+            "source": {"dataset": scene.group, "subset": None, "original_id": scene.name,
+                       "original_name": scene.name, "url": None, "license": None},
+            "files": files,
+            "map_info": {"resolution": res, "origin": [origin[0], origin[1], 0.0],
+                         "size": [int(occ.shape[1]), int(occ.shape[0])]},
+            "nav_region": {"area_m2": float((~occ).sum() * res * res), "method": "opacity_field_costmap",
+                           "params": {"embodiment": emb, "radius": float(eattrs["radius"]),
+                                      "h_min": float(eattrs["h_min"]), "h_max": float(eattrs["h_max"]),
+                                      "tau_occ": float(cfg.voxelize.tau_occ)}},
+            "processing": {"normalizer_version": NORMALIZER_VERSION, "processed_at": now, "normalized": True,
+                           "extrinsic_matrix": t.tolist(), "steps": steps},
+            "scale": dict(root_attrs.get("scale", {})),  # metric sanity: floor-to-ceiling, doorway-like gaps
+            "tags": [scene.group], "created_at": now, "updated_at": now,
+        }
+        tmp.json("manifest.json", manifest)
+    return {"outputs": [str(out.path)], "labels": labels_file is not None}

@@ -1,0 +1,3 @@
+from stages.evaluate.protocol.cli import main
+
+main()

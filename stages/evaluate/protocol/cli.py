@@ -1,0 +1,27 @@
+"""``python -m stages.evaluate.protocol --agent depth_reactive --port 8000``."""
+from __future__ import annotations
+
+from stages.evaluate.protocol.server import serve_agent
+
+
+def main(argv=None) -> None:
+    """python -m stages.evaluate.protocol --agent depth_reactive --port 8000: serve a registered agent."""
+    import argparse
+
+    from stages.evaluate.agents import make_agent
+
+    ap = argparse.ArgumentParser(description=main.__doc__)
+    ap.add_argument("--agent", default="depth_reactive")
+    ap.add_argument("--host", default="127.0.0.1")
+    ap.add_argument("--port", type=int, default=8000)
+    ap.add_argument("--port-file", default=None, help="write the bound port here once listening (port 0 = any)")
+    args = ap.parse_args(argv)
+
+    def ready(port):
+        if args.port_file:
+            with open(args.port_file, "w") as f:
+                f.write(str(port))
+        print(f"serving agent {args.agent!r} on ws://{args.host}:{port}", flush=True)
+
+    serve_agent(lambda: make_agent(args.agent), args.host, args.port, ready)
+

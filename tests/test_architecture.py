@@ -1,0 +1,175 @@
+"""The code's own structure: layers, cycles, private names, stage folders, IO through the catalog.
+
+Layers: navcore (domain: Gaussians and formats, rendering, the navigation vocabulary, IO datasets)
+<- stages (one package per graph stage, independent of each other) <- pipeline. Every import
+counts, also the ones inside functions.
+"""
+import ast
+import re
+from pathlib import Path
+
+import pytest
+
+LAYERS = ("navcore", "stages", "pipeline")  # lowest first
+
+
+def modules(project_root: Path) -> dict[str, Path]:
+    out = {}
+    for top in LAYERS:
+        for f in sorted((project_root / top).rglob("*.py")):
+            parts = list(f.relative_to(project_root).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            out[".".join(parts)] = f
+    return out
+
+
+def imports_of(name: str, path: Path, known: set[str]) -> list[tuple[str, str, int]]:
+    """(imported module, imported name or '', line) of every import of our packages in a module."""
+    tree = ast.parse(path.read_text())
+    pkg = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(a.name, "", node.lineno) for a in node.names if a.name.split(".")[0] in LAYERS]
+        elif isinstance(node, ast.ImportFrom):
+            mod = node.module or ""
+            if node.level:
+                base = pkg.split(".")[: len(pkg.split(".")) - node.level + 1]
+                mod = ".".join(base + ([mod] if mod else []))
+            if mod.split(".")[0] not in LAYERS:
+                continue
+            for a in node.names:
+                sub = f"{mod}.{a.name}"
+                out.append((sub, "", node.lineno) if sub in known else (mod, a.name, node.lineno))
+    return out
+
+
+@pytest.fixture(scope="module")
+def graph(project_root):
+    mods = modules(project_root)
+    return mods, {m: imports_of(m, p, set(mods)) for m, p in mods.items()}
+
+
+def test_imports_never_go_up_a_layer_and_stages_do_not_import_each_other(graph):
+    _, edges = graph
+    bad = []
+    for m, imps in edges.items():
+        for target, _, line in imps:
+            lm, lt = LAYERS.index(m.split(".")[0]), LAYERS.index(target.split(".")[0])
+            if lt > lm:
+                bad.append(f"{m}:{line} imports {target} (a higher layer)")
+            if m.startswith("stages.") and target.startswith("stages.") and m.split(".")[1] != target.split(".")[1]:
+                bad.append(f"{m}:{line} imports {target} (another stage: shared code belongs in navcore)")
+    assert not bad, "\n".join(bad)
+
+
+def test_no_import_cycles(graph):
+    _, edges = graph
+    adj = {m: sorted({t for t, _, _ in imps if t in edges and t != m}) for m, imps in edges.items()}
+    # a package's __init__ importing its own submodules is no cycle of the design; everything else is
+    adj = {m: [t for t in ts if not t.startswith(m + ".")] for m, ts in adj.items()}
+    index, low, stack, on, cycles, counter = {}, {}, [], set(), [], [0]
+
+    def strongconnect(v):  # Tarjan
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on.add(v)
+        for w in adj[v]:
+            if w not in index:
+                strongconnect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in adj:
+        if v not in index:
+            strongconnect(v)
+    assert not cycles, cycles
+
+
+def test_no_private_name_is_used_across_packages(graph, project_root):
+    mods, edges = graph
+    bad = [f"{m}:{line} imports {name} from {target}" for m, imps in edges.items()
+           for target, name, line in imps
+           if name.startswith("_") and target.rpartition(".")[0] != m.rpartition(".")[0]]
+    # module attributes: `mod._x` on an imported module of another package
+    for m, path in mods.items():
+        tree = ast.parse(path.read_text())
+        aliases = {}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] in LAYERS:
+                for a in node.names:
+                    if f"{node.module}.{a.name}" in mods:
+                        aliases[a.asname or a.name] = f"{node.module}.{a.name}"
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in aliases \
+                    and node.attr.startswith("_") and not node.attr.startswith("__"):
+                target = aliases[node.value.id]
+                if target.rpartition(".")[0] != m.rpartition(".")[0]:
+                    bad.append(f"{m}:{node.lineno} uses {target}.{node.attr}")
+    assert not bad, "\n".join(bad)
+
+
+def test_stage_packages_are_the_graph_stages(project_root):
+    from pipeline.graph import STAGES
+
+    folders = {p.name for p in (project_root / "stages").iterdir() if (p / "__init__.py").exists()}
+    assert folders == {s.name for s in STAGES}
+    for s in STAGES:  # the graph holds the functions of stages/<name>/stage.py
+        assert s.run.__module__ == f"stages.{s.name}.stage", s.name
+        for fn in (s.inputs, s.finalize):
+            assert fn is None or fn.__module__ == f"stages.{s.name}.stage"
+
+
+IO_BY_HAND = re.compile(r"catalog\.path\(|atomic_path|write_text_atomic|zarr\.open|pq\.(?:read|write)_table|"
+                        r"\.read_text\(|\.write_text\(|read_scene_zarr|write_scene_zarr")
+
+
+def test_stages_read_and_write_through_catalog_datasets(project_root):
+    bad = [f"{f.relative_to(project_root)}:{i}: {line.strip()}"
+           for f in sorted((project_root / "stages").rglob("*.py"))
+           for i, line in enumerate(f.read_text().splitlines(), 1) if IO_BY_HAND.search(line)]
+    assert not bad, "\n".join(bad)
+
+
+def test_layout_datasets_have_known_types(project_root):
+    import yaml
+
+    from navcore.io.datasets import TYPES
+
+    layout = yaml.safe_load((project_root / "catalogs" / "layout.yaml").read_text())
+    for name, entry in layout.items():
+        assert isinstance(entry, str) or entry["type"] in TYPES, name
+
+
+def test_registries_list_without_importing_heavy_modules(project_root):
+    """Listing agents, segmenters, planners, metrics and formats imports none of them (lazy
+    entries), and every entry resolves."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from stages.evaluate.agents import AGENTS\n"
+            "from stages.semantics.segmenters import SEGMENTERS\n"
+            "from stages.episodes.planner import PLANNERS\n"
+            "from stages.evaluate.metrics import METRICS\n"
+            "from navcore.gaussians.formats import READERS\n"
+            "names = [list(r) for r in (AGENTS, SEGMENTERS, PLANNERS, METRICS, READERS)]\n"
+            "assert 'sam3' in names[1] and 'stages.semantics.sam3_segmenter' not in sys.modules\n"
+            "import pipeline.config\n"
+            "assert 'torch' not in sys.modules, 'importing the config pulls in torch'\n"
+            "for r in (AGENTS, PLANNERS, METRICS, READERS):\n"
+            "    assert all(r[k] is not None for k in r)\n")
+    subprocess.run([sys.executable, "-c", code], cwd=project_root, check=True)
