@@ -44,8 +44,9 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
     ply = read_gaussians(asset / "aligned.ply")
     assert len(ply) == len(aligned) and np.allclose(ply.means, aligned.means, atol=1e-6)
     assert len(read_gaussians(asset / "source.ply")) == len(source)
-    splat = read_gaussians(asset / "compressed.splat")
-    assert len(splat) == len(aligned) and np.allclose(splat.means, aligned.means, atol=1e-5)
+    splat = read_gaussians(asset / "compressed.splat")  # .splat is sorted by size x opacity
+    assert len(splat) == len(aligned)
+    assert np.allclose(np.sort(splat.means, axis=0), np.sort(aligned.means, axis=0), atol=1e-5)
     g = zarr.open_group(str(tmp_path / "03_costmaps" / f"{sid}.zarr"))["locobot"]
     occ, sup = np.asarray(g["occ"][...]), np.asarray(g["support"][...])
     assert np.array_equal(read_pgm(asset / "nav_map.pgm"), occ)  # PGM rows flipped, 0 = occupied
@@ -142,7 +143,7 @@ def test_batch_submission_scripts(project_root, make_cfg):
     p = array_script("pbs", 4, [], 4, "16gb", "01:00:00", None, "acct", "python", project_root)
     assert "#PBS -J 0-3" in p and "$PBS_ARRAY_INDEX" in p and "#PBS -A acct" in p
     pytest.importorskip("dask_jobqueue")
-    from pipeline.executor import jobqueue_cluster
+    from pipeline.backends import jobqueue_cluster
 
     cfg = make_cfg("/tmp/unused", "executor=slurm", "executor.jobqueue.cores=16", "executor.jobqueue.queue=gpu",
                    "executor.jobqueue.job_extra_directives=['--constraint=skylake']")
@@ -188,18 +189,15 @@ def test_interrupted_write_leaves_nothing_trusted(tmp_path, monkeypatch, make_cf
 
     cfg = make_cfg(tmp_path / "d", "stages=[voxelize]")
     execute(cfg)
-    import stages.voxelize.stage as vstage
+    import dataclasses
 
-    real_run = vstage.run
+    from pipeline import graph
 
     def crashing_run(scene, cfg_, catalog):
-        import zarr as z
-
-        out = catalog.path("voxels", scene)
-        with atomic_path(out) as tmp:
-            z.open_group(str(tmp), mode="w").create_array("A", shape=(2,), dtype="f4")
+        with catalog.dataset("voxels", scene).writing() as g:
+            g.create_array("A", shape=(2,), dtype="f4")
             raise MemoryError("worker killed while writing")
-    monkeypatch.setattr(vstage, "run", crashing_run)
+    monkeypatch.setitem(graph.BY_NAME, "voxelize", dataclasses.replace(graph.BY_NAME["voxelize"], run=crashing_run))
     s = execute(make_cfg(tmp_path / "d", "stages=[voxelize]", "force=true"))
     r = {x["stage"]: x for x in s["results"]}
     assert r["voxelize"]["status"] == "failed" and "MemoryError" in r["voxelize"]["error"]
@@ -207,7 +205,7 @@ def test_interrupted_write_leaves_nothing_trusted(tmp_path, monkeypatch, make_cf
     assert not (tmp_path / "d" / "_markers" / "voxelize" / f"{sid}.json").exists()
     # the previous complete output is still in place, untouched by the failed attempt
     assert "V" in zarr.open_group(str(tmp_path / "d" / "02_voxels" / f"{sid}.zarr")).array_keys()
-    monkeypatch.setattr(vstage, "run", real_run)
+    monkeypatch.undo()
     assert {x["stage"]: x["status"] for x in execute(make_cfg(tmp_path / "d", "stages=[voxelize]"))["results"]}[
         "voxelize"] == "done"
 
