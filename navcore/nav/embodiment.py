@@ -8,8 +8,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from omegaconf import OmegaConf
-
 EMBODIMENT_DIR = Path(__file__).resolve().parents[2] / "conf" / "embodiment"
 """The embodiment files (Hydra config group `embodiment`)."""
 
@@ -64,6 +62,8 @@ class Limits:
 
 def load_embodiment(name: str) -> Embodiment:
     """An embodiment from conf/embodiment/{name}.yaml (for costmap.embodiments)."""
+    from omegaconf import OmegaConf
+
     path = EMBODIMENT_DIR / f"{name}.yaml"
     if not path.exists():
         known = sorted(p.stem for p in EMBODIMENT_DIR.glob("*.yaml"))
