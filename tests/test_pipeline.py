@@ -287,3 +287,20 @@ def test_catalog_datasets_round_trip_atomically_and_find_partitions(tmp_path, pr
         cat.dataset("episodes", scene)
     with pytest.raises(KeyError, match="folder of datasets"):
         cat.dataset("episodes_root")
+
+
+def test_compare_data_normalises_roots_and_reports_every_difference(tmp_path):
+    from benchmarks.compare_data import compare
+
+    for root in ("a", "b"):
+        d = tmp_path / root / "01_scenes" / "s"
+        d.mkdir(parents=True)
+        (d / "ingest.json").write_text(json.dumps({"source": str(tmp_path / root / "00_sources" / "x.ply")}))
+        (tmp_path / root / "_markers").mkdir()
+        (tmp_path / root / "_markers" / f"{root}.json").write_text(root)  # bookkeeping: ignored
+    assert compare(tmp_path / "a", tmp_path / "b") == {"files": [1, 1], "only_first": [], "only_second": [],
+                                                        "differing": []}
+    (tmp_path / "b" / "01_scenes" / "s" / "ingest.json").write_text("{}")
+    (tmp_path / "b" / "extra.bin").write_bytes(b"\0")
+    rep = compare(tmp_path / "a", tmp_path / "b")
+    assert rep["differing"] == ["01_scenes/s/ingest.json"] and rep["only_second"] == ["extra.bin"]
