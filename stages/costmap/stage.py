@@ -7,13 +7,12 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from navcore.gaussians.content import content_of
+from navcore.nav.embodiment import load_embodiment
 from stages.costmap.build import CostmapConfig, build_costmap, doorway_gaps, map_extent, scale_warnings, support_mask
 
 
 def embodiments(cfg) -> list:
     """The main embodiment, then costmap.embodiments (loaded from conf/embodiment)."""
-    from navcore.nav.embodiment import load_embodiment
-
     main = OmegaConf.to_object(cfg.embodiment)
     extra = [load_embodiment(n) for n in cfg.costmap.embodiments if n != main.name]
     return [main] + extra
