@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from navcore.io.episode_schema import quantize_trajectory
 from navcore.nav.actions import ACTION_NAMES, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from navcore.nav.embodiment import Limits
 from navcore.nav.oracle import discrete_expert
@@ -181,7 +182,7 @@ class EpisodeGenerator:
             return None
         path, length = best
         final_yaw = goal_yaw if goal.kind in ("image", "object") else None
-        ro = rollout(path[:, :2], start_yaw, final_yaw, self.limits, self.ecfg.dt)
+        ro = as_stored(rollout(path[:, :2], start_yaw, final_yaw, self.limits, self.ecfg.dt))
         # success-region centres: the goal, or every instance of the ObjectNav category
         centres = np.ascontiguousarray(
             [v["centre"] for v in goal.instances] if goal.kind == "object" else goal.xy[None], np.float64)
@@ -342,6 +343,12 @@ class EpisodeGenerator:
                           n_req, from_expert)
 
 
+def as_stored(ro: dict) -> dict:
+    """A rollout with its poses and controls rounded to their stored precision (float32): every
+    check, length and oracle below sees exactly what the trajectory table will hold."""
+    return {**ro, **{k: np.asarray(ro[k], np.float32).astype(np.float64) for k in ("x", "y", "yaw", "v", "w")}}
+
+
 _ACTION_NAME_ARRAY = np.array([ACTION_NAMES[k] for k in sorted(ACTION_NAMES)], object)
 
 
@@ -383,6 +390,6 @@ def _trajectory_columns(rows: list[dict], trajs: list[dict], dt: float) -> dict[
             "dx": dx, "dy": dy, "dyaw": dyaw,
             "phase": np.array(["stop", "translate", "rotate"], object)[ro["phase"]],
         }
-        for k, a in part.items():
+        for k, a in quantize_trajectory(part).items():
             cols.setdefault(k, []).append(a)
     return cols

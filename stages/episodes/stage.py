@@ -9,21 +9,21 @@ import pyarrow as pa
 from omegaconf import OmegaConf
 
 from navcore.instances import load_instances
+from navcore.io.episode_schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA, TRAJECTORY_WRITE
 from navcore.nav.geodesic import NavGraph, eligible_cells
 from navcore.seeds import stream_seed
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.generate import EpisodeGenerator, scene_split
-from stages.episodes.schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA
 
 
-def write_table(rows_or_cols, schema: pa.Schema, dataset) -> None:
+def write_table(rows_or_cols, schema: pa.Schema, dataset, **options) -> None:
     """Write one Parquet dataset (zstd, no pandas metadata: same rows, same bytes)."""
     if isinstance(rows_or_cols, list):
         table = pa.Table.from_pylist(rows_or_cols, schema=schema)
     else:
         table = pa.table({f.name: pa.array(np.concatenate(rows_or_cols[f.name]) if rows_or_cols else [], type=f.type)
                           for f in schema}, schema=schema)
-    dataset.save(table, row_group_size=1 << 20)
+    dataset.save(table, **(options or {"row_group_size": 1 << 20}))
 
 
 def remove_scene_partitions(catalog, scene) -> None:
@@ -56,10 +56,10 @@ def run(scene, cfg, catalog) -> dict:
         seed = stream_seed(ecfg.seed, scene.scene_id, name)
         gen = EpisodeGenerator(cm, graph, tcfg, ecfg, pcfg, emb, f"{scene.group}/{scene.scene_id}", seed, instances)
         res = gen.generate()
-        for ds, data, schema in (("episodes", res.episodes, EPISODE_SCHEMA),
-                                 ("trajectories", res.trajectories, TRAJECTORY_SCHEMA)):
+        for ds, data, schema, options in (("episodes", res.episodes, EPISODE_SCHEMA, {}),
+                                          ("trajectories", res.trajectories, TRAJECTORY_SCHEMA, TRAJECTORY_WRITE)):
             out = catalog.dataset(ds, scene, task=name)
-            write_table(data, schema, out)
+            write_table(data, schema, out, **options)
             result["outputs"].append(str(out.path))
         result["tasks"][name] = {
             "episodes": len(res.episodes), "requested": res.requested,

@@ -9,9 +9,17 @@ from navcore.nav.poses import integrate, wrap_angle
 
 # Slack for float round-off in the checks (relative to the limits), and the pose tolerance of
 # the control-consistency check, metres / radians (controls are stored as float32: integrating
-# them over a thousand steps drifts by ~1e-5).
+# them over a thousand steps drifts by ~1e-5). Poses are stored as float32 too: the limits
+# checks add the largest error that rounding can put into differences of stored poses.
 _SLACK = 1e-6
 _POSE_TOL = 1e-4
+
+
+def float32_rounding(*arrays) -> float:
+    """Largest float32 rounding error of any value of the arrays (half an ulp at their largest
+    magnitude)."""
+    m = max((float(np.abs(a).max()) for a in arrays if len(a)), default=0.0)
+    return float(np.spacing(np.float32(m))) / 2
 
 REASONS = ("clearance", "collision", "goal", "heading", "speed", "acceleration", "controls")
 
@@ -42,16 +50,19 @@ def check_trajectory(x, y, yaw, v, w, costmap, radius: float, limits: Limits, dt
         return "goal"
     if goal_yaw is not None and abs(wrap_angle(goal_yaw - yaw[-1])) > heading_tolerance:
         return "goal"
+    # a difference of two stored values is off by at most 2 e; a planar step by 2 sqrt2 e
+    e_pos, e_yaw = float32_rounding(x, y), float32_rounding(yaw)
     dyaw = wrap_angle(np.diff(yaw))
-    if (np.abs(dyaw) > limits.w_max * dt * (1 + _SLACK)).any():
+    if (np.abs(dyaw) > limits.w_max * dt * (1 + _SLACK) + 2 * e_yaw).any():
         return "heading"
     speed = np.hypot(np.diff(x), np.diff(y)) / dt
-    if (speed > limits.v_max * (1 + _SLACK)).any():
+    if (speed > limits.v_max * (1 + _SLACK) + 2 * np.sqrt(2) * e_pos / dt).any():
         return "speed"
     rest = np.zeros(1)
     acc = np.abs(np.diff(np.concatenate([rest, speed, rest]))) / dt
     ang = np.abs(np.diff(np.concatenate([rest, dyaw / dt, rest]))) / dt
-    if (acc > limits.a_max * (1 + _SLACK)).any() or (ang > limits.alpha_max * (1 + _SLACK)).any():
+    if (acc > limits.a_max * (1 + _SLACK) + 4 * np.sqrt(2) * e_pos / dt**2).any() or \
+            (ang > limits.alpha_max * (1 + _SLACK) + 4 * e_yaw / dt**2).any():
         return "acceleration"
     xi, yi, ti = integrate(x[0], y[0], yaw[0], np.asarray(v)[:-1], np.asarray(w)[:-1], dt)
     if max(np.abs(xi - x).max(), np.abs(yi - y).max(), np.abs(wrap_angle(ti - yaw)).max()) > _POSE_TOL:

@@ -20,6 +20,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from navcore.io.episode_schema import TRAJECTORY_WRITE
+
 FORMAT_VERSION = "1.0"
 
 # NavArena's column sets (NAVARENA_FORMATS.md section 2); rotation columns are named
@@ -74,6 +76,13 @@ def _tasks_of(catalog, scene) -> list[str]:
     return list(catalog.find("episodes", scene))
 
 
+def trajectory_write(table: pa.Table) -> dict:
+    """The canonical store's trajectory encoding, for the columns an export keeps."""
+    names = set(table.column_names)
+    return {**TRAJECTORY_WRITE, "use_dictionary": [c for c in TRAJECTORY_WRITE["use_dictionary"] if c in names],
+            "column_encoding": {c: e for c, e in TRAJECTORY_WRITE["column_encoding"].items() if c in names}}
+
+
 def navarena_episodes(ep: pa.Table, chunk_size: int) -> pa.Table:
     """Canonical episodes -> NavArena episodes.parquet columns (chunk_index by row order)."""
     n = ep.num_rows
@@ -117,7 +126,7 @@ def _fill_navarena_scene(out, scene, catalog, ecfg: ExportConfig, created: str) 
             ids = part["episode_id"]
             tpart = tr.filter(pc.is_in(tr["episode_id"], value_set=ids)).select(NAVARENA_TRAJECTORY_COLUMNS)
             out.parquet(f"{task}/data/chunk-{k:06d}/episodes.parquet", part)
-            out.parquet(f"{task}/data/chunk-{k:06d}/trajectories.parquet", tpart)
+            out.parquet(f"{task}/data/chunk-{k:06d}/trajectories.parquet", tpart, **trajectory_write(tpart))
         splits = sorted(set(ep["split"].to_pylist()))
         info = {"dataset_name": ecfg.dataset_name, "scene_path": f"{scene.group}/{scene.scene_id}", "task_type": task,
                 "split": splits[0] if len(splits) == 1 else ",".join(splits), "num_episodes": ep.num_rows,

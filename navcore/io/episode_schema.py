@@ -1,4 +1,4 @@
-"""The canonical tables of the episodes stage: one pyarrow schema each, defined here only.
+"""The canonical tables of the episodes stage (read by export and evaluate): one pyarrow schema each, defined here only.
 
 Stored hive-partitioned by task and scene (`task=` and `scene_id=` come from the folder names, so
 they are not columns of the files):
@@ -6,6 +6,14 @@ they are not columns of the files):
     data/06_trajectories/task={task}/scene_id={scene_id}/part-0.parquet  one row per expert step
 Frame: the scene's aligned frame (z up, metres, floor z = 0); rotations are quaternions
 [qx, qy, qz, qw] of the heading (yaw about +z, counter-clockwise from +x).
+
+Trajectories are the bulk of a release (about 500 rows an episode at 20 Hz), so they are encoded
+for size (``TRAJECTORY_WRITE``): float32 throughout (positions to about 4 um at 50 m from the
+origin; the validity re-check allows exactly that rounding), BYTE_STREAM_SPLIT for the floats,
+delta encoding for ``step``, dictionaries for the strings; the columns derived from others
+(quaternion, world-frame velocity, relative waypoint, accelerations, curvature) are rounded to the
+binary grids of ``TRAJECTORY_QUANTA`` so that their low bytes compress away. The stored poses
+(x, y, yaw) and controls (v, omega) are float32 exactly as computed.
 """
 from __future__ import annotations
 
@@ -52,11 +60,15 @@ EPISODE_SCHEMA = pa.schema(_fields(
     ("seed", pa.int64()),           # the (scene, task) stream seed
 ))
 
+def _pose32(prefix: str) -> list[tuple[str, pa.DataType]]:
+    return [(name, F32) for name, _ in _pose(prefix)]
+
+
 TRAJECTORY_SCHEMA = pa.schema(_fields(
     ("episode_id", STR),
     ("step", I32),                  # row k is the state at t = k dt
-    ("timestamp", F64),             # seconds
-    *_pose(""), ("yaw", F64),
+    ("timestamp", F32),             # seconds
+    *_pose32(""), ("yaw", F32),
     ("action", STR),                # move_forward | turn_left | turn_right | stop (the control's kind)
     ("action_id", I8),              # 0 stop, 1 move_forward, 2 turn_left, 3 turn_right (Habitat's ids)
     ("linear_velocity", F32),       # v held from this row to the next, m/s (robot frame, forward)
@@ -68,3 +80,27 @@ TRAJECTORY_SCHEMA = pa.schema(_fields(
     ("dx", F32), ("dy", F32), ("dyaw", F32),  # pose change to the next row in this row's robot frame
     ("phase", STR),                 # rotate | translate | stop
 ))
+
+TRAJECTORY_QUANTA = {
+    **dict.fromkeys(("rotation_qz", "rotation_qw", "linear_velocity_x", "linear_velocity_y", "dx", "dy", "dyaw"),
+                    2.0**-16),  # 1.5e-5 (m, m/s, rad, unit quaternion)
+    **dict.fromkeys(("linear_acceleration", "angular_acceleration", "curvature"), 2.0**-12),  # 2.4e-4
+}
+"""Binary grid of each derived trajectory column (values are rounded to multiples of it)."""
+
+TRAJECTORY_WRITE = {
+    "compression": "zstd",
+    "use_dictionary": [f.name for f in TRAJECTORY_SCHEMA if f.type in (STR, I8)],
+    "column_encoding": {**{f.name: "BYTE_STREAM_SPLIT" for f in TRAJECTORY_SCHEMA if f.type == F32},
+                        "step": "DELTA_BINARY_PACKED"},
+    "row_group_size": 1 << 20,
+}
+"""pyarrow.parquet.write_table options of trajectory tables (canonical store and exports)."""
+
+
+def quantize_trajectory(cols: dict) -> dict:
+    """Round the derived columns of one trajectory (name -> array) to TRAJECTORY_QUANTA."""
+    import numpy as np
+
+    return {k: (np.round(np.asarray(v, np.float64) / TRAJECTORY_QUANTA[k]) * TRAJECTORY_QUANTA[k]
+                if k in TRAJECTORY_QUANTA else v) for k, v in cols.items()}
