@@ -285,6 +285,7 @@ def test_exports_read_back_equal_to_the_store(episode_run):
         ep_chunks = pd.concat([pd.read_parquet(c / "episodes.parquet") for c in chunks], ignore_index=True)
         tr_chunks = pd.concat([pd.read_parquet(c / "trajectories.parquet") for c in chunks], ignore_index=True)
         assert list(tr_chunks.columns) == NAVARENA_TRAJECTORY_COLUMNS
+        assert all(tr_chunks[c].dtype == np.float64 for c in ("timestamp", "position_x", "rotation_qw"))  # the spec's
         assert (ep_chunks.groupby("chunk_index").size() <= 8).all()
         for c in ("episode_id", "start_position_x", "goal_position_y", "geodesic_distance", "num_steps", "goals_json"):
             assert ep_chunks[c].tolist() == store[c].tolist() == meta_eps[c].tolist()

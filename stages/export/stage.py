@@ -42,6 +42,10 @@ NAVARENA_TRAJECTORY_COLUMNS = [
     "linear_velocity", "angular_velocity", "linear_velocity_x", "linear_velocity_y",
     "angular_acceleration", "linear_acceleration", "curvature", "phase",
 ]
+NAVARENA_FLOAT64 = ("timestamp", "position_x", "position_y", "position_z", "rotation_qx", "rotation_qy",
+                    "rotation_qz", "rotation_qw")
+"""Trajectory columns the NavArena layout types as float64 (NAVARENA_FORMATS.md section 3; the
+canonical store keeps them float32, which float64 holds exactly)."""
 HABITAT_TASKS = ("pointnav", "objectnav")
 
 
@@ -74,6 +78,14 @@ def _read(catalog, dataset: str, scene, task: str) -> pa.Table | None:
 
 def _tasks_of(catalog, scene) -> list[str]:
     return list(catalog.find("episodes", scene))
+
+
+def navarena_trajectories(tr: pa.Table) -> pa.Table:
+    """Canonical trajectory rows -> NavArena trajectories.parquet columns and types."""
+    tr = tr.select(NAVARENA_TRAJECTORY_COLUMNS)
+    for c in NAVARENA_FLOAT64:
+        tr = tr.set_column(tr.schema.get_field_index(c), c, tr[c].cast(pa.float64()))
+    return tr
 
 
 def trajectory_write(table: pa.Table) -> dict:
@@ -124,7 +136,7 @@ def _fill_navarena_scene(out, scene, catalog, ecfg: ExportConfig, created: str) 
         for k in range(n_chunks):
             part = ne.slice(k * ecfg.chunk_size, ecfg.chunk_size)
             ids = part["episode_id"]
-            tpart = tr.filter(pc.is_in(tr["episode_id"], value_set=ids)).select(NAVARENA_TRAJECTORY_COLUMNS)
+            tpart = navarena_trajectories(tr.filter(pc.is_in(tr["episode_id"], value_set=ids)))
             out.parquet(f"{task}/data/chunk-{k:06d}/episodes.parquet", part)
             out.parquet(f"{task}/data/chunk-{k:06d}/trajectories.parquet", tpart, **trajectory_write(tpart))
         splits = sorted(set(ep["split"].to_pylist()))
