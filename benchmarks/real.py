@@ -120,7 +120,6 @@ def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) ->
 
     from navcore.gaussians.content import content_of
     from navcore.gaussians.formats import read_gaussians
-    from navcore.gaussians.store import read_scene_zarr
     from stages.costmap.render_check import RenderCheckConfig, check_costmap
 
     t0 = time.perf_counter()
@@ -131,7 +130,7 @@ def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) ->
     vox = marker(catalog, scene, "voxelize").get("info", {})
     cm_info = marker(catalog, scene, "costmap").get("info", {})
     emb = OmegaConf.to_object(cfg.embodiment)
-    gs, _ = read_scene_zarr(catalog.path("aligned", scene))
+    gs, _ = catalog.dataset("aligned", scene).load()
     cm = catalog.dataset("costmaps", scene).load(emb.name)
     t0 = time.perf_counter()
     rc = check_costmap(gs, cm, emb, RenderCheckConfig(poses=poses), backend="cpu")

@@ -112,7 +112,9 @@ class Catalog:
             raise KeyError(f"{dataset!r} is a folder of datasets, not a dataset; use catalog.path")
         if kind not in TYPES:
             raise ValueError(f"layout: dataset {dataset!r} has unknown type {kind!r} ({', '.join(TYPES)})")
-        return TYPES[kind](self.path(dataset, scene, **extra))
+        base = self.layout[dataset].get("base")  # a dataset derived on read from another one
+        kwargs = {"base": self.dataset(base, scene, **extra)} if base else {}
+        return TYPES[kind](self.path(dataset, scene, **extra), **kwargs)
 
     def find(self, dataset: str, scene: SceneEntry | None = None, **extra) -> dict[str, Dataset]:
         """The existing datasets of a name whose path fields other than the given ones vary

@@ -113,7 +113,8 @@ class AssetConfig:
     write_compressed_splat: bool = True
     """Also write compressed.splat (32 bytes a Gaussian)."""
     write_source_ply: bool = True
-    """Write source.ply (INRIA layout of the ingested scene)."""
+    """Write source.ply (required by the V1 asset): a hard link to the original when it is a local
+    INRIA binary PLY (no second copy), else the ingested scene written in that layout."""
     labels: str = "model_predicted"
     """labels.json from: model_predicted (the semantics stage's instances) | ground_truth (synthetic
     scenes) | none."""

@@ -56,7 +56,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("synthesize", synthesize.run, (), ("synthetic",), only_synthetic=True),
     Stage("ingest", ingest.run, ("synthesize",), ("ingest",), version="2"),
     Stage("voxelize", voxelize.run, ("ingest",), ("voxelize",), version="3"),
-    Stage("align", align.run, ("voxelize",), ("align",), version="3"),
+    Stage("align", align.run, ("voxelize",), ("align",), version="4"),
     Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="3",
           inputs=costmap.hashed_inputs),
     Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment")),

@@ -8,7 +8,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from navcore.io.datasets import CostmapDataset
+from navcore.io.datasets import AlignedGaussianDataset, CostmapDataset, GaussianDataset
 from navcore.nav.actions import MOVE_FORWARD, STOP
 from navcore.nav.embodiment import Embodiment, Limits
 from navcore.nav.geodesic import NavGraph, max_detour
@@ -320,7 +320,6 @@ def test_exports_read_back_equal_to_the_store(episode_run):
 def test_goal_images_rendered_at_the_goal_camera_and_exported(episode_run, make_cfg):
     from PIL import Image
 
-    from navcore.gaussians.store import read_scene_zarr
     from navcore.render import Renderer
     from navcore.render.camera import intrinsics, viewmats
     from pipeline.executor import execute
@@ -338,7 +337,8 @@ def test_goal_images_rendered_at_the_goal_camera_and_exported(episode_run, make_
     e = eps.iloc[0]
     img = np.asarray(Image.open(base / f"goal_images/{e['episode_id']}_goal.jpg")).astype(float) / 255
     cam = json.loads(e["goal_camera_json"])
-    gs, _ = read_scene_zarr(root / "01_scenes" / sid / "aligned.zarr")
+    store = GaussianDataset(root / "01_scenes" / sid / "gaussians.zarr")
+    gs, _ = AlignedGaussianDataset(root / "01_scenes" / sid / "alignment.json", store).load()
     ref = Renderer(gs, "cpu").render(viewmats(np.array([[*cam["position"][:2], cam["yaw"]]]), cam["position"][2],
                                               cam["pitch_deg"]),
                                      intrinsics(cam["width"], cam["height"], cam["hfov_deg"])[None],

@@ -36,13 +36,20 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
     from PIL import Image
 
     from navcore.gaussians.formats import read_gaussians
-    from navcore.io.datasets import GaussianDataset
+    from navcore.io.datasets import AlignedGaussianDataset, GaussianDataset
     from stages.asset.stage import read_pgm
 
-    aligned, _ = GaussianDataset(tmp_path / "01_scenes" / sid / "aligned.zarr").load()
-    source, _ = GaussianDataset(tmp_path / "01_scenes" / sid / "gaussians.zarr").load()
+    store = GaussianDataset(tmp_path / "01_scenes" / sid / "gaussians.zarr")
+    aligned, attrs = AlignedGaussianDataset(tmp_path / "01_scenes" / sid / "alignment.json", store).load()
+    source, _ = store.load()
+    t = np.asarray(attrs["source_to_aligned"])
+    assert np.allclose(aligned.means, source.means @ t[:3, :3].T + t[:3, 3], atol=1e-5)  # derived on read
+    assert not (tmp_path / "01_scenes" / sid / "aligned.zarr").exists()  # the Gaussians are stored once
     ply = read_gaussians(asset / "aligned.ply")
     assert len(ply) == len(aligned) and np.allclose(ply.means, aligned.means, atol=1e-6)
+    # source.ply is the generated original itself: linked, not a second copy
+    original = next((tmp_path / "00_sources" / "synthetic").iterdir()) / "scene.ply"
+    assert (asset / "source.ply").samefile(original) and man["files"]["source_ply"] == "source.ply"
     assert len(read_gaussians(asset / "source.ply")) == len(source)
     splat = read_gaussians(asset / "compressed.splat")  # .splat is sorted by size x opacity
     assert len(splat) == len(aligned)

@@ -142,6 +142,28 @@ class GaussianDataset(Dataset):
             write_scene_zarr(tmp, scene, attrs)
 
 
+class AlignedGaussianDataset(Dataset):
+    """The scene in the gravity frame, derived on read: the canonical store (``base``, a
+    GaussianDataset) moved by the 4x4 ``source_to_aligned`` of the alignment document at ``path``.
+    Nothing but those 16 numbers is stored for it (no second copy of the Gaussians)."""
+
+    def __init__(self, path: str | Path, base: GaussianDataset):
+        super().__init__(path)
+        self.base = base
+
+    def exists(self) -> bool:
+        return self.path.exists() and self.base.exists()
+
+    def transform(self) -> np.ndarray:
+        return np.asarray(json.loads(self.path.read_text())["source_to_aligned"], np.float64)
+
+    def load(self):
+        """(GaussianScene in the aligned frame, attrs with frame and source_to_aligned)."""
+        gs, attrs = self.base.load()
+        t = self.transform()
+        return gs.transformed(t), {**attrs, "frame": "aligned", "source_to_aligned": t.tolist()}
+
+
 COSTMAP_LAYERS = ("raw", "support", "occ", "clearance", "components")
 """Arrays of one embodiment's group in a costmap store, [ny, nx], row = y."""
 COSTMAP_GRID = "[ny, nx], row = y; cell (i, j) centre = origin + ((j+.5) res, (i+.5) res)"
@@ -216,6 +238,19 @@ class FolderWriter:
 
     def text(self, name: str, text: str) -> str:
         (self / name).write_text(text)
+        return name
+
+    def link(self, name: str, source: str | Path) -> str:
+        """A file that is a local file's bytes exactly: a hard link (no second copy) where the
+        filesystem allows, else a copy."""
+        import os
+        import shutil
+
+        dst = self / name
+        try:
+            os.link(source, dst)
+        except OSError:  # another filesystem, or links not supported
+            shutil.copyfile(source, dst)
         return name
 
     def bytes(self, name: str, data: bytes) -> str:
@@ -296,8 +331,9 @@ class FileDataset(Dataset):
 
 
 TYPES: dict[str, type[Dataset]] = {
-    "json": JSONDataset, "json_gz": JSONGzDataset, "text": TextDataset, "parquet": ParquetDataset, "zarr": ZarrDataset,
-    "gaussians": GaussianDataset, "costmap": CostmapDataset, "image": ImageDataset, "folder": FolderDataset, "file": FileDataset,
+    "json": JSONDataset, "json_gz": JSONGzDataset, "text": TextDataset, "parquet": ParquetDataset,
+    "zarr": ZarrDataset, "gaussians": GaussianDataset, "aligned_gaussians": AlignedGaussianDataset,
+    "costmap": CostmapDataset, "image": ImageDataset, "folder": FolderDataset, "file": FileDataset,
     "synthetic_source": SyntheticSourceDataset,
 }
 """Dataset type names of the layout file."""

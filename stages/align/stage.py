@@ -1,6 +1,7 @@
-"""Stage `align`: up axis and floor plane of the scene's content -> rigid transform; apply it to
-the Gaussians (positions and rotations; floaters too: the renderable model stays whole).
-alignment.json explains the choice (every candidate with its numbers) and reports the metric
+"""Stage `align`: up axis and floor plane of the scene's content -> rigid transform. Only the
+transform is stored (alignment.json): the `aligned` dataset applies it to the canonical store on
+read (positions and rotations; floaters too: the renderable model stays whole), so the Gaussians
+are stored once. alignment.json also explains the choice (every candidate with its numbers) and reports the metric
 scale evidence (floor-to-ceiling height); floor_side_view.png shows the Gaussian density seen from
 two sides with the chosen floor. The voxel field in the aligned frame is re-evaluated from the
 transformed Gaussians by the costmap stage (exact, unlike resampling the source grid)."""
@@ -68,15 +69,14 @@ def plt_close(fig) -> None:
 
 def run(scene, cfg, catalog) -> dict:
     acfg: AlignConfig = OmegaConf.to_object(cfg.align)
-    gs, attrs = catalog.dataset("scene", scene).load()
+    gs, _ = catalog.dataset("scene", scene).load()
     content = content_of(gs)
     cams = camera_file(scene, catalog)
     c2w = read_cameras(cams, 64, 48)[0] if cams is not None else None
     n, d, info = fit_floor(content, acfg, c2w)
     t = floor_transform(n, d)
-    aligned = gs.transformed(t)
-    out = catalog.dataset("aligned", scene)
-    out.save(aligned, {**attrs, "frame": "aligned", "source_to_aligned": t.tolist()})
+    aligned = gs.transformed(t)  # not stored: the `aligned` dataset derives it on read from these 16 numbers
+    out = catalog.dataset("alignment", scene)
     aligned_content = content_of(aligned)
     ceiling, how = ceiling_height(aligned_content, acfg)
     tilt = nearest_axis(n)[1]
@@ -84,7 +84,7 @@ def run(scene, cfg, catalog) -> dict:
     summary = {"up_axis": up, "floor_normal_source": list(map(float, n)), "floor_offset": d,
                "tilt_from_nearest_axis_deg": tilt, "floor_to_ceiling_m": round(ceiling, 3), "ceiling_from": how,
                "cameras": str(cams) if cams is not None else None}
-    catalog.dataset("alignment", scene).save({"source_to_aligned": t.tolist(), **summary, "candidates": info})
+    out.save({"source_to_aligned": t.tolist(), **summary, "candidates": info})
     fig = side_view(aligned_content, f"{scene.name}: up axis {up}, floor-to-ceiling {ceiling:.2f} m ({how})")
     catalog.dataset("floor_side_view", scene).save(fig)
     plt_close(fig)

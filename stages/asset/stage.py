@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from navcore.gaussians.formats import write_inria_ply, write_splat
+from navcore.gaussians.formats.ply import is_inria_ply
 from navcore.instances import ground_truth_labels, load_instances, table_to_labels
 from navcore.io.stamps import build_time
 
@@ -77,8 +78,12 @@ def run(scene, cfg, catalog) -> dict:
         files = {"source_ply": None, "aligned_ply": "aligned.ply", "nav_map": "nav_map.pgm",
                  "nav_map_config": "nav_map.yaml", "nav_mask": "nav_mask.png", "labels": None, "structure": None,
                  "compressed_ply": None}
-        if cfg.asset.write_source_ply:
-            write_inria_ply(tmp / "source.ply", src)
+        if cfg.asset.write_source_ply:  # the original when it already is an INRIA PLY (linked, not copied)
+            original = catalog.dataset("ingest_report", scene).load()["source"]
+            if is_inria_ply(original):
+                tmp.link("source.ply", original)
+            else:
+                write_inria_ply(tmp / "source.ply", src)
             files["source_ply"] = "source.ply"
         write_inria_ply(tmp / "aligned.ply", aligned)
         write_pgm(tmp / "nav_map.pgm", occ)

@@ -72,6 +72,21 @@ def parse_header(path: Path) -> tuple[str, list[PlyElement], int]:
     return fmt, elements, header_len
 
 
+INRIA_REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+                  "rot_0", "rot_1", "rot_2", "rot_3")
+
+
+def is_inria_ply(path: str | Path) -> bool:
+    """Whether a file is a 3DGS PLY in the INRIA layout, binary little endian (one vertex element
+    holding at least the INRIA properties): what the V1 asset's source.ply must be."""
+    try:
+        fmt, elements, _ = parse_header(Path(path))
+    except (OSError, SceneFormatError):
+        return False
+    return (fmt == "binary_little_endian" and [e.name for e in elements] == ["vertex"]
+            and set(INRIA_REQUIRED) <= {name for name, _ in elements[0].properties})
+
+
 def read_elements(path: Path) -> dict[str, np.ndarray]:
     fmt, elements, header_len = parse_header(path)
     size = os.path.getsize(path)
