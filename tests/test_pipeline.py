@@ -311,3 +311,22 @@ def test_compare_data_normalises_roots_and_reports_every_difference(tmp_path):
     (tmp_path / "b" / "extra.bin").write_bytes(b"\0")
     rep = compare(tmp_path / "a", tmp_path / "b")
     assert rep["differing"] == ["01_scenes/s/ingest.json"] and rep["only_second"] == ["extra.bin"]
+
+
+def test_storage_measure_counts_a_hard_link_to_the_source_once(tmp_path):
+    import os
+
+    from benchmarks.storage import measure
+
+    src = tmp_path / "src.ply"
+    src.write_bytes(b"x" * 1000)
+    scene = tmp_path / "d" / "01_scenes" / "s1"
+    scene.mkdir(parents=True)
+    (scene / "ingest.json").write_text(json.dumps({"scene_id": "s1", "group": "g", "source": str(src)}))
+    asset = tmp_path / "d" / "09_assets" / "g" / "s1"
+    asset.mkdir(parents=True)
+    os.link(src, asset / "source.ply")  # the original, linked
+    (asset / "aligned.ply").write_bytes(b"y" * 500)
+    s = measure(tmp_path / "d")["scenes"][0]
+    assert s["source_bytes"] == 1000
+    assert s["store_and_asset_bytes"] == 500 + (scene / "ingest.json").stat().st_size

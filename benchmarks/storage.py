@@ -1,0 +1,63 @@
+"""Bytes stored per scene against its source file, and per episode.
+
+    python -m benchmarks.storage data
+
+Counts unique inodes (a hard link to the source costs nothing). Per scene: the scene folder
+(canonical Gaussian store, alignment, reports) plus the asset, then with voxels and costmaps; per
+episode: the episodes and trajectories tables over the number of episodes. Prints a table and
+JSON.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+
+def tree_bytes(paths, seen: set) -> int:
+    tot = 0
+    for p in paths:
+        if not p.exists():
+            continue
+        for f in ([p] if p.is_file() else sorted(q for q in p.rglob("*") if q.is_file())):
+            st = f.stat()
+            if (st.st_dev, st.st_ino) not in seen:
+                seen.add((st.st_dev, st.st_ino))
+                tot += st.st_size
+    return tot
+
+
+def measure(root: Path) -> dict:
+    import pyarrow.parquet as pq
+
+    scenes = []
+    for rep in sorted((root / "01_scenes").glob("*/ingest.json")):
+        ing = json.loads(rep.read_text())
+        sid, seen = ing["scene_id"], set()
+        src = tree_bytes([Path(ing["source"])], seen)  # counted first: links to it are free
+        store = tree_bytes([root / "01_scenes" / sid, root / "09_assets" / ing["group"] / sid], seen)
+        maps = tree_bytes([root / "02_voxels" / f"{sid}.zarr", root / "03_costmaps" / f"{sid}.zarr"], seen)
+        scenes.append({"scene_id": sid, "source_bytes": src, "store_and_asset_bytes": store, "maps_bytes": maps,
+                       "ratio": store / src if src else None, "ratio_with_maps": (store + maps) / src if src else None})
+    eps = sorted((root / "05_episodes").glob("task=*/scene_id=*/part-0.parquet"))
+    n = sum(pq.read_metadata(f).num_rows for f in eps)
+    tables = tree_bytes([root / "05_episodes", root / "06_trajectories"], set())
+    return {"scenes": scenes, "episodes": n, "bytes_per_episode": tables / n if n else None}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("data", type=Path, nargs="?", default=Path("data"))
+    rep = measure(ap.parse_args(argv).data)
+    for s in rep["scenes"]:
+        print(f"{s['scene_id']}: source {s['source_bytes'] / 1e6:.1f} MB, scene store + asset "
+              f"{s['store_and_asset_bytes'] / 1e6:.1f} MB ({s['ratio']:.2f}x), with voxels and costmaps "
+              f"{s['ratio_with_maps']:.2f}x")
+    print(f"{rep['episodes']} episodes: {rep['bytes_per_episode'] / 1e3:.2f} KB an episode with its trajectory")
+    print(json.dumps(rep, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
