@@ -93,12 +93,17 @@ class Catalog:
         e = self.layout[dataset]
         return (e, None) if isinstance(e, str) else (e["path"], e["type"])
 
-    def path(self, dataset: str, scene: SceneEntry | None = None, **extra) -> Path:
-        """Resolve a logical dataset name to a path."""
-        template, _ = self._entry(dataset)
+    def _fields(self, scene: SceneEntry | None, extra: dict) -> dict:
+        """Values of a path template's placeholders: the root, a scene's id / group / name, extras."""
         fields = {"root": str(self.root), **extra}
         if scene is not None:
             fields.update(scene_id=scene.scene_id, group=scene.group, name=scene.name)
+        return fields
+
+    def path(self, dataset: str, scene: SceneEntry | None = None, **extra) -> Path:
+        """Resolve a logical dataset name to a path."""
+        template, _ = self._entry(dataset)
+        fields = self._fields(scene, extra)
         try:
             return Path(template.format(**fields))
         except KeyError as e:
@@ -121,9 +126,7 @@ class Catalog:
         (e.g. every task of one scene's episodes), keyed by the varying fields' values joined
         with "/" (in the template's order), sorted."""
         template, _ = self._entry(dataset)
-        fields = {"root": str(self.root), **extra}
-        if scene is not None:
-            fields.update(scene_id=scene.scene_id, group=scene.group, name=scene.name)
+        fields = self._fields(scene, extra)
         free = list(dict.fromkeys(n for _, n, _, _ in string.Formatter().parse(template) if n and n not in fields))
         pattern = template.format(**{**{n: "*" for n in free}, **fields})
         anchor = Path(pattern.split("*")[0]).parent if "*" in pattern else Path(pattern).parent

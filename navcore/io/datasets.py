@@ -290,8 +290,7 @@ class FolderDataset(Dataset):
         return self.path / name
 
     def read_json(self, name: str, default: Any = None) -> Any:
-        p = self.path / name
-        return json.loads(p.read_text()) if p.exists() else default
+        return JSONDataset(self.path / name).load_or(default)
 
     def glob(self, pattern: str) -> list[Path]:
         return sorted(self.path.glob(pattern))
@@ -315,9 +314,9 @@ class SyntheticSourceDataset(FolderDataset):
     def read_ground_truth(self, name: str, default: Any = None) -> Any:
         """A ground-truth file: JSON parsed, .npy loaded; ``default`` when absent."""
         p = self.ground_truth(name)
-        if not p.exists():
-            return default
-        return np.load(p) if p.suffix == ".npy" else json.loads(p.read_text())
+        if p.suffix != ".npy":
+            return JSONDataset(p).load_or(default)
+        return np.load(p) if p.exists() else default
 
 
 class FileDataset(Dataset):
