@@ -35,7 +35,10 @@ def measure(root: Path) -> dict:
     for rep in sorted((root / "01_scenes").glob("*/ingest.json")):
         ing = json.loads(rep.read_text())
         sid, seen = ing["scene_id"], set()
-        src = tree_bytes([Path(ing["source"])], seen)  # counted first: links to it are free
+        source = Path(ing["source"])
+        if source.name in ("lod-meta.json", "meta.json"):  # a SOG folder: the whole folder is the source
+            source = source.parent
+        src = tree_bytes([source], seen)  # counted first: links to it are free
         store = tree_bytes([root / "01_scenes" / sid, root / "09_assets" / ing["group"] / sid], seen)
         maps = tree_bytes([root / "02_voxels" / f"{sid}.zarr", root / "03_costmaps" / f"{sid}.zarr"], seen)
         scenes.append({"scene_id": sid, "source_bytes": src, "store_and_asset_bytes": store, "maps_bytes": maps,
