@@ -19,7 +19,7 @@ import numpy as np
 if TYPE_CHECKING:  # torch is imported when a renderer is built, not when cameras are
     import torch
 
-BACKENDS = ("auto", "cpu", "gsplat")
+BACKENDS = ("auto", "cpu", "gsplat", "torch")
 
 
 @dataclass
@@ -47,8 +47,9 @@ class Renderer:
 
     Args:
         gs: navcore.gaussians.model.GaussianScene (aligned frame).
-        backend: "gsplat" (CUDA), "cpu" (plain PyTorch, same rules as gsplat's classic mode) or
-            "auto" (gsplat when CUDA and gsplat are there).
+        backend: "gsplat" (CUDA), "cpu" (compiled with numba, gsplat's classic-mode rules, work
+            proportional to what the camera sees), "torch" (the plain-PyTorch reference of the same
+            rules, slow: for checking the others) or "auto" (gsplat when CUDA and gsplat are there).
         sh_degree: SH degree to evaluate (None: all the scene has).
     """
 
@@ -63,6 +64,10 @@ class Renderer:
         self.sh_degree = sh_degree
         self.num_gaussians = len(gs.means)
         if backend == "cpu":
+            from navcore.render.cpu_fast import prepare
+
+            self._g = prepare(gs)
+        elif backend == "torch":
             from navcore.render.cpu import gaussian_tensors
 
             self._g = gaussian_tensors(gs)
@@ -79,6 +84,8 @@ class Renderer:
         extra: optional [N, C] per-Gaussian values composited in the same pass as the colour
         (out.extra [B, H, W, C]): pixel-aligned labels at the cost of a few more channels."""
         if self.backend == "cpu":
+            from navcore.render.cpu_fast import render
+        elif self.backend == "torch":
             from navcore.render.cpu import render
         else:
             from navcore.render.gsplat_backend import render

@@ -1,0 +1,395 @@
+"""The CPU renderer: compiled (numba) EWA splatting with gsplat's classic-mode rules.
+
+Same rules as `navcore/render/cpu.py` (the plain-PyTorch reference, which documents them and
+was checked against gsplat on an H100), organised so that the work is proportional to what the
+camera sees rather than to the scene:
+
+1. cull: one pass over the means with a conservative test (near / far plane on the mean depth,
+   gsplat's rule; the image rectangle widened by an upper bound on each Gaussian's footprint,
+   from its largest standard deviation), so only candidates get the full projection;
+2. project the candidates (EWA with the clamped Jacobian, eps2d, opacity-aware box) and
+   evaluate their colour (SH at the view direction) in parallel;
+3. order: a stable LSD radix sort of the depth keys (float bits; ties keep the Gaussian index
+   order) and a counting sort into 16x16 tiles, so each tile's list is by depth then index,
+   gsplat's order;
+4. rasterise: tiles in parallel, each Gaussian visiting only the pixels of its box inside the
+   tile (outside the box its alpha is below 1/255 by construction of the box, so gsplat skips
+   them too), front to back with the exclusive stop at T <= 1e-4, a tile ending when all its
+   pixels are done.
+
+The scene is prepared once (`prepare`): float32 means, the 3D covariances, opacities, SH
+coefficients and each Gaussian's largest standard deviation.
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from navcore.gaussians.sh import C0, C1, C2, C3
+
+TILE = 16
+ALPHA_MIN = np.float32(1.0 / 255.0)
+T_MIN = np.float32(1e-4)
+EXTENT_MAX = 3.33  # gsplat's cap on the footprint extent (sigmas)
+
+
+def prepare(gs) -> dict:
+    """A GaussianScene as the renderer's arrays (computed once per scene)."""
+    q = gs.quats.astype(np.float64)
+    q = q / np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-12)
+    w, x, y, z = q.T
+    rot = np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+                    2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+                    2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1).reshape(-1, 3, 3)
+    s = np.exp(gs.log_scales.astype(np.float64))
+    m = rot * s[:, None, :]
+    cov = m @ m.transpose(0, 2, 1)
+    cov6 = np.stack([cov[:, 0, 0], cov[:, 0, 1], cov[:, 0, 2], cov[:, 1, 1], cov[:, 1, 2], cov[:, 2, 2]], 1)
+    opac = 1.0 / (1.0 + np.exp(-gs.opacity_logits.astype(np.float64)))
+    # gsplat's opacity-aware footprint extent (sigmas), a function of the opacity alone
+    ext = np.minimum(EXTENT_MAX, np.sqrt(2.0 * np.log(np.maximum(opac * 255.0, 1.0))))
+    return {"means": np.ascontiguousarray(gs.means, np.float32),
+            "cov": np.ascontiguousarray(cov6, np.float32),
+            "opacities": opac.astype(np.float32), "ext": ext.astype(np.float32),
+            "lmax": np.log(np.maximum(opac * 255.0, 1e-30)).astype(np.float32),
+            "smax": s.max(1).astype(np.float32),
+            "sh": np.ascontiguousarray(gs.sh, np.float32)}
+
+
+@numba.njit(cache=True, parallel=True)
+def _cull(means, smax, opac, R, t, fx, fy, cx, cy, width, height, near, far, lim_x, lim_y, keep):
+    """keep[i] = 1 when Gaussian i may be visible (a superset of gsplat's survivors)."""
+    n = means.shape[0]
+    kx = math.sqrt(1.0 + lim_x * lim_x)
+    ky = math.sqrt(1.0 + lim_y * lim_y)
+    for i in numba.prange(n):
+        keep[i] = 0
+        if opac[i] < ALPHA_MIN:
+            continue
+        mx, my, mz = means[i, 0], means[i, 1], means[i, 2]
+        z = R[2, 0] * mx + R[2, 1] * my + R[2, 2] * mz + t[2]
+        if z <= near or z >= far:
+            continue
+        x = R[0, 0] * mx + R[0, 1] * my + R[0, 2] * mz + t[0]
+        y = R[1, 0] * mx + R[1, 1] * my + R[1, 2] * mz + t[1]
+        # footprint bound: e sqrt(J Sigma J^T + eps) <= e (sqrt(eps) + |J_row| smax), + 1 for the ceil
+        rx = EXTENT_MAX * (0.5478 + fx * kx * smax[i] / z) + 1.0
+        ry = EXTENT_MAX * (0.5478 + fy * ky * smax[i] / z) + 1.0
+        u = fx * x / z + cx
+        v = fy * y / z + cy
+        if u + rx <= 0 or u - rx >= width or v + ry <= 0 or v - ry >= height:
+            continue
+        keep[i] = 1
+
+
+@numba.njit(cache=True, inline="always")
+def _sh_colour(sh, i, dx, dy, dz, deg, out, j, col):
+    """out[j, col:col + 3] = max(SH(i) at the unit direction (dx, dy, dz) + 0.5, 0) (3DGS basis)."""
+    for c in range(3):
+        v = C0 * sh[i, 0, c]
+        if deg >= 1:
+            v += -C1 * dy * sh[i, 1, c] + C1 * dz * sh[i, 2, c] - C1 * dx * sh[i, 3, c]
+        out[j, col + c] = v
+    if deg >= 2:
+        xx, yy, zz, xy, yz, xz = dx * dx, dy * dy, dz * dz, dx * dy, dy * dz, dx * dz
+        b4, b5, b6, b7, b8 = C2[0] * xy, C2[1] * yz, C2[2] * (2 * zz - xx - yy), C2[3] * xz, C2[4] * (xx - yy)
+        for c in range(3):
+            out[j, col + c] += (b4 * sh[i, 4, c] + b5 * sh[i, 5, c] + b6 * sh[i, 6, c] + b7 * sh[i, 7, c]
+                                + b8 * sh[i, 8, c])
+        if deg >= 3:
+            b9 = C3[0] * dy * (3 * xx - yy)
+            b10 = C3[1] * xy * dz
+            b11 = C3[2] * dy * (4 * zz - xx - yy)
+            b12 = C3[3] * dz * (2 * zz - 3 * xx - 3 * yy)
+            b13 = C3[4] * dx * (4 * zz - xx - yy)
+            b14 = C3[5] * dz * (xx - yy)
+            b15 = C3[6] * dx * (xx - 3 * yy)
+            for c in range(3):
+                out[j, col + c] += (b9 * sh[i, 9, c] + b10 * sh[i, 10, c] + b11 * sh[i, 11, c] + b12 * sh[i, 12, c]
+                                    + b13 * sh[i, 13, c] + b14 * sh[i, 14, c] + b15 * sh[i, 15, c])
+    for c in range(3):
+        out[j, col + c] = max(out[j, col + c] + np.float32(0.5), np.float32(0.0))
+
+
+# per-row render data: u, v, rx, ry (px), conic a, b, c, opacity, depth, ln(255 opacity) (alpha >=
+# 1/255 iff sigma <= it), then the features
+U, V, RX, RY, CA, CB, CC, OP, Z, LM, F0 = range(11)
+
+
+@numba.njit(cache=True, parallel=True)
+def _project(idx, means, cov, opac, ext, lmax, sh, deg, feats_in, R, t, campos, fx, fy, cx, cy, width, height, eps2d,
+             lim_lo_x, lim_hi_x, lim_lo_y, lim_hi_y, data, box):
+    """EWA projection of the candidates idx into data[j] (see U..F0) and box[j] = (x0, x1, y0, y1),
+    the tile range (x1 = x0 when culled). Features: the SH colour (deg >= 0) then feats_in[idx[j]]."""
+    tw = (width + TILE - 1) // TILE
+    th = (height + TILE - 1) // TILE
+    nf = data.shape[1] - F0
+    for j in numba.prange(idx.shape[0]):
+        i = idx[j]
+        box[j, 0] = 0
+        box[j, 1] = 0
+        box[j, 2] = 0
+        box[j, 3] = 0
+        mx, my, mz = means[i, 0], means[i, 1], means[i, 2]
+        x = R[0, 0] * mx + R[0, 1] * my + R[0, 2] * mz + t[0]
+        y = R[1, 0] * mx + R[1, 1] * my + R[1, 2] * mz + t[1]
+        z = R[2, 0] * mx + R[2, 1] * my + R[2, 2] * mz + t[2]
+        # camera-frame covariance V = R Sigma R^T
+        s00, s01, s02, s11, s12, s22 = cov[i, 0], cov[i, 1], cov[i, 2], cov[i, 3], cov[i, 4], cov[i, 5]
+        a0 = R[0, 0] * s00 + R[0, 1] * s01 + R[0, 2] * s02
+        a1 = R[0, 0] * s01 + R[0, 1] * s11 + R[0, 2] * s12
+        a2 = R[0, 0] * s02 + R[0, 1] * s12 + R[0, 2] * s22
+        b0 = R[1, 0] * s00 + R[1, 1] * s01 + R[1, 2] * s02
+        b1 = R[1, 0] * s01 + R[1, 1] * s11 + R[1, 2] * s12
+        b2 = R[1, 0] * s02 + R[1, 1] * s12 + R[1, 2] * s22
+        c0 = R[2, 0] * s00 + R[2, 1] * s01 + R[2, 2] * s02
+        c1 = R[2, 0] * s01 + R[2, 1] * s11 + R[2, 2] * s12
+        c2 = R[2, 0] * s02 + R[2, 1] * s12 + R[2, 2] * s22
+        v00 = a0 * R[0, 0] + a1 * R[0, 1] + a2 * R[0, 2]
+        v01 = a0 * R[1, 0] + a1 * R[1, 1] + a2 * R[1, 2]
+        v02 = a0 * R[2, 0] + a1 * R[2, 1] + a2 * R[2, 2]
+        v11 = b0 * R[1, 0] + b1 * R[1, 1] + b2 * R[1, 2]
+        v12 = b0 * R[2, 0] + b1 * R[2, 1] + b2 * R[2, 2]
+        v22 = c0 * R[2, 0] + c1 * R[2, 1] + c2 * R[2, 2]
+        # Jacobian of the pinhole at the clamped mean; cov2d = J V J^T + eps2d
+        txz = min(max(x / z, lim_lo_x), lim_hi_x) * z
+        tyz = min(max(y / z, lim_lo_y), lim_hi_y) * z
+        j00 = fx / z
+        j02 = -fx * txz / (z * z)
+        j11 = fy / z
+        j12 = -fy * tyz / (z * z)
+        ca = j00 * (j00 * v00 + j02 * v02) + j02 * (j00 * v02 + j02 * v22) + eps2d
+        cb = j00 * (j11 * v01 + j12 * v02) + j02 * (j11 * v12 + j12 * v22)
+        cc = j11 * (j11 * v11 + j12 * v12) + j12 * (j11 * v12 + j12 * v22) + eps2d
+        det = ca * cc - cb * cb
+        if not det > 0:
+            continue
+        rx = math.ceil(ext[i] * math.sqrt(max(ca, 0.0)))
+        ry = math.ceil(ext[i] * math.sqrt(max(cc, 0.0)))
+        u = fx * x / z + cx
+        v = fy * y / z + cy
+        if rx <= 0 or ry <= 0 or u + rx <= 0 or u - rx >= width or v + ry <= 0 or v - ry >= height:
+            continue
+        x0 = min(max(int(math.floor((u - rx) / TILE)), 0), tw)
+        x1 = min(max(int(math.ceil((u + rx) / TILE)), 0), tw)
+        y0 = min(max(int(math.floor((v - ry) / TILE)), 0), th)
+        y1 = min(max(int(math.ceil((v + ry) / TILE)), 0), th)
+        if x1 <= x0 or y1 <= y0:
+            continue
+        box[j, 0], box[j, 1], box[j, 2], box[j, 3] = x0, x1, y0, y1
+        data[j, U], data[j, V], data[j, RX], data[j, RY] = u, v, rx, ry
+        data[j, CA], data[j, CB], data[j, CC] = cc / det, -cb / det, ca / det
+        data[j, OP], data[j, Z], data[j, LM] = opac[i], z, lmax[i]
+        k0 = 0
+        if deg >= 0:
+            dx, dy, dz = mx - campos[0], my - campos[1], mz - campos[2]
+            nrm = max(math.sqrt(dx * dx + dy * dy + dz * dz), 1e-12)
+            _sh_colour(sh, i, dx / nrm, dy / nrm, dz / nrm, deg, data, j, F0)
+            k0 = 3
+        for k in range(k0, nf):
+            data[j, F0 + k] = feats_in[i, k - k0]
+
+
+CHUNKS = 16  # work split of the sorts (fixed, so that the output does not depend on the thread count)
+
+
+@numba.njit(cache=True, parallel=True)
+def _depth_order(data, box):
+    """Rows with a non-empty tile range, sorted by depth; stable (ties keep the row order, i.e.
+    the Gaussian index order): a parallel LSD radix sort of the depth's float bits, 3 x 11 bits."""
+    live = np.nonzero(box[:, 1] > box[:, 0])[0].astype(np.int32)
+    n = live.shape[0]
+    ka = np.empty(n, np.uint32)
+    for k in numba.prange(n):
+        ka[k] = np.float32(data[live[k], Z]).view(np.uint32)  # positive floats order as their bits
+    va = live
+    kb = np.empty_like(ka)
+    vb = np.empty_like(va)
+    hist = np.zeros((CHUNKS, 2048), np.int64)
+    for shift in (0, 11, 22):
+        for c in numba.prange(CHUNKS):
+            lo, hi = c * n // CHUNKS, (c + 1) * n // CHUNKS
+            for d in range(2048):
+                hist[c, d] = 0
+            for k in range(lo, hi):
+                hist[c, (ka[k] >> shift) & 2047] += 1
+        total = 0
+        for d in range(2048):
+            for c in range(CHUNKS):
+                h = hist[c, d]
+                hist[c, d] = total
+                total += h
+        for c in numba.prange(CHUNKS):
+            lo, hi = c * n // CHUNKS, (c + 1) * n // CHUNKS
+            for k in range(lo, hi):
+                d = (ka[k] >> shift) & 2047
+                p = hist[c, d]
+                hist[c, d] = p + 1
+                kb[p] = ka[k]
+                vb[p] = va[k]
+        ka, kb = kb, ka
+        va, vb = vb, va
+    return va
+
+
+@numba.njit(cache=True, parallel=True)
+def _gather(order, data, box):
+    """data and box rows in the given order (one pass, so that rasterisation reads them in order)."""
+    d2 = np.empty((order.shape[0], data.shape[1]), np.float32)
+    b2 = np.empty((order.shape[0], 4), np.int32)
+    for k in numba.prange(order.shape[0]):
+        j = order[k]
+        for c in range(data.shape[1]):
+            d2[k, c] = data[j, c]
+        for c in range(4):
+            b2[k, c] = box[j, c]
+    return d2, b2
+
+
+@numba.njit(cache=True, parallel=True)
+def _bin(box, tw, th):
+    """Counting sort of the (depth-ordered) rows into tiles: (rows [M], offsets [tw * th + 1]);
+    each tile's rows stay in ascending order."""
+    n = box.shape[0]
+    nt = tw * th
+    counts = np.zeros((CHUNKS, nt), np.int64)
+    for c in numba.prange(CHUNKS):
+        for k in range(c * n // CHUNKS, (c + 1) * n // CHUNKS):
+            for ty in range(box[k, 2], box[k, 3]):
+                for tx in range(box[k, 0], box[k, 1]):
+                    counts[c, ty * tw + tx] += 1
+    offsets = np.empty(nt + 1, np.int64)
+    total = 0
+    for tt in range(nt):
+        offsets[tt] = total
+        for c in range(CHUNKS):
+            h = counts[c, tt]
+            counts[c, tt] = total
+            total += h
+    offsets[nt] = total
+    rows = np.empty(total, np.int32)
+    for c in numba.prange(CHUNKS):
+        for k in range(c * n // CHUNKS, (c + 1) * n // CHUNKS):
+            for ty in range(box[k, 2], box[k, 3]):
+                for tx in range(box[k, 0], box[k, 1]):
+                    tt = ty * tw + tx
+                    rows[counts[c, tt]] = k
+                    counts[c, tt] += 1
+    return rows, offsets
+
+
+@numba.njit(cache=True, parallel=True)
+def _rasterize(rows, offsets, data, width, height, out):
+    """out[H, W, C + 2] = (sum w f, sum w z, sum w) per pixel, front to back per tile."""
+    tw = (width + TILE - 1) // TILE
+    nt = offsets.shape[0] - 1
+    nf = data.shape[1] - F0
+    for tt in numba.prange(nt):
+        ty, tx = tt // tw, tt % tw
+        px0, py0 = tx * TILE, ty * TILE
+        pw = min(TILE, width - px0)
+        ph = min(TILE, height - py0)
+        T = np.ones(TILE * TILE, np.float32)
+        acc = np.zeros((TILE * TILE, nf + 2), np.float32)
+        done = np.zeros(TILE * TILE, np.bool_)
+        left = pw * ph
+        for k in range(offsets[tt], offsets[tt + 1]):
+            j = rows[k]
+            u, v, rx, ry = data[j, U], data[j, V], data[j, RX], data[j, RY]
+            ca, cb, cc = data[j, CA], data[j, CB], data[j, CC]
+            o, z = data[j, OP], data[j, Z]
+            lm = data[j, LM]
+            # pixels whose centre lies in the box (alpha < 1/255 outside it); per row, only the
+            # span where sigma <= ln(255 o), i.e. alpha >= 1/255 (widened by a rounding margin)
+            qx0 = max(px0, int(math.floor(u - rx - 0.5)))
+            qx1 = min(px0 + pw, int(math.ceil(u + rx + 0.5)))
+            qy0 = max(py0, int(math.floor(v - ry - 0.5)))
+            qy1 = min(py0 + ph, int(math.ceil(v + ry + 0.5)))
+            ha = np.float32(0.5) * ca
+            for py in range(qy0, qy1):
+                dy = np.float32(py + 0.5) - v
+                bq = cb * dy
+                disc = bq * bq - 4.0 * ha * (np.float32(0.5) * cc * dy * dy - lm)
+                if disc < 0 or ha <= 0:
+                    continue
+                sq = math.sqrt(disc)
+                r0 = max(qx0, int(math.floor(u + (-bq - sq) / (2.0 * ha) - 0.5 - 1e-3)))
+                r1 = min(qx1, int(math.ceil(u + (-bq + sq) / (2.0 * ha) - 0.5 + 1e-3)) + 1)
+                for px in range(r0, r1):
+                    p = (py - py0) * TILE + (px - px0)
+                    if done[p]:
+                        continue
+                    dx = np.float32(px + 0.5) - u
+                    sigma = ha * dx * dx + np.float32(0.5) * cc * dy * dy + cb * dx * dy
+                    if sigma < 0 or sigma > lm:
+                        continue
+                    alpha = min(np.float32(0.999), o * math.exp(-sigma))
+                    if alpha < ALPHA_MIN:
+                        continue
+                    tn = T[p] * (np.float32(1.0) - alpha)
+                    if tn <= T_MIN:
+                        done[p] = True
+                        left -= 1
+                        continue
+                    wgt = alpha * T[p]
+                    for c in range(nf):
+                        acc[p, c] += wgt * data[j, F0 + c]
+                    acc[p, nf] += wgt * z
+                    acc[p, nf + 1] += wgt
+                    T[p] = tn
+            if left == 0:
+                break
+        for py in range(ph):
+            for px in range(pw):
+                p = py * TILE + px
+                for c in range(nf + 2):
+                    out[py0 + py, px0 + px, c] = acc[p, c]
+
+
+def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: int, deg: int,
+               near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, features=None, extra=None):
+    """One camera -> (feats [H, W, C], depth [H, W], alpha [H, W]) float32 numpy arrays."""
+    R = np.ascontiguousarray(viewmat[:3, :3], np.float32)
+    t = np.ascontiguousarray(viewmat[:3, 3], np.float32)
+    fx, fy, cx, cy = (float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]))
+    tan_x, tan_y = 0.5 * width / fx, 0.5 * height / fy
+    lo_x, hi_x = -(cx / fx + 0.3 * tan_x), (width - cx) / fx + 0.3 * tan_x
+    lo_y, hi_y = -(cy / fy + 0.3 * tan_y), (height - cy) / fy + 0.3 * tan_y
+    n = len(g["means"])
+    keep = np.empty(n, np.uint8)
+    _cull(g["means"], g["smax"], g["opacities"], R, t, fx, fy, cx, cy, width, height, near, far,
+          max(-lo_x, hi_x), max(-lo_y, hi_y), keep)
+    idx = np.flatnonzero(keep)
+    if features is not None:
+        feats_in, d = np.ascontiguousarray(features, np.float32), -1
+    elif extra is not None:
+        feats_in, d = np.ascontiguousarray(extra, np.float32), deg
+    else:
+        feats_in, d = np.zeros((n, 0), np.float32), deg
+    nf = feats_in.shape[1] + (3 if d >= 0 else 0)
+    data = np.empty((len(idx), F0 + nf), np.float32)
+    box = np.empty((len(idx), 4), np.int32)
+    campos = (-R.T.astype(np.float64) @ t.astype(np.float64)).astype(np.float32)
+    _project(idx, g["means"], g["cov"], g["opacities"], g["ext"], g["lmax"], g["sh"], d, feats_in, R, t, campos, fx, fy, cx,
+             cy, width, height, eps2d, lo_x, hi_x, lo_y, hi_y, data, box)
+    data, box = _gather(_depth_order(data, box), data, box)
+    rows, offsets = _bin(box, -(-width // TILE), -(-height // TILE))
+    out = np.zeros((height, width, nf + 2), np.float32)
+    _rasterize(rows, offsets, data, width, height, out)
+    alpha = out[..., nf + 1]
+    dep = out[..., nf] / np.maximum(alpha, np.float32(1e-10))
+    return out[..., :nf], dep, alpha
+
+
+def render(g: dict, viewmats, Ks, width: int, height: int, sh_degree: int | None = None, near: float = 0.01,
+           far: float = 1e10, features=None, extra=None):
+    """A batch of cameras, the same contract as `navcore.render.cpu.render` (torch tensors out)."""
+    import torch
+
+    deg = int(round(math.sqrt(g["sh"].shape[1]))) - 1 if sh_degree is None else int(sh_degree)
+    outs = [render_one(g, vm, K, width, height, deg, near, far, features=features, extra=extra)
+            for vm, K in zip(np.asarray(viewmats, np.float32), np.asarray(Ks, np.float32))]
+    rgb, dep, alp = (torch.from_numpy(np.stack([o[k] for o in outs])) for k in range(3))
+    return rgb, dep, alp
