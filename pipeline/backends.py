@@ -1,14 +1,73 @@
-"""Where tasks run: a Dask client on a LocalCluster, on an existing scheduler (address), or on
-batch-job workers (dask-jobqueue SLURM / PBS); and the loop that submits a run's tasks to it."""
+"""Where tasks run: a Dask client on a local cluster (CPU workers plus one worker per GPU), on an
+existing scheduler (address), or on batch-job workers (dask-jobqueue SLURM / PBS); and the loop
+that submits a run's tasks to it.
+
+Placement uses Dask worker resources: GPU workers advertise GPU=1 (and see only their own GPU,
+CUDA_VISIBLE_DEVICES), CPU workers CPU=<threads> (and see no GPU); every worker MEMORY=<GB>.
+With GPU workers present a stage declared `gpu` asks for GPU=1 and the others for CPU=1, so GPU
+stages run one per GPU and never on a CPU worker, and CPU stages fill the CPU workers; every
+task also asks for its stage's memory_gb (capped at a worker's memory).
+"""
 from __future__ import annotations
 
 import os
+import subprocess
 import time
+from dataclasses import dataclass
 
 from rich.console import Console
 
 from pipeline.catalog import Catalog
 from pipeline.tasks import run_task
+
+
+def visible_gpus() -> list[str]:
+    """The GPU ids this machine gives the run: CUDA_VISIBLE_DEVICES when set, else nvidia-smi's
+    list (no torch import: the client process stays light)."""
+    env = os.environ.get("CUDA_VISIBLE_DEVICES")
+    if env is not None:
+        return [d.strip() for d in env.split(",") if d.strip() and d.strip() != "-1"]
+    try:
+        out = subprocess.run(["nvidia-smi", "-L"], capture_output=True, text=True, timeout=20).stdout
+    except (OSError, subprocess.SubprocessError):
+        return []
+    return [str(i) for i, line in enumerate(ln for ln in out.splitlines() if ln.startswith("GPU "))]
+
+
+def memory_gb(limit) -> float:
+    """A Dask memory limit ('8GB', '512MiB', bytes) in GB."""
+    from dask.utils import parse_bytes
+
+    return parse_bytes(limit) / 1e9 if isinstance(limit, str) else float(limit) / 1e9
+
+
+@dataclass
+class Placement:
+    """What the cluster's workers advertise; `resources(stage)` is a task's request."""
+
+    gpu_workers: int = 0
+    worker_memory_gb: float | None = None
+
+    def resources(self, stage) -> dict | None:
+        req = {}
+        if self.gpu_workers:
+            req["GPU" if stage.gpu else "CPU"] = 1
+        if self.worker_memory_gb:
+            req["MEMORY"] = min(stage.memory_gb, self.worker_memory_gb)
+        return req or None
+
+
+class PinGPU:
+    """Worker plugin of GPU batch jobs: worker process k of a job (name suffix -k) sees only the
+    job's k-th GPU. Runs at worker start, before any task imports torch."""
+
+    name = "navarena-pin-gpu"
+
+    def setup(self, worker):
+        ids = [d for d in os.environ.get("CUDA_VISIBLE_DEVICES", "").split(",") if d]
+        k = str(worker.name).rsplit("-", 1)[-1]
+        if ids and k.isdigit():
+            os.environ["CUDA_VISIBLE_DEVICES"] = ids[int(k) % len(ids)]
 
 
 def jobqueue_cluster(ex):
@@ -17,12 +76,48 @@ def jobqueue_cluster(ex):
 
     jq = ex.jobqueue
     cls = {"slurm": dask_jobqueue.SLURMCluster, "pbs": dask_jobqueue.PBSCluster}[ex.kind]
-    return cls(cores=jq.cores, memory=jq.memory, processes=jq.processes, walltime=jq.walltime, queue=jq.queue,
-               account=jq.account, job_extra_directives=list(jq.job_extra_directives),
-               log_directory=jq.log_directory, job_name="navarena-worker")
+    processes, extra, directives = jq.processes, [], list(jq.job_extra_directives)
+    per_worker = memory_gb(jq.memory) / max(processes, 1)
+    if jq.gpus_per_job > 0:
+        processes = jq.gpus_per_job
+        per_worker = memory_gb(jq.memory) / processes
+        directives.append(f"--gres=gpu:{jq.gpus_per_job}" if ex.kind == "slurm" else f"-l ngpus={jq.gpus_per_job}")
+        extra = ["--resources", f"GPU=1,CPU=1,MEMORY={per_worker:.3f}"]
+    else:
+        extra = ["--resources", f"MEMORY={per_worker:.3f}"]
+    cluster = cls(cores=jq.cores, memory=jq.memory, processes=processes, walltime=jq.walltime, queue=jq.queue,
+                  account=jq.account, job_extra_directives=directives, worker_extra_args=extra,
+                  log_directory=jq.log_directory, job_name="navarena-worker")
+    return cluster, Placement(jq.gpus_per_job > 0, per_worker)
+
+
+def local_cluster(ex, gpus: list[str]):
+    """CPU workers (no GPU visible) plus one worker per GPU (pinned to it), as one SpecCluster."""
+    import psutil
+    from dask.distributed import Nanny, Scheduler, SpecCluster
+
+    if not ex.processes:
+        raise ValueError("executor.gpus needs worker processes (executor.processes=true): a thread "
+                         "cannot be pinned to its own GPU")
+    n = ex.n_workers + len(gpus)
+    mem = (psutil.virtual_memory().total / 1e9 / n) if ex.memory_limit == "auto" else memory_gb(ex.memory_limit)
+    workers = {}
+    for i in range(ex.n_workers):
+        workers[f"cpu-{i}"] = {"cls": Nanny, "options": {
+            "nthreads": ex.threads_per_worker, "memory_limit": f"{mem:.3f}GB", "silence_logs": 40,
+            "resources": {"CPU": ex.threads_per_worker, "MEMORY": mem},
+            "env": {"CUDA_VISIBLE_DEVICES": "", "NUMBA_NUM_THREADS": os.environ["NUMBA_NUM_THREADS"]}}}
+    for g in gpus:
+        workers[f"gpu-{g}"] = {"cls": Nanny, "options": {
+            "nthreads": 1, "memory_limit": f"{mem:.3f}GB", "silence_logs": 40,
+            "resources": {"GPU": 1, "MEMORY": mem},
+            "env": {"CUDA_VISIBLE_DEVICES": g, "NUMBA_NUM_THREADS": os.environ["NUMBA_NUM_THREADS"]}}}
+    scheduler = {"cls": Scheduler, "options": {"dashboard_address": ":0" if ex.dashboard else None}}
+    return SpecCluster(workers=workers, scheduler=scheduler, silence_logs=40), Placement(len(gpus), mem)
 
 
 def dask_client(ex):
+    """(client, cluster or None, Placement)."""
     import logging
 
     import dask
@@ -36,41 +131,59 @@ def dask_client(ex):
     if ex.kind == "address" or ex.address:
         if not ex.address:
             raise ValueError("executor.kind=address needs executor.address=tcp://host:port")
-        return Client(ex.address), None
+        return Client(ex.address), None, Placement(int(ex.gpus or 0))
     if ex.kind in ("slurm", "pbs"):
-        cluster = jobqueue_cluster(ex)
+        cluster, placement = jobqueue_cluster(ex)
         cluster.scale(jobs=ex.jobqueue.jobs)
-        return Client(cluster), cluster
+        client = Client(cluster)
+        if placement.gpu_workers:
+            client.register_plugin(PinGPU())
+        return client, cluster, placement
     if ex.kind != "local":
         raise ValueError(f"executor.kind must be local, address, slurm, pbs or sync, not {ex.kind!r}")
+    gpus = visible_gpus() if ex.gpus is None else [str(i) for i in range(int(ex.gpus))]
     # numba threads per worker: share the cores instead of oversubscribing them
     os.environ.setdefault("NUMBA_NUM_THREADS", str(max(1, (os.cpu_count() or 1) // max(ex.n_workers, 1))))
     # Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in its workers, which also freezes glibc's mmap
-    # threshold at 128 KiB: every large temporary (the CPU renderer's per-tile tensors) becomes a
-    # fresh mmap and page faults; a semantics scene took 6x longer in a worker than in a process
-    import dask
-
+    # threshold at 128 KiB: every large temporary becomes a fresh mmap and page faults (a
+    # semantics scene took 6x longer in a worker than in a process with the torch renderer)
     env = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
     env.pop("MALLOC_TRIM_THRESHOLD_", None)
     dask.config.set({"distributed.nanny.pre-spawn-environ": env})
+    if gpus:
+        cluster, placement = local_cluster(ex, gpus)
+        return Client(cluster), cluster, placement
     cluster = LocalCluster(n_workers=ex.n_workers, threads_per_worker=ex.threads_per_worker,
                            processes=ex.processes, memory_limit=ex.memory_limit,
                            dashboard_address=":0" if ex.dashboard else None, silence_logs=40)
-    return Client(cluster), cluster
+    return Client(cluster), cluster, Placement()
+
+
+def run_placed(*args) -> dict:
+    """run_task, its result saying where it ran (worker name, the GPU it was given)."""
+    from dask.distributed import get_worker
+
+    r = run_task(*args)
+    r["worker"] = str(get_worker().name)
+    gpu = os.environ.get("CUDA_VISIBLE_DEVICES")
+    if gpu:
+        r["gpu"] = gpu
+    return r
 
 
 def run_on_dask(cfg, catalog: Catalog, chain, record, console: Console) -> None:
     from dask.distributed import as_completed
 
-    client, cluster = dask_client(cfg.executor)
+    client, cluster, placement = dask_client(cfg.executor)
     try:
         if client.dashboard_link:
             console.print(f"Dask dashboard: {client.dashboard_link}")
         run_id = f"{os.getpid()}-{time.time_ns()}"
 
         def submit(st, scene, h, force, ups):
-            return client.submit(run_task, st.name, scene, cfg, catalog, h, force, *ups,
-                                 key=f"{st.name}-{scene.scene_id}-{h}-{run_id}", pure=False)
+            return client.submit(run_placed, st.name, scene, cfg, catalog, h, force, *ups,
+                                 key=f"{st.name}-{scene.scene_id}-{h}-{run_id}", pure=False,
+                                 resources=placement.resources(st))
         handles = chain(submit)
         what = {fut.key: (name, scene) for name, scene, fut in handles}
         for fut in as_completed([fut for _, _, fut in handles]):

@@ -66,6 +66,10 @@ class JobqueueConfig:
     """Extra #SBATCH / #PBS lines, e.g. ['--constraint=skylake']."""
     log_directory: str | None = None
     """Where the worker jobs write their logs."""
+    gpus_per_job: int = 0
+    """GPUs per worker job: > 0 requests them (SLURM --gres=gpu:N), starts one worker process per
+    GPU (overriding processes) and pins each worker to its own GPU; GPU stages go to these
+    workers only."""
 
 
 @dataclass
@@ -88,6 +92,12 @@ class ExecutorConfig:
     """tcp://host:port of an existing scheduler; setting it implies kind=address."""
     dashboard: bool = True
     """Start the Dask dashboard of a LocalCluster."""
+    gpus: int | None = None
+    """GPU workers of a local run, one per GPU, each pinned to its GPU (CUDA_VISIBLE_DEVICES):
+    None = one per GPU the machine has (nvidia-smi, or CUDA_VISIBLE_DEVICES when set), 0 = none.
+    With GPU workers the stages that declare a GPU go to them only, the others to the n_workers
+    CPU workers (which see no GPU). kind=address: the number of workers started with
+    `--resources GPU=1` (0 sends every task anywhere)."""
     jobqueue: JobqueueConfig = field(default_factory=JobqueueConfig)
 
 

@@ -39,6 +39,10 @@ class Stage:
             stage (dataset-level files); it must derive them from what is on disk, so that shards
             of one dataset agree.
         default: part of the default run (`stages` of the config); evaluate is not.
+        gpu: the stage uses a GPU when its worker has one (rendering, the CUDA voxelizer, SAM3);
+            with GPU workers in the cluster it runs on them only, one task per GPU at a time.
+        memory_gb: the stage's peak memory per scene at the default sizes (a Dask resource: a
+            worker runs at most as many tasks at once as its memory holds).
     """
 
     name: str
@@ -50,23 +54,25 @@ class Stage:
     inputs: Callable | None = None
     finalize: Callable | None = None
     default: bool = True
+    gpu: bool = False
+    memory_gb: float = 1.0
 
 
 STAGES: tuple[Stage, ...] = (
     Stage("synthesize", synthesize.run, (), ("synthetic",), only_synthetic=True),
     Stage("ingest", ingest.run, ("synthesize",), ("ingest",), version="2"),
-    Stage("voxelize", voxelize.run, ("ingest",), ("voxelize",), version="3"),
+    Stage("voxelize", voxelize.run, ("ingest",), ("voxelize",), version="3", gpu=True, memory_gb=3.0),
     Stage("align", align.run, ("voxelize",), ("align",), version="4"),
     Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="3",
           inputs=costmap.hashed_inputs),
-    Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment")),
+    Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), gpu=True, memory_gb=3.0),
     Stage("asset", asset.run, ("costmap", "semantics"), ("asset",), version="3"),
     Stage("episodes", episodes.run, ("costmap", "semantics"), ("episodes", "task", "planner", "embodiment"),
           version="2"),
-    Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",)),
+    Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",), gpu=True, memory_gb=2.0),
     Stage("export", export.run, ("episodes", "asset", "goal_images"), ("export",), finalize=export.finalize),
     Stage("evaluate", evaluate.run, ("episodes",), ("evaluate", "episodes", "task", "embodiment"),
-          finalize=evaluate.finalize, default=False),
+          finalize=evaluate.finalize, default=False, gpu=True, memory_gb=2.0),
 )
 DEFAULT_STAGES = [s.name for s in STAGES if s.default]
 BY_NAME = {s.name: s for s in STAGES}

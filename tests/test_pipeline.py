@@ -154,12 +154,41 @@ def test_batch_submission_scripts(project_root, make_cfg):
 
     cfg = make_cfg("/tmp/unused", "executor=slurm", "executor.jobqueue.cores=16", "executor.jobqueue.queue=gpu",
                    "executor.jobqueue.job_extra_directives=['--constraint=skylake']")
-    cluster = jobqueue_cluster(cfg.executor)
+    cluster, placement = jobqueue_cluster(cfg.executor)
     try:
         js = cluster.job_script()
     finally:
         cluster.close()
     assert "#SBATCH -p gpu" in js and "--constraint=skylake" in js and "#SBATCH --cpus-per-task=16" in js
+    assert placement.gpu_workers == 0 and "--resources MEMORY=16.000" in js  # 32 GB over 2 processes
+    # GPU jobs: the GPUs requested, one worker process per GPU, each advertising one
+    cfg = make_cfg("/tmp/unused", "executor=slurm", "executor.jobqueue.gpus_per_job=4")
+    cluster, placement = jobqueue_cluster(cfg.executor)
+    try:
+        js = cluster.job_script()
+    finally:
+        cluster.close()
+    assert "#SBATCH --gres=gpu:4" in js and "--nworkers 4" in js and "GPU=1,CPU=1,MEMORY=8.000" in js
+    assert placement.gpu_workers and placement.worker_memory_gb == 8.0
+
+
+def test_gpu_stages_go_to_gpu_workers_only(tmp_path, make_cfg):
+    """Two (pretend) GPUs on a CPU machine: each GPU worker sees only its own GPU, the stages that
+    declare a GPU run on those workers only, one at a time per GPU, and the others on the CPU
+    workers, which see no GPU."""
+    from pipeline.executor import execute
+    from pipeline.graph import BY_NAME
+
+    cfg = make_cfg(tmp_path / "data", "executor.kind=local", "executor.gpus=2", "executor.n_workers=1",
+                   "executor.dashboard=false", "stages=[voxelize,align,costmap]", "scenes.count=2")
+    summary = execute(cfg)
+    done = [r for r in summary["results"] if r["status"] in ("done", "n/a")]
+    assert not summary["failures"] and {r["stage"] for r in done} >= {"voxelize", "costmap"}
+    for r in done:
+        if BY_NAME[r["stage"]].gpu:
+            assert r["worker"] == f"gpu-{r['gpu']}" and r["gpu"] in ("0", "1")
+        else:
+            assert r["worker"] == "cpu-0" and "gpu" not in r
 
 
 @pytest.mark.parametrize("cmd", [["-m", "pipeline"], None])
@@ -330,3 +359,16 @@ def test_storage_measure_counts_a_hard_link_to_the_source_once(tmp_path):
     s = measure(tmp_path / "d")["scenes"][0]
     assert s["source_bytes"] == 1000
     assert s["store_and_asset_bytes"] == 500 + (scene / "ingest.json").stat().st_size
+
+
+def test_gpu_job_workers_are_pinned_to_their_own_gpu(monkeypatch):
+    """Worker k of a GPU batch job (dask names it <job>-k) keeps only the job's k-th GPU."""
+    import os
+    from types import SimpleNamespace
+
+    from pipeline.backends import PinGPU
+
+    for name, want in [("SLURMCluster-3-0", "4"), ("SLURMCluster-3-1", "6"), ("SLURMCluster-3-2", "4")]:
+        monkeypatch.setenv("CUDA_VISIBLE_DEVICES", "4,6")
+        PinGPU().setup(SimpleNamespace(name=name))
+        assert os.environ["CUDA_VISIBLE_DEVICES"] == want
