@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
 
-.PHONY: setup dataset test lint test-all bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: setup dataset test lint test-all test-slurm bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -74,10 +74,18 @@ bench-spatial-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.voxelize_gpu $(ARGS)
 
 # sharded array job on a batch cluster: make submit SHARDS=64 SCHEDULER=slurm ARGS="scenes=synthetic_large"
+# (SUBMIT_FLAGS: more options of pipeline.submit, e.g. "--wait --cpus 4 --mem 16G --queue cpu")
 SHARDS ?= 8
 SCHEDULER ?= slurm
+SUBMIT_FLAGS ?=
 submit: $(STAMP)
-	$(BIN)/python -m pipeline.submit --shards $(SHARDS) --scheduler $(SCHEDULER) -- $(ARGS)
+	$(BIN)/python -m pipeline.submit --shards $(SHARDS) --scheduler $(SCHEDULER) $(SUBMIT_FLAGS) -- $(ARGS)
+
+# the batch-scheduler tests: a one-node SLURM on this machine (scripts/slurm_localhost.sh, root),
+# then make submit (array job, shards, cancel and resubmit) and executor=slurm (dask-jobqueue)
+test-slurm: $(STAMP)
+	scripts/slurm_localhost.sh
+	$(BIN)/python -m pytest -q -m slurm tests/test_slurm.py $(ARGS)
 
 clean:
 	rm -rf data/_hydra data/_runs

@@ -1,12 +1,14 @@
 """Sharded batch submission: one array job, one pipeline run per shard.
 
-    python -m pipeline.submit --shards 64 --scheduler slurm [--dry-run] [--cpus 8] [--mem 32G]
+    python -m pipeline.submit --shards 64 --scheduler slurm [--dry-run] [--wait] [--cpus 8] [--mem 32G]
         [--time 04:00:00] [--queue cpu] -- scenes=synthetic_large costmap.embodiments=[stretch]
 
 Array task k runs ``python -m pipeline scenes.shard=k scenes.num_shards=N executor=local ...``
 (every n-th scene in scene-id order: disjoint and deterministic). Completion markers make the
 job safe to resubmit: finished (stage, scene) pairs are skipped, failed ones are retried.
-The script is written to data/_submit/ and handed to sbatch / qsub unless --dry-run.
+The script is written to <data_root>/_submit/ (data_root from the overrides, default data/) and
+handed to sbatch / qsub unless --dry-run; --wait blocks until the array job has ended and returns
+non-zero when a task failed (sbatch --wait / qsub -W block=true).
 """
 from __future__ import annotations
 
@@ -22,22 +24,24 @@ PROJECT_ROOT = Path(__file__).resolve().parent.parent
 
 
 def array_script(scheduler: str, shards: int, overrides: list[str], cpus: int, mem: str, walltime: str,
-                 queue: str | None, account: str | None, python: str, workdir: Path) -> str:
-    """The batch script of an array job over the shards."""
+                 queue: str | None, account: str | None, python: str, workdir: Path,
+                 logs: str = "data/_submit/logs") -> str:
+    """The batch script of an array job over the shards (logs: its log folder, relative to
+    workdir or absolute)."""
     if shards < 1:
         raise ValueError("--shards must be >= 1")
     over = " ".join(shlex.quote(o) for o in overrides)
     if scheduler == "slurm":
         head = ["#!/bin/bash", "#SBATCH --job-name=navarena", f"#SBATCH --array=0-{shards - 1}",
                 f"#SBATCH --cpus-per-task={cpus}", f"#SBATCH --mem={mem}", f"#SBATCH --time={walltime}",
-                "#SBATCH --output=data/_submit/logs/navarena-%A_%a.out"]
+                f"#SBATCH --output={logs}/navarena-%A_%a.out"]
         head += [f"#SBATCH --partition={queue}"] if queue else []
         head += [f"#SBATCH --account={account}"] if account else []
         index = "$SLURM_ARRAY_TASK_ID"
     elif scheduler == "pbs":
         head = ["#!/bin/bash", "#PBS -N navarena", f"#PBS -J 0-{shards - 1}",
                 f"#PBS -l select=1:ncpus={cpus}:mem={mem}", f"#PBS -l walltime={walltime}",
-                "#PBS -o data/_submit/logs/", "#PBS -j oe"]
+                f"#PBS -o {logs}/", "#PBS -j oe"]
         head += [f"#PBS -q {queue}"] if queue else []
         head += [f"#PBS -A {account}"] if account else []
         index = "$PBS_ARRAY_INDEX"
@@ -62,11 +66,13 @@ def main(argv=None) -> int:
     ap.add_argument("--queue")
     ap.add_argument("--account")
     ap.add_argument("--dry-run", action="store_true", help="write the script, do not submit it")
+    ap.add_argument("--wait", action="store_true", help="block until the job has ended (its exit status)")
     args = ap.parse_args(argv)
-    script = array_script(args.scheduler, args.shards, overrides, args.cpus, args.mem, args.time, args.queue,
-                          args.account, sys.executable, PROJECT_ROOT)
-    out = PROJECT_ROOT / "data" / "_submit"
+    root = Path(next((o.split("=", 1)[1] for o in overrides if o.startswith("data_root=")), "data"))
+    out = (root if root.is_absolute() else PROJECT_ROOT / root) / "_submit"
     (out / "logs").mkdir(parents=True, exist_ok=True)
+    script = array_script(args.scheduler, args.shards, overrides, args.cpus, args.mem, args.time, args.queue,
+                          args.account, sys.executable, PROJECT_ROOT, str(out / "logs"))
     path = out / f"navarena-{args.scheduler}-{dt.datetime.now():%Y%m%dT%H%M%S}.sh"
     path.write_text(script)
     print(f"wrote {path}")
@@ -76,7 +82,8 @@ def main(argv=None) -> int:
     if shutil.which(cmd) is None:
         print(f"{cmd} is not on PATH: submit {path} yourself", file=sys.stderr)
         return 2
-    return subprocess.run([cmd, str(path)], cwd=PROJECT_ROOT).returncode
+    wait = (["--wait"] if args.scheduler == "slurm" else ["-W", "block=true"]) if args.wait else []
+    return subprocess.run([cmd, *wait, str(path)], cwd=PROJECT_ROOT).returncode
 
 
 if __name__ == "__main__":

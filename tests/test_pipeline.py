@@ -1,5 +1,6 @@
 """The pipeline: outputs, markers, reruns, config changes, failures, determinism, Dask."""
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -223,6 +224,22 @@ def test_interrupted_write_leaves_nothing_trusted(tmp_path, monkeypatch, make_cf
             raise RuntimeError("killed")
     assert not final.exists() and not any(tmp_path.iterdir())  # no stray temporary either
 
+    # a SIGKILLed writer cannot clean up: its temporary goes at the next write of that output
+    # (on this host, once its process is gone); a live writer's temporary is left alone
+    import subprocess
+
+    from navcore.io.atomic import HOST
+
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    stale = tmp_path / f".tmp-out.zarr-{HOST}-{dead.pid}-x1"
+    live = tmp_path / f".tmp-out.zarr-{HOST}-{os.getpid()}-x2"
+    for p in (stale, live):
+        (p / "out.zarr").mkdir(parents=True)
+    with atomic_path(final) as tmp:
+        tmp.write_text("whole")
+    assert final.read_text() == "whole" and not stale.exists() and live.exists()
+
     cfg = make_cfg(tmp_path / "d", "stages=[voxelize]")
     execute(cfg)
     import dataclasses
@@ -363,7 +380,6 @@ def test_storage_measure_counts_a_hard_link_to_the_source_once(tmp_path):
 
 def test_gpu_job_workers_are_pinned_to_their_own_gpu(monkeypatch):
     """Worker k of a GPU batch job (dask names it <job>-k) keeps only the job's k-th GPU."""
-    import os
     from types import SimpleNamespace
 
     from pipeline.backends import PinGPU

@@ -1,15 +1,46 @@
 """Atomic outputs: write into a temporary sibling, then rename into place.
 
 A killed run leaves at most a ``.tmp-*`` sibling, never a half-written file or folder under
-the final name, so a rerun never trusts partial output.
+the final name, so a rerun never trusts partial output; the next write of the same output on the
+same host removes the leftovers of writers that are no longer alive (the temporary's name carries
+the writer's host and process id; a live writer's temporary is never touched).
 """
 from __future__ import annotations
 
 import contextlib
 import os
 import shutil
+import socket
 import tempfile
 from pathlib import Path
+
+HOST = socket.gethostname().replace("-", "_")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_temporaries(final: Path) -> list[Path]:
+    """Remove the ``.tmp-`` / ``.old-`` siblings of ``final`` left by dead writers on this host."""
+    removed = []
+    for p in final.parent.glob(f".tmp-{final.name}-*"):
+        parts = p.name[len(f".tmp-{final.name}-"):].split("-")
+        if len(parts) >= 3 and parts[0] == HOST and parts[1].isdigit() and not _alive(int(parts[1])):
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    for p in final.parent.glob(f".old-{final.name}-*"):
+        pid = p.name.rsplit("-", 1)[-1]
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
+            removed.append(p)
+    return removed
 
 
 @contextlib.contextmanager
@@ -22,7 +53,8 @@ def atomic_path(final: str | Path):
     """
     final = Path(final)
     final.parent.mkdir(parents=True, exist_ok=True)
-    tmp_dir = Path(tempfile.mkdtemp(prefix=f".tmp-{final.name}-", dir=final.parent))
+    remove_stale_temporaries(final)
+    tmp_dir = Path(tempfile.mkdtemp(prefix=f".tmp-{final.name}-{HOST}-{os.getpid()}-", dir=final.parent))
     tmp = tmp_dir / final.name
     try:
         yield tmp
