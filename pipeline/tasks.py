@@ -3,15 +3,28 @@ failures come back as results, so one bad scene cannot stop the run, and its dow
 are skipped with the reason."""
 from __future__ import annotations
 
-import json
 import time
 import traceback
 
 from pipeline.catalog import Catalog, SceneEntry
 from pipeline.graph import BY_NAME
-from pipeline.markers import is_done, write_marker
+from pipeline.markers import read_marker, write_marker
 
 FAILED = ("failed", "skipped")
+
+
+def current(stage_name: str, scene: SceneEntry, catalog: Catalog, config_hash: str, force: bool) -> dict | None:
+    """The result of a (stage, scene) that needs no work (n/a, or its marker current), else None.
+    Cheap (one small file read): the executor asks it before submitting, so that a finished
+    run resumes in seconds without sending thousands of no-op tasks through the scheduler."""
+    base = {"stage": stage_name, "scene_id": scene.scene_id, "scene": scene.name}
+    if BY_NAME[stage_name].only_synthetic and not scene.synthetic:
+        return {**base, "status": "n/a"}
+    marker = catalog.path("markers", scene, stage=stage_name)
+    m = None if force else read_marker(marker)
+    if m is not None and m.get("config_hash") == config_hash:
+        return {**base, "status": "cached", **notes(m.get("info", {}))}
+    return None
 
 
 def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_hash: str, force: bool,
@@ -22,11 +35,10 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
         if up["status"] in FAILED:
             return {**base, "status": "skipped", "error": f"upstream {up['stage']} {up['status']}"}
     stage = BY_NAME[stage_name]
-    if stage.only_synthetic and not scene.synthetic:
-        return {**base, "status": "n/a"}
+    done = current(stage_name, scene, catalog, config_hash, force)
+    if done is not None:
+        return done
     marker = catalog.path("markers", scene, stage=stage_name)
-    if not force and is_done(marker, config_hash):
-        return {**base, "status": "cached", **notes(json.loads(marker.read_text()).get("info", {}))}
     marker.unlink(missing_ok=True)  # outputs are about to change: the old marker must not vouch for them
     t0 = time.perf_counter()
     try:

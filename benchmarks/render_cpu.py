@@ -1,0 +1,91 @@
+"""The CPU renderer's frame rate on this machine, against the plain-PyTorch reference renderer in
+the same run: a 1 M-Gaussian synthetic scene and, when a data root with the real indoor scenes is
+given, each real scene (aligned), robot views at the LoCoBot camera (random free-space poses), one
+view per call, medians over the views.
+
+    python -m benchmarks.render_cpu [--real-root /tmp/real2] [--views 20] [--out data/08_reports]
+        -> render_cpu.json
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+SIZES = ((160, 120), (640, 480))
+
+
+def fps(renderer, vm, K, w, h) -> tuple[float, list[float]]:
+    renderer.render(vm[:1], K[:1], w, h)  # warm-up (compiled kernels loaded)
+    ts = []
+    for i in range(len(vm)):
+        t0 = time.perf_counter()
+        renderer.render(vm[i:i + 1], K[i:i + 1], w, h)
+        ts.append(time.perf_counter() - t0)
+    return 1.0 / float(np.median(ts)), ts
+
+
+def scene_fps(gs, poses, emb, ref_views: int) -> dict:
+    from navcore.render import Renderer
+    from navcore.render.camera import embodiment_camera
+
+    fast, ref = Renderer(gs, "cpu"), Renderer(gs, "torch")
+    out = {"n_gaussians": len(gs.means), "views": len(poses)}
+    for w, h in SIZES:
+        vm, K, _, _ = embodiment_camera(emb, poses, w, h)
+        f, ts = fps(fast, vm, K, w, h)
+        fr, _ = fps(ref, vm[:ref_views], K[:ref_views], w, h)
+        out[f"{w}x{h}"] = {"fps": f, "fps_p10": 1.0 / float(np.percentile(ts, 90)), "torch_reference_fps": fr,
+                           "speedup": f / fr}
+        print(w, h, out[f"{w}x{h}"], flush=True)
+    return out
+
+
+def free_poses(costmap, k: int, rng) -> np.ndarray:
+    iy, ix = np.nonzero(costmap.clearance >= costmap.radius + costmap.margin)
+    pick = rng.choice(len(ix), k, replace=False)
+    x = costmap.origin[0] + (ix[pick] + 0.5) * costmap.resolution
+    y = costmap.origin[1] + (iy[pick] + 0.5) * costmap.resolution
+    return np.stack([x, y, rng.uniform(-np.pi, np.pi, k)], 1)
+
+
+def main(argv=None) -> dict:
+    from benchmarks.render_gpu import canonical_scene, room_poses
+    from navcore.nav.embodiment import Embodiment
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--real-root", type=Path)
+    ap.add_argument("--views", type=int, default=20)
+    ap.add_argument("--ref-views", type=int, default=3)
+    ap.add_argument("--gaussians", type=int, default=1_000_000)
+    ap.add_argument("--out", default="data/08_reports")
+    args = ap.parse_args(argv)
+    emb, rng = Embodiment(), np.random.default_rng(0)
+    gs, rooms = canonical_scene(7, args.gaussians)
+    rep = {"host": platform.node(), "cpu_cores": os.cpu_count(), "scenes": {}}
+    rep["scenes"]["synthetic"] = scene_fps(gs, room_poses(rooms, args.views, rng), emb, args.ref_views)
+    if args.real_root:
+        from navcore.io.datasets import AlignedGaussianDataset, CostmapDataset, GaussianDataset
+
+        for ing in sorted(args.real_root.glob("01_scenes/*/ingest.json")):
+            d, meta = ing.parent, json.loads(ing.read_text())
+            gs, _ = AlignedGaussianDataset(d / "alignment.json", GaussianDataset(d / "gaussians.zarr")).load()
+            cm = CostmapDataset(args.real_root / "03_costmaps" / f"{meta['scene_id']}.zarr").load(emb.name)
+            rep["scenes"][meta["name"]] = scene_fps(gs, free_poses(cm, args.views, rng), emb, args.ref_views)
+    for w, h in SIZES:
+        key = f"{w}x{h}"
+        rep[f"cpu_fps_{w}"] = min(s[key]["fps"] for s in rep["scenes"].values() if s["n_gaussians"] >= 1_000_000)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "render_cpu.json").write_text(json.dumps(rep, indent=1))
+    print(json.dumps({k: v for k, v in rep.items() if k != "scenes"}, indent=1))
+    return rep
+
+
+if __name__ == "__main__":
+    main()
