@@ -114,6 +114,10 @@ class IngestConfig:
     lod_level: int | None = None
     """Level of detail of streamed SOG scenes (lod-meta.json; 0 = finest); null = the finest level
     whose files are all present."""
+    store: str = "auto"
+    """The canonical store: reference (the source's path and a checksum; the Gaussians are read
+    from the source by every stage: no second copy), copy (a compressed Zarr copy) or auto
+    (reference, except for formats slow to decode, SOG: ~6 s a read at 1.5 M Gaussians)."""
 
 
 @dataclass

@@ -1,4 +1,5 @@
 """Readers, writers and validation on the real sample files and on generated corrupt files."""
+import dataclasses
 import gzip
 import struct
 
@@ -332,3 +333,36 @@ def test_shared_sog_folder_and_spz_agree(real_indoor_dir):
     lim = 127.5 / (0.15 * 255)  # SPZ's colour range, step 1 / (0.15 * 255)
     assert np.abs(np.clip(a.sh[:, 0], -lim, lim) - b.sh[:, 0]).max() <= 0.5 / (0.15 * 255) + 1e-5
     assert np.percentile(1 - np.abs((a.quats * b.quats).sum(1)), 99) < 2e-3  # SPZ v2: 8-bit x, y, z
+
+
+def test_reference_store_reads_back_the_copy_and_refuses_a_changed_source(tmp_path, real_dir):
+    """A reference store (the source's recipe and a checksum, kilobytes) loads the same Gaussians
+    and extras as a full copy; a source edited or removed afterwards is a clear error."""
+    import shutil
+
+    from navcore.gaussians.validate import ValidationLimits, read_validated
+    from navcore.io.datasets import GaussianDataset
+
+    src = tmp_path / "scene.ply"
+    shutil.copy(real_dir / "inria_sh3_small.ply", src)
+    clean, _ = read_validated(src, "inria_ply", "s1", scale=0.5)
+    clean.extras["content"] = np.arange(len(clean)) % 3 == 0
+    ref, copy = GaussianDataset(tmp_path / "ref.zarr"), GaussianDataset(tmp_path / "copy.zarr")
+    ref.save(clean, {"scene_id": "s1"}, {"path": str(src), "format": "inria_ply", "level": None, "scale": 0.5,
+                                          "limits": dataclasses.asdict(ValidationLimits())})
+    copy.save(clean, {"scene_id": "s1"})
+    (a, aa), (b, ba) = ref.load(), copy.load()
+    for name in ("means", "quats", "log_scales", "opacity_logits", "sh"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert np.array_equal(a.extras["content"], b.extras["content"])
+    assert aa["store"] == "reference" and ba["store"] == "copy"
+    size = lambda p: sum(f.stat().st_size for f in p.rglob("*") if f.is_file())  # noqa: E731
+    assert size(ref.path) < 0.05 * size(copy.path)
+    data = bytearray(src.read_bytes())
+    data[-5] ^= 0x40  # one bit of the last Gaussian's payload
+    src.write_bytes(bytes(data))
+    with pytest.raises(SceneFormatError, match="changed since it was ingested"):
+        ref.load()
+    src.unlink()
+    with pytest.raises(SceneFormatError, match="is gone"):
+        ref.load()

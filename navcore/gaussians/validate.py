@@ -74,3 +74,22 @@ def sanitize(scene: GaussianScene, path, scene_id: str | None = None,
     report.renormalized_quats = int((np.abs(qk - 1.0) > 1e-3).sum())
     clean.quats = (clean.quats / qk[:, None].astype(np.float32)).astype(np.float32)
     return clean, report
+
+
+def read_validated(path, fmt: str | None, scene_id: str | None = None, level: int | None = None,
+                   scale: float = 1.0, limits: ValidationLimits | None = None):
+    """Read a source scene, bring it to metres (``scale``) and validate it: (clean scene, report).
+    The one definition of a scene's canonical Gaussians, used by ingest and by a store that refers
+    to its source instead of copying it."""
+    from navcore.gaussians.formats import read_gaussians
+
+    try:
+        raw = read_gaussians(path, fmt, level=level)
+    except SceneFormatError as e:
+        raise SceneFormatError(e.path, e.problem, scene_id) from None
+    if scale != 1.0:  # the source's units -> metres
+        if not scale > 0:
+            raise ValueError(f"ingest.scale={scale} must be positive")
+        raw.means *= np.float32(scale)
+        raw.log_scales += np.float32(np.log(scale))
+    return sanitize(raw, path, scene_id, limits)

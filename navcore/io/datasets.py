@@ -135,11 +135,12 @@ class GaussianDataset(Dataset):
 
         return read_scene_zarr(self.path)
 
-    def save(self, scene, attrs: dict | None = None) -> None:
+    def save(self, scene, attrs: dict | None = None, source: dict | None = None) -> None:
+        """source: store a reference to it instead of a copy (navcore.gaussians.store)."""
         from navcore.gaussians.store import write_scene_zarr
 
         with atomic_path(self.path) as tmp:
-            write_scene_zarr(tmp, scene, attrs)
+            write_scene_zarr(tmp, scene, attrs, source)
 
 
 class AlignedGaussianDataset(Dataset):

@@ -1,14 +1,18 @@
 """Stage `ingest`: read a source scene in any supported format, validate it, store it canonically
-(Zarr) with a report of what was dropped and why."""
+(Zarr: a reference to the source or a copy, ingest.store) with a report of what was dropped and
+why."""
 from __future__ import annotations
 
-import numpy as np
+import dataclasses
+
 from omegaconf import OmegaConf
 
 from navcore.gaussians.content import CONTENT_KEY, content_mask
-from navcore.gaussians.errors import SceneFormatError
-from navcore.gaussians.formats import read_gaussians
-from navcore.gaussians.validate import sanitize
+from navcore.gaussians.validate import read_validated
+
+# formats whose decoding costs seconds a read (SOG: WebP images): copied under store=auto, since
+# every later stage reads the scene again
+SLOW_TO_DECODE = ("sog",)
 
 
 def source_path(scene, catalog):
@@ -20,23 +24,18 @@ def source_path(scene, catalog):
 
 def run(scene, cfg, catalog) -> dict:
     path, fmt = source_path(scene, catalog)
-    try:
-        raw = read_gaussians(path, fmt, level=cfg.ingest.lod_level)
-    except SceneFormatError as e:
-        raise SceneFormatError(e.path, e.problem, scene.scene_id) from None
     icfg = OmegaConf.to_object(cfg.ingest)
-    limits = icfg.limits
-    if icfg.scale != 1.0:  # the source's units -> metres
-        if not icfg.scale > 0:
-            raise ValueError(f"ingest.scale={icfg.scale} must be positive")
-        raw.means *= icfg.scale
-        raw.log_scales += np.float32(np.log(icfg.scale))
-    clean, report = sanitize(raw, path, scene.scene_id, limits)
+    if icfg.store not in ("auto", "reference", "copy"):
+        raise ValueError(f"ingest.store must be auto, reference or copy, not {icfg.store!r}")
+    clean, report = read_validated(path, fmt, scene.scene_id, icfg.lod_level, icfg.scale, icfg.limits)
     # floaters stay in the renderable model; the mask keeps them out of grids and maps
     mask, content = content_mask(clean.means, icfg.content)
     clean.extras[CONTENT_KEY] = mask
     out = catalog.dataset("scene", scene)
-    out.save(clean, {"scene_id": scene.scene_id, "source": str(path), "format": fmt})
+    ref = icfg.store == "reference" or (icfg.store == "auto" and fmt not in SLOW_TO_DECODE)
+    source = {"path": str(path), "format": fmt, "level": icfg.lod_level, "scale": icfg.scale,
+              "limits": dataclasses.asdict(icfg.limits)} if ref else None
+    out.save(clean, {"scene_id": scene.scene_id, "source": str(path), "format": fmt}, source)
     rep = {"scene_id": scene.scene_id, "name": scene.name, "group": scene.group, "source": str(path),
            "format": fmt, "scale": icfg.scale, "validation": report.as_dict(), "content": content}
     catalog.dataset("ingest_report", scene).save(rep)
