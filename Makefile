@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
 
-.PHONY: setup dataset test lint test-all test-slurm bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: setup dataset test lint test-all test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -69,6 +69,24 @@ eval: $(STAMP)
 # render-based costmap check, and the realistic synthetic scenes against the mesh
 bench-real: $(STAMP)
 	$(BIN)/python -m benchmarks.real $(ARGS)
+
+# issue 13's proof (about two hours on two cores): storage of the default and real datasets, the
+# release cost (one-core sample runs of a real and a synthetic 1.5 M-Gaussian scene at 1/10 of the
+# release density; GPU stage times from release_gpu.json, written on a CUDA machine by
+# `python -m benchmarks.release_gpu`), the 2,000-scene simulation, the SLURM tests, the CPU renderer
+COST = executor=sync goal_images.enabled=true task.pointnav.episodes_per_scene=400 \
+       task.imagenav.episodes_per_scene=400 task.objectnav.episodes_per_scene=280
+ONE_CORE = NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 SOURCE_DATE_EPOCH=1700000000
+bench-scale: $(STAMP)
+	test -f data/_runs/latest.json || $(BIN)/python -m pipeline
+	$(BIN)/python -m pipeline scenes=real_indoor data_root=data/real_indoor
+	$(ONE_CORE) $(BIN)/python -m pipeline data_root=data/cost_real scenes=real_indoor scenes.limit=1 $(COST)
+	$(ONE_CORE) $(BIN)/python -m pipeline data_root=data/cost_synthetic scenes.count=1 scenes.num_gaussians=1500000 $(COST)
+	$(BIN)/python -m benchmarks.bench_scale cost data/cost_real data/cost_synthetic
+	$(BIN)/python -m benchmarks.render_cpu --real-root data/real_indoor
+	$(BIN)/python -m benchmarks.bench_scale sim --root data/sim
+	$(BIN)/python -m benchmarks.bench_scale slurm
+	$(BIN)/python -m benchmarks.bench_scale report --data data --real-root data/real_indoor
 
 bench-spatial-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.voxelize_gpu $(ARGS)
