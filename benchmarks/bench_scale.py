@@ -114,16 +114,21 @@ def sample_of(root: Path) -> dict:
 
     summary = json.loads((root / "_runs" / "latest.json").read_text())
     sec = {r["stage"]: r.get("duration_s") or 0.0 for r in summary["results"] if r["scene_id"] != "*"}
+    if any(r["status"] == "cached" for r in summary["results"]):
+        raise SystemExit(f"{root}: the last run reused stages; a cost sample must compute every stage")
     import pyarrow.parquet as pq
 
     eps = {p.parent.parent.name.split("=", 1)[1]: pq.read_metadata(p).num_rows
            for p in (root / "05_episodes").glob("task=*/scene_id=*/part-0.parquet")}
     sem = json.loads(next((root / "_markers" / "semantics").glob("*.json")).read_text())["info"]
+    cm = json.loads(next((root / "_markers" / "costmap").glob("*.json")).read_text())["info"]
+    free_m2 = max(e["free_area_m2"] for e in cm["embodiments"].values())
     ing = json.loads(next((root / "01_scenes").glob("*/ingest.json")).read_text())
     st = measure(root)
     return {"name": ing["name"], "gaussians": ing["validation"]["n_kept"], "seconds": sec, "episodes": eps,
             "failures": [f"{r['stage']}: {r.get('error')}" for r in summary["failures"]],
             "semantics_views": sem.get("views", 0), "semantics_renderer": sem.get("renderer"),
+            "free_area_m2": free_m2,
             "bytes_scene": st["scenes"][0]["store_and_asset_bytes"] + st["scenes"][0]["maps_bytes"],
             "source_bytes": st["scenes"][0]["source_bytes"], "bytes_per_episode": st["bytes_per_episode"]}
 
@@ -144,7 +149,9 @@ def extrapolate(sample: dict, gpu: dict | None, objectnav_like: str = "pointnav"
     out = {"per_scene_cpu_only_s": cpu, "release_core_hours_cpu_only": sum(cpu.values()) * RELEASE_SCENES / 3600}
     if gpu:
         g = gpu["stages"]
-        views = sample["semantics_views"]
+        # a scene the sample could not segment (a real one without labels: SAM3 would run) is
+        # costed with the free-space covering poses: one a square metre, 8 headings (the defaults)
+        views = sample["semantics_views"] or int(sample["free_area_m2"] * 8)
         gpu_s = {"voxelize": g["voxelize_s"], "goal_images": g["goal_image_s"] * per_scene_eps["imagenav"],
                  "semantics": views * (g["semantics_view_s"] + 1.0 / SAM3_FPS_H100)}
         cpu_rest = {k: v for k, v in cpu.items() if k not in GPU_STAGES}

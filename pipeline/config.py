@@ -124,8 +124,9 @@ class IngestConfig:
 class AssetConfig:
     """NavArena V1 asset export."""
 
-    write_compressed_splat: bool = True
-    """Also write compressed.splat (32 bytes a Gaussian)."""
+    write_compressed_splat: bool = False
+    """Also write compressed.splat (optional in V1; 32 bytes a Gaussian, 0.47x an SH-0 INRIA PLY: a
+    second copy of the aligned model, so off by default)."""
     write_source_ply: bool = True
     """Write source.ply (required by the V1 asset): a hard link to the original when it is a local
     INRIA binary PLY (no second copy), else the ingested scene written in that layout."""

@@ -26,7 +26,7 @@ def statuses(summary):
 
 
 def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
-    cfg = make_cfg(tmp_path)
+    cfg = make_cfg(tmp_path, "asset.write_compressed_splat=true")
     s1 = execute(cfg)
     assert set(statuses(s1).values()) == {"done"} and not s1["failures"]
     sid = s1["results"][0]["scene_id"]
