@@ -23,6 +23,8 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+from benchmarks import write_report
+
 PROJECT = Path(__file__).resolve().parent.parent
 # tiny procedural scenes: one small room, 20 k Gaussians, 6 episodes, semantics off, coarser
 # obstacle and support grids (the defaults' 5 mm obstacle grid dominates a tiny scene's time)
@@ -317,10 +319,7 @@ def markdown(r: dict) -> str:
 
 
 def write(out, name: str, rep: dict) -> None:
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / name).write_text(json.dumps(rep, indent=1, default=str))
-    print(json.dumps({k: v for k, v in rep.items() if not isinstance(v, (dict, list))}, indent=1))
+    write_report(out, name, rep, omit=[k for k, v in rep.items() if isinstance(v, (dict, list))])
 
 
 def main(argv=None) -> int:

@@ -16,7 +16,6 @@ import json
 import os
 import platform
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -86,6 +85,7 @@ def gpu_stages(gs, rooms, emb, rng) -> dict:
 def main(argv=None) -> dict:
     import torch
 
+    from benchmarks import write_report
     from benchmarks.render_gpu import canonical_scene
     from navcore.nav.embodiment import Embodiment
 
@@ -105,9 +105,7 @@ def main(argv=None) -> dict:
     gs, rooms = canonical_scene(8, args.release_gaussians)
     rep["stages"] = gpu_stages(gs, rooms, emb, rng)
     print(json.dumps(rep["stages"], indent=1), flush=True)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "release_gpu.json").write_text(json.dumps(rep, indent=1))
+    write_report(args.out, "release_gpu.json", rep, omit=("agreement", "stages"))
     return rep
 
 

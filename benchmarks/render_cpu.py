@@ -55,6 +55,7 @@ def free_poses(costmap, k: int, rng) -> np.ndarray:
 
 
 def main(argv=None) -> dict:
+    from benchmarks import write_report
     from benchmarks.render_gpu import canonical_scene, room_poses
     from navcore.nav.embodiment import Embodiment
 
@@ -80,10 +81,7 @@ def main(argv=None) -> dict:
     for w, h in SIZES:
         key = f"{w}x{h}"
         rep[f"cpu_fps_{w}"] = min(s[key]["fps"] for s in rep["scenes"].values() if s["n_gaussians"] >= 1_000_000)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "render_cpu.json").write_text(json.dumps(rep, indent=1))
-    print(json.dumps({k: v for k, v in rep.items() if k != "scenes"}, indent=1))
+    write_report(args.out, "render_cpu.json", rep, omit=("scenes",))
     return rep
 
 

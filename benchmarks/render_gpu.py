@@ -12,15 +12,14 @@ gsplat's, and the median / mean absolute difference of expected depth over pixel
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import platform
 import time
-from pathlib import Path
 
 import numpy as np
 import torch
 
+from benchmarks import write_report
 from navcore.nav.embodiment import Embodiment
 from navcore.render import Renderer
 from navcore.render.camera import embodiment_camera
@@ -94,10 +93,7 @@ def main(argv=None) -> dict:
               "depth_mean_abs_m_max": max(v["depth_mean_abs_m"] for v in views),
               "gsplat_raw_fps": fps, "gsplat_fps_batch": args.fps_batch, "gsplat_fps_gaussians": len(gs.means),
               "per_view": views}
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "render_gpu.json").write_text(json.dumps(result, indent=1))
-    print(json.dumps({k: v for k, v in result.items() if k != "per_view"}, indent=1))
+    write_report(args.out, "render_gpu.json", result, omit=("per_view",))
     return result
 
 

@@ -76,19 +76,17 @@ def jobqueue_cluster(ex):
 
     jq = ex.jobqueue
     cls = {"slurm": dask_jobqueue.SLURMCluster, "pbs": dask_jobqueue.PBSCluster}[ex.kind]
-    processes, extra, directives = jq.processes, [], list(jq.job_extra_directives)
+    gpus = jq.gpus_per_job > 0
+    processes = jq.gpus_per_job if gpus else jq.processes  # one worker process per GPU
     per_worker = memory_gb(jq.memory) / max(processes, 1)
-    if jq.gpus_per_job > 0:
-        processes = jq.gpus_per_job
-        per_worker = memory_gb(jq.memory) / processes
+    directives = list(jq.job_extra_directives)
+    if gpus:
         directives.append(f"--gres=gpu:{jq.gpus_per_job}" if ex.kind == "slurm" else f"-l ngpus={jq.gpus_per_job}")
-        extra = ["--resources", f"GPU=1,CPU=1,MEMORY={per_worker:.3f}"]
-    else:
-        extra = ["--resources", f"MEMORY={per_worker:.3f}"]
+    extra = ["--resources", ("GPU=1,CPU=1," if gpus else "") + f"MEMORY={per_worker:.3f}"]
     cluster = cls(cores=jq.cores, memory=jq.memory, processes=processes, walltime=jq.walltime, queue=jq.queue,
                   account=jq.account, job_extra_directives=directives, worker_extra_args=extra,
                   log_directory=jq.log_directory, job_name="navarena-worker")
-    return cluster, Placement(jq.gpus_per_job > 0, per_worker)
+    return cluster, Placement(int(gpus), per_worker)
 
 
 def local_cluster(ex, gpus: list[str]):

@@ -153,22 +153,19 @@ def test_batch_submission_scripts(project_root, make_cfg):
     pytest.importorskip("dask_jobqueue")
     from pipeline.backends import jobqueue_cluster
 
-    cfg = make_cfg("/tmp/unused", "executor=slurm", "executor.jobqueue.cores=16", "executor.jobqueue.queue=gpu",
-                   "executor.jobqueue.job_extra_directives=['--constraint=skylake']")
-    cluster, placement = jobqueue_cluster(cfg.executor)
-    try:
-        js = cluster.job_script()
-    finally:
-        cluster.close()
+    def job_script(*overrides):
+        cluster, placement = jobqueue_cluster(make_cfg("/tmp/unused", "executor=slurm", *overrides).executor)
+        try:
+            return cluster.job_script(), placement
+        finally:
+            cluster.close()
+
+    js, placement = job_script("executor.jobqueue.cores=16", "executor.jobqueue.queue=gpu",
+                               "executor.jobqueue.job_extra_directives=['--constraint=skylake']")
     assert "#SBATCH -p gpu" in js and "--constraint=skylake" in js and "#SBATCH --cpus-per-task=16" in js
     assert placement.gpu_workers == 0 and "--resources MEMORY=16.000" in js  # 32 GB over 2 processes
     # GPU jobs: the GPUs requested, one worker process per GPU, each advertising one
-    cfg = make_cfg("/tmp/unused", "executor=slurm", "executor.jobqueue.gpus_per_job=4")
-    cluster, placement = jobqueue_cluster(cfg.executor)
-    try:
-        js = cluster.job_script()
-    finally:
-        cluster.close()
+    js, placement = job_script("executor.jobqueue.gpus_per_job=4")
     assert "#SBATCH --gres=gpu:4" in js and "--nworkers 4" in js and "GPU=1,CPU=1,MEMORY=8.000" in js
     assert placement.gpu_workers and placement.worker_memory_gb == 8.0
 
