@@ -148,6 +148,40 @@ def test_ompl_expert_is_valid_deterministic_and_near_the_geodesic(room_with_door
         ScenePlanner(cm, PlannerConfig(name="nope"))
 
 
+def test_geodesic_expert_is_taut_valid_and_falls_back_to_ompl(room_with_door):
+    cm = room_with_door
+    g = NavGraph(cm, ~cm.occupancy)
+    a, b = cm.cell_centers(np.array([cell_of(cm, 1.0, 0.5), cell_of(cm, 3.0, 0.5)]))
+    f = g.field(cell_of(cm, 3.0, 0.5)[None])
+    seed = f.path_xy(cell_of(cm, 1.0, 0.5))
+    geo = f.at_cells(cell_of(cm, 1.0, 0.5)[None])[0]
+    seed_ompl(7)
+    planner = ScenePlanner(cm, PlannerConfig(name="geodesic"))
+    p = planner.plan((a[0], a[1], 0.0), [(b[0], b[1], 0.0)], geo, seed)
+    assert planner.fallbacks == 0 and np.allclose(p[0], a) and np.allclose(p[-1], b)
+    assert cm.are_motions_valid(np.concatenate([p[:-1], p[1:]], 1)).all()
+    # the same exact continuous shortest path as the geodesic test: tangent, arc over the wall's
+    # top, tangent (here between the two cell centres)
+    c = np.array([2.025, 1.975])
+    da, db = np.hypot(*(a - c)), np.hypot(*(b - c))
+    ta, tb = math.atan2(*(a - c)[::-1]), math.atan2(*(b - c)[::-1])
+    arc = 2 * math.pi - (tb - ta) - math.acos(cm.radius / da) - math.acos(cm.radius / db)
+    exact = math.sqrt(da**2 - cm.radius**2) + math.sqrt(db**2 - cm.radius**2) + cm.radius * arc
+    length = np.hypot(*np.diff(p, axis=0).T).sum()
+    assert exact * (1 - 1e-3) <= length <= min(geo, exact * 1.005)  # tauter than the grid's path
+    # in line of sight the path is the straight segment
+    c1, c2 = cm.cell_centers(np.array([cell_of(cm, 0.5, 0.5), cell_of(cm, 1.5, 2.5)]))
+    straight = g.field(cell_of(cm, 1.5, 2.5)[None]).path_xy(cell_of(cm, 0.5, 0.5))
+    assert np.array_equal(planner.plan((*c1, 0.0), [(*c2, 0.0)], None, straight), np.array([c1, c2]))
+    # a seed through the wall is not trusted: OMPL (the fallback) plans, and says so
+    through = np.array([a, b])
+    q = planner.plan((a[0], a[1], 0.0), [(b[0], b[1], 0.0)], geo, through)
+    assert planner.fallbacks == 1 and q is not None and np.allclose(q[-1], b)
+    assert cm.are_motions_valid(np.concatenate([q[:-1], q[1:]], 1)).all()
+    with pytest.raises(ValueError, match="fallback must be an OMPL planner"):
+        ScenePlanner(cm, PlannerConfig(name="geodesic", fallback="geodesic"))
+
+
 def test_discrete_expert_reaches_the_goal_through_the_door(room_with_door):
     cm = room_with_door
     g = NavGraph(cm, ~cm.occupancy)

@@ -7,6 +7,8 @@ bilinear patch the segment's F is a quadratic in t, whose minimum is taken analy
 """
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
@@ -130,3 +132,55 @@ states_valid = numba.njit(cache=True, parallel=True)(_states_valid)
 states_valid_serial = numba.njit(cache=True)(_states_valid)
 motions_valid = numba.njit(cache=True, parallel=True)(_motions_valid)
 motions_valid_serial = numba.njit(cache=True)(_motions_valid)
+
+
+@numba.njit(cache=True)
+def taut_path(f, ox, oy, inv_res, thr, xy, step):
+    """Shorten a valid polyline into a taut one (string pulling).
+
+    The polyline [M, 2] (metres) is resampled at most `step` apart along its segments; from each
+    kept point the path jumps to the farthest resampled point ahead that it sees by a valid
+    straight motion (scanning forward to the first that it does not), so corners slide up to the
+    obstacles while every kept segment is a checked valid motion (a start that sees the end
+    directly gives the straight segment). First and last points are kept.
+    Returns [K, 2] (K >= 2 unless M < 2).
+    """
+    m = xy.shape[0]
+    if m < 2:
+        return xy.copy()
+    if segment_clear(f, (xy[0, 0] - ox) * inv_res - 0.5, (xy[0, 1] - oy) * inv_res - 0.5,
+                     (xy[m - 1, 0] - ox) * inv_res - 0.5, (xy[m - 1, 1] - oy) * inv_res - 0.5, thr):
+        out = np.empty((2, 2))  # in line of sight: the straight segment
+        out[0] = xy[0]
+        out[1] = xy[m - 1]
+        return out
+    counts = np.empty(m - 1, np.int64)
+    total = 1
+    for i in range(m - 1):
+        counts[i] = max(1, int(math.ceil(math.hypot(xy[i + 1, 0] - xy[i, 0], xy[i + 1, 1] - xy[i, 1]) / step)))
+        total += counts[i]
+    dense = np.empty((total, 2))
+    k = 0
+    for i in range(m - 1):
+        for s in range(counts[i]):
+            t = s / counts[i]
+            dense[k, 0] = xy[i, 0] + t * (xy[i + 1, 0] - xy[i, 0])
+            dense[k, 1] = xy[i, 1] + t * (xy[i + 1, 1] - xy[i, 1])
+            k += 1
+    dense[k] = xy[m - 1]
+    u = (dense[:, 0] - ox) * inv_res - 0.5
+    v = (dense[:, 1] - oy) * inv_res - 0.5
+    out = np.empty((total, 2))
+    out[0] = dense[0]
+    n = 1
+    i = 0
+    while i < total - 1:
+        best = i + 1
+        j = i + 2
+        while j < total and segment_clear(f, u[i], v[i], u[j], v[j], thr):
+            best = j
+            j += 1
+        out[n] = dense[best]
+        n += 1
+        i = best
+    return out[:n]

@@ -80,6 +80,14 @@ class Costmap:
         fn = K.motions_valid if len(seg) >= PARALLEL_BATCH else K.motions_valid_serial
         return fn(self._f, self._ox, self._oy, self._inv, self._thr, seg)
 
+    def taut_path(self, xy: np.ndarray, step: float, slack: float = 1e-3) -> np.ndarray:
+        """[M, 2] valid polyline (metres) -> [K, 2] a shorter one through the same corridor: its
+        points resampled `step` apart, then string-pulled by straight motions valid with `slack`
+        metres to spare (a taut path touches the obstacles; the slack keeps poses rounded to
+        float32 valid), see collision.taut_path. The first and last points stay."""
+        xy = np.ascontiguousarray(np.asarray(xy, dtype=np.float64)[:, :2])
+        return K.taut_path(self._f, self._ox, self._oy, self._inv, self._thr + slack, xy, float(step))
+
     def clearance_at(self, xy: np.ndarray) -> np.ndarray:
         """Interpolated clearance (metres; negative outside the supported region) at [N, 2] points."""
         return K.clearance_at(self._f, self._ox, self._oy, self._inv, np.ascontiguousarray(np.asarray(xy, float)[:, :2]))

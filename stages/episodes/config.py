@@ -61,11 +61,14 @@ class DifficultyConfig:
 
 @dataclass
 class PlannerConfig:
-    """The OMPL expert planner (conf/planner/{key}.yaml)."""
+    """The expert planner (conf/planner/{key}.yaml)."""
 
-    name: str = "rrtconnect"
-    """Registry key: rrtconnect (feasible, fast), rrtstar, informed_rrtstar, bitstar (asymptotically
-    optimal)."""
+    name: str = "geodesic"
+    """Registry key: geodesic (the episode's grid geodesic made taut, OMPL `fallback` when that
+    fails), or an OMPL planner for every episode: rrtconnect (feasible, fast), rrtstar,
+    informed_rrtstar, bitstar (asymptotically optimal)."""
+    fallback: str = "rrtconnect"
+    """geodesic: the OMPL planner of an episode whose taut geodesic fails the motion test."""
     max_iterations: int = 20000
     """Termination: planner loop iterations per query (deterministic, unlike a time budget)."""
     range: float = 0.0
@@ -75,8 +78,8 @@ class PlannerConfig:
     simplify: bool = True
     """Shorten the path with OMPL's PathSimplifier (vertex reduction, rope shortcutting)."""
     resample_step: float = 0.1
-    """Simplification: the shortened path is resampled at this spacing and shortened again, so that
-    its corners can move up to the obstacles, metres."""
+    """Shortening (geodesic's string pulling, OMPL's second shortcut pass): the path is resampled at
+    this spacing before shortcuts, so that its corners can move up to the obstacles, metres."""
     attempts: int = 3
     """Plan up to this many times while the path is longer than retry_ratio x the geodesic; keep
     the shortest (a feasible planner may pick a long way round an obstacle)."""

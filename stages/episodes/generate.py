@@ -80,6 +80,7 @@ class TaskResult:
     wall_s: float
     requested: int
     geodesic_from_expert: int = 0
+    expert_fallbacks: int = 0
 
 
 class EpisodeGenerator:
@@ -168,11 +169,12 @@ class EpisodeGenerator:
         if cm.is_motion_valid(start_xy[0], start_xy[1], goal_xy[0], goal_xy[1]):
             geo = min(geo, euclid)  # in line of sight the geodesic is the straight line
         best = None
+        seed_path = cm.cell_centers(path_cells)
         for _ in range(max(1, self.planner.cfg.attempts)):
-            path = self.planner.plan((start_xy[0], start_xy[1], start_yaw), goal_poses, geo)
+            path = self.planner.plan((start_xy[0], start_xy[1], start_yaw), goal_poses, geo, seed_path)
             if path is None:
                 continue
-            length = float(np.hypot(*np.diff(path[:, :2], axis=0).T).sum())
+            length = float(np.hypot(*np.diff(path, axis=0).T).sum())
             if best is None or length < best[1]:
                 best = (path, length)
             if length <= geo * self.planner.cfg.retry_ratio:
@@ -182,7 +184,7 @@ class EpisodeGenerator:
             return None
         path, length = best
         final_yaw = goal_yaw if goal.kind in ("image", "object") else None
-        ro = as_stored(rollout(path[:, :2], start_yaw, final_yaw, self.limits, self.ecfg.dt))
+        ro = as_stored(rollout(path, start_yaw, final_yaw, self.limits, self.ecfg.dt))
         # success-region centres: the goal, or every instance of the ObjectNav category
         centres = np.ascontiguousarray(
             [v["centre"] for v in goal.instances] if goal.kind == "object" else goal.xy[None], np.float64)
@@ -340,7 +342,7 @@ class EpisodeGenerator:
             counters[split] += 1
         traj_cols = _trajectory_columns(rows, trajs, self.ecfg.dt)
         return TaskResult(rows, traj_cols, self.rejections, time.process_time() - c0, time.perf_counter() - t0,
-                          n_req, from_expert)
+                          n_req, from_expert, self.planner.fallbacks)
 
 
 def as_stored(ro: dict) -> dict:

@@ -1,6 +1,14 @@
-"""Expert planning in SE(2) with OMPL on a costmap.
+"""Expert planning in SE(2) on a costmap: the scene's exact grid geodesic made taut, with OMPL's
+planners as the fallback (or, by key, as the planner).
 
-The state validity checker and the motion validator are the costmap's own exact disk tests (one
+Key `geodesic` (the default): every episode already has the shortest path of the any-angle grid
+graph from its start to its goal (the Dijkstra field its geodesic distance comes from); it is
+resampled and string-pulled by the costmap's exact motion test (collision.taut_path, compiled),
+which gives a path no longer than the geodesic in well under a millisecond, with no Python call
+per check. Should that path fail the motion test anyway, the episode is planned by OMPL with the
+`fallback` planner. The OMPL keys plan every episode with OMPL from scratch.
+
+For OMPL, the state validity checker and the motion validator are the costmap's own exact disk tests (one
 call per edge instead of OMPL's sampled checks along it). Termination is by iteration count, and
 OMPL's random generator is reseeded per scene, so the same inputs give the same paths whatever
 machine or worker runs them. Planners are chosen by registry key (config group `planner`).
@@ -23,6 +31,7 @@ YAW_WEIGHT = 0.01
 
 
 PLANNERS = Registry("planner", {
+    "geodesic": "stages.episodes.planner:GEODESIC",
     "rrtconnect": "ompl.geometric:RRTConnect",
     "rrtstar": "ompl.geometric:RRTstar",
     "informed_rrtstar": "ompl.geometric:InformedRRTstar",
@@ -31,6 +40,8 @@ PLANNERS = Registry("planner", {
 """OMPL planners by key. Not registered, see design.md: AORRTC (crashes in these bindings) and
 PRM* (its solve() checks for solutions on a second thread, which deadlocks on the Python validity
 callback)."""
+GEODESIC = "taut grid geodesic, OMPL fallback"
+"""The `geodesic` key's registry entry (it names no OMPL class; ScenePlanner handles it)."""
 ASYMPTOTICALLY_OPTIMAL = frozenset({"rrtstar", "informed_rrtstar", "bitstar"})
 
 
@@ -67,10 +78,16 @@ class ScenePlanner:
     """
 
     def __init__(self, costmap, cfg: PlannerConfig):
-        if cfg.name not in PLANNERS:
-            raise ValueError(f"unknown planner {cfg.name!r}; registered: {', '.join(PLANNERS)}")
-        cls, self.optimizing = PLANNERS[cfg.name], cfg.name in ASYMPTOTICALLY_OPTIMAL
+        for key in (cfg.name, cfg.fallback):
+            if key not in PLANNERS:
+                raise ValueError(f"unknown planner {key!r}; registered: {', '.join(PLANNERS)}")
+        self.seeded = cfg.name == "geodesic"
+        ompl_key = cfg.fallback if self.seeded else cfg.name
+        if ompl_key == "geodesic":
+            raise ValueError("planner.fallback must be an OMPL planner, not 'geodesic'")
+        cls, self.optimizing = PLANNERS[ompl_key], ompl_key in ASYMPTOTICALLY_OPTIMAL
         self.cfg = cfg
+        self.fallbacks = 0  # seeded paths that failed the motion test and went to OMPL
         self.costmap = costmap
         ny, nx = costmap.clearance.shape
         self.space = ob.SE2StateSpace()
@@ -110,7 +127,8 @@ class ScenePlanner:
             return limit
         return ob.plannerOrTerminationCondition(limit, ob.exactSolnPlannerTerminationCondition(pdef))
 
-    def plan(self, start, goals, reference_length: float | None = None) -> np.ndarray | None:
+    def plan(self, start, goals, reference_length: float | None = None,
+             geodesic_path: np.ndarray | None = None) -> np.ndarray | None:
         """Plan from a start pose to the nearest reachable of one or more goal poses.
 
         Args:
@@ -118,9 +136,16 @@ class ScenePlanner:
             goals: [G, 3] goal poses (any one ends the path).
             reference_length: geodesic distance (metres); optimizing planners stop once within
                 cost_tolerance of it.
+            geodesic_path: [M, 2] the grid geodesic from the start to a goal (metres), used by
+                the `geodesic` key; OMPL plans when it is None or its taut path is not valid.
         Returns:
-            [M, 3] (x, y, yaw) path vertices from start to a goal, or None if none was found.
+            [M, 2] (x, y) path vertices from start to a goal, or None if none was found.
         """
+        if self.seeded and geodesic_path is not None and len(geodesic_path) >= 2:
+            path = self.costmap.taut_path(geodesic_path, self.cfg.resample_step)
+            if self.costmap.are_motions_valid(np.concatenate([path[:-1], path[1:]], 1)).all():
+                return path
+            self.fallbacks += 1
         self._keep = []
         pdef = ob.ProblemDefinition(self.si)
         pdef.addStartState(self._state(*start))
@@ -159,7 +184,7 @@ class ScenePlanner:
             self.simplifier.ropeShortcutPath(path)
             self.simplifier.reduceVertices(path, 0, 0, 0.33)
             self.simplifier.collapseCloseVertices(path)
-        return np.array([(s.getX(), s.getY(), s.getYaw()) for s in path.getStates()], float)
+        return np.array([(s.getX(), s.getY()) for s in path.getStates()], float)
 
 
 def _iterations(n: int):

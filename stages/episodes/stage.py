@@ -65,7 +65,8 @@ def run(scene, cfg, catalog) -> dict:
             "episodes": len(res.episodes), "requested": res.requested,
             "trajectory_rows": int(sum(len(a) for a in res.trajectories.get("step", []))),
             "rejections": dict(sorted(res.rejections.items())), "cpu_s": round(res.cpu_s, 3),
-            "wall_s": round(res.wall_s, 3), "geodesic_from_expert": res.geodesic_from_expert}
+            "wall_s": round(res.wall_s, 3), "geodesic_from_expert": res.geodesic_from_expert,
+            "expert_fallbacks": res.expert_fallbacks}
         if len(res.episodes) < res.requested:
             shortfalls.append({"task": name, "episodes": len(res.episodes), "requested": res.requested,
                                "rejections": dict(sorted(res.rejections.items()))})
