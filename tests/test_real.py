@@ -59,6 +59,18 @@ def test_content_excludes_far_floaters_and_bounds_the_grid():
     assert np.all(np.asarray(grid.shape) * 0.05 <= 1.2 * room_box + 0.2)  # the grid follows the content
 
 
+def test_unique_cells_match_numpys_row_unique_including_huge_boxes():
+    from navcore.gaussians.content import _unique_rows
+
+    rng = np.random.default_rng(5)
+    small = rng.integers(-40, 40, size=(20_000, 3))
+    huge = np.concatenate([small, [[2**40, -2**40, 7], [-2**41, 3, 2**40]]])  # linear key would overflow
+    for keys in (small, huge, small[:0]):
+        want = np.unique(keys.reshape(-1, 3), axis=0, return_inverse=True, return_counts=True)
+        got = _unique_rows(keys.reshape(-1, 3))
+        assert all(np.array_equal(g, w.reshape(g.shape)) for g, w in zip(got, want))
+
+
 @pytest.mark.parametrize("axis", list(AXES))
 def test_floor_found_for_every_up_axis_with_artefacts(axis):
     sc = realistic(10 + list(AXES).index(axis), level="moderate", up_axis=axis)

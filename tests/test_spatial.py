@@ -171,6 +171,28 @@ def test_free_components_are_ranked_by_size():
     assert list(cm.component_at(np.array([[0.55, 0.65], [0.15, 0.15], [-1.0, 0.0]]))) == [1, 3, 0]
 
 
+def test_voxel_dbscan_gives_sklearns_labels():
+    from sklearn.cluster import DBSCAN
+
+    from navcore.voxels.cluster import voxel_dbscan
+
+    rng = np.random.default_rng(3)
+    contested = 0  # border points in reach of core points of two clusters (order decides)
+    for eps, ms, density in [(0.15 / 0.05, 4, 0.05), (1.0, 2, 0.3), (1.5, 5, 0.2), (2.0, 1, 0.02), (2.5, 7, 0.1),
+                             (1.5, 6, 0.15), (2.0, 9, 0.08)]:
+        idx = np.argwhere(rng.random((24, 20, 10)) < density)
+        db = DBSCAN(eps=eps, min_samples=ms).fit(idx.astype(np.float32))
+        got = voxel_dbscan(idx, eps, ms)
+        assert np.array_equal(got, db.labels_), (eps, ms)
+        core = np.zeros(len(idx), bool)
+        core[db.core_sample_indices_] = True
+        d2 = ((idx[:, None] - idx[None]) ** 2).sum(-1)
+        for i in np.flatnonzero(~core):
+            contested += len(set(db.labels_[core & (d2[i] <= eps * eps)])) > 1
+    assert contested > 0
+    assert len(voxel_dbscan(np.zeros((0, 3), int), 2.0, 3)) == 0
+
+
 def test_max_bound_is_conservative_and_tight_on_tall_voxels():
     """A_v >= the true max of rho inside every voxel (dense sampling), on 1 cm x 1 cm x 5 cm
     voxels, for a flat Gaussian tilted inside a vertical plane (the case where bounding each

@@ -73,6 +73,24 @@ def cell_components(cells: np.ndarray) -> tuple[int, np.ndarray]:
     return connected_components(graph, directed=False)
 
 
+def _unique_rows(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """np.unique(keys, axis=0, return_inverse=True, return_counts=True) of [N, 3] int64 cells,
+    through one int64 per row when the box allows (the same lexicographic order; numpy sorts
+    rows as opaque records, 3 s for 1.5 M Gaussians)."""
+    if not len(keys):
+        return keys.reshape(0, 3), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    lo = keys.min(0)
+    dims = keys.max(0) - lo + 1
+    if float(dims[0]) * float(dims[1]) * float(dims[2]) >= 2.0**62:
+        cells, inv, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+        return cells, inv.reshape(-1), counts
+    k = keys - lo
+    lin = (k[:, 0] * dims[1] + k[:, 1]) * dims[2] + k[:, 2]
+    u, inv, counts = np.unique(lin, return_inverse=True, return_counts=True)
+    cells = np.stack([u // (dims[1] * dims[2]), (u // dims[2]) % dims[1], u % dims[2]], 1) + lo
+    return cells, inv.reshape(-1), counts
+
+
 def content_mask(means: np.ndarray, cfg: ContentConfig | None = None) -> tuple[np.ndarray, dict]:
     """Content Gaussians of a scene.
 
@@ -84,8 +102,7 @@ def content_mask(means: np.ndarray, cfg: ContentConfig | None = None) -> tuple[n
     cfg = cfg or ContentConfig()
     n = len(means)
     keys = np.floor(means.astype(np.float64) / cfg.cell).astype(np.int64)
-    cells, inv, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    inv = inv.reshape(-1)
+    cells, inv, counts = _unique_rows(keys)
     threshold = max(float(cfg.min_count), cfg.rel_density * float(np.median(counts[inv])))
     dense = np.nonzero(counts >= threshold)[0]
     n_comp, labels = cell_components(cells[dense])

@@ -12,6 +12,8 @@ i, truncated at ``truncation`` sigma. ``sample`` selects where chi2 is taken:
 """
 from __future__ import annotations
 
+import glob
+import os
 from dataclasses import dataclass
 from typing import Iterator
 
@@ -72,8 +74,16 @@ def gaussian_params(scene: GaussianScene, grid: VoxelGrid, cfg: VoxelizeConfig) 
     return GaussianParams(means[keep], rt[keep], inv_sig[keep], alpha[keep], w[keep], lo[keep], hi[keep])
 
 
+def _no_cuda_device() -> bool:
+    """Whether this process surely has no CUDA device (no NVIDIA device node, or
+    CUDA_VISIBLE_DEVICES hides them all): 'auto' then skips importing torch (3.4 s a stage)."""
+    if os.environ.get("CUDA_VISIBLE_DEVICES") in ("", "-1"):
+        return True
+    return not (os.path.exists("/proc/driver/nvidia") or glob.glob("/dev/nvidia[0-9]*"))
+
+
 def _use_cuda(cfg: VoxelizeConfig) -> bool:
-    if cfg.device == "cpu":
+    if cfg.device == "cpu" or (cfg.device == "auto" and _no_cuda_device()):
         return False
     try:
         import torch

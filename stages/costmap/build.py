@@ -38,6 +38,7 @@ from scipy.spatial import Delaunay
 from navcore.gaussians.model import GaussianScene
 from navcore.nav.embodiment import Embodiment
 from navcore.voxels import VoxelGrid, VoxelizeConfig, column_max_opacity, opacity_field
+from navcore.voxels.cluster import voxel_dbscan
 from stages.costmap.kernels import rasterize_triangles
 
 
@@ -226,8 +227,6 @@ def raw_obstacles_fine(scene: GaussianScene, origin, shape, s: int, emb: Embodim
 
 def support_mask(scene: GaussianScene, origin, shape, cfg: CostmapConfig, vcfg: VoxelizeConfig) -> tuple[np.ndarray, dict]:
     """M_sup [ny, nx] from DBSCAN + alpha shape of the aligned occupied voxels."""
-    from sklearn.cluster import DBSCAN
-
     res = cfg.support_resolution
     nz = max(1, int(np.ceil((cfg.support_z_max - cfg.support_z_min) / res)))
     extent_xy = (shape[1] * cfg.resolution, shape[0] * cfg.resolution)
@@ -239,7 +238,7 @@ def support_mask(scene: GaussianScene, origin, shape, cfg: CostmapConfig, vcfg: 
     sup = np.zeros(shape, dtype=bool)
     if len(idx) < 3:
         return sup, info
-    labels = DBSCAN(eps=cfg.dbscan_eps / res, min_samples=cfg.dbscan_min_samples).fit_predict(idx.astype(np.float32))
+    labels = voxel_dbscan(idx, cfg.dbscan_eps / res, cfg.dbscan_min_samples)  # = sklearn's DBSCAN
     counts = np.bincount(labels[labels >= 0]) if (labels >= 0).any() else np.zeros(0, int)
     if len(counts) == 0:
         return sup, info

@@ -27,7 +27,7 @@ def hashed_inputs(cfg) -> list[dict]:
 def run(scene, cfg, catalog) -> dict:
     ccfg: CostmapConfig = OmegaConf.to_object(cfg.costmap)
     vcfg = OmegaConf.to_object(cfg.voxelize)
-    gs, _ = catalog.dataset("aligned", scene).load()
+    gs, _ = catalog.dataset("aligned", scene).load(view_dependent=False)  # geometry and opacity only
     gs = content_of(gs)  # floaters stay out of the maps
     extent = map_extent(gs, ccfg)
     support = support_mask(gs, *extent, ccfg, vcfg)
