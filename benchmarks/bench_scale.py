@@ -152,8 +152,11 @@ def extrapolate(sample: dict, gpu: dict | None, objectnav_like: str = "pointnav"
     if gpu:
         g = gpu["stages"]
         # a scene the sample could not segment (a real one without labels: SAM3 would run) is
-        # costed with the free-space covering poses: one a square metre, 8 headings (the defaults)
-        views = sample["semantics_views"] or int(sample["free_area_m2"] * 8)
+        # costed with the free-space covering poses of the defaults: one per spacing^2, all around
+        from stages.semantics.config import SemanticsConfig
+
+        sc = SemanticsConfig()
+        views = sample["semantics_views"] or int(sample["free_area_m2"] / sc.spacing**2 * round(360 / sc.yaw_step_deg))
         gpu_s = {"voxelize": g["voxelize_s"], "goal_images": g["goal_image_s"] * per_scene_eps["imagenav"],
                  "semantics": views * (g["semantics_view_s"] + 1.0 / SAM3_FPS_H100)}
         cpu_rest = {k: v for k, v in cpu.items() if k not in GPU_STAGES}

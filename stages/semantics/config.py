@@ -68,9 +68,11 @@ class SemanticsConfig:
     poses: str = "auto"
     """Covering poses: source (the scene's capture cameras) | free_space (on free costmap cells at the
     embodiment's camera height, all around) | auto (source when the scene has cameras)."""
-    spacing: float = 1.0
-    """free_space: one position per spacing x spacing metres of free space."""
-    yaw_step_deg: float = 45.0
+    spacing: float = 1.5
+    """free_space: one position per spacing x spacing metres of free space (1.5 m with 60 degree
+    headings found every object that 1 m / 45 degrees found, from 0.38 x the views:
+    docs/bench_semantics_views.md; 2 m split objects into several instances)."""
+    yaw_step_deg: float = 60.0
     """free_space: headings every this many degrees (full circle)."""
     max_views: int = 0
     """Keep at most this many views (evenly spread over the list; 0 = all)."""
