@@ -192,6 +192,8 @@ def _project(idx, means, cov, opac, ext, lmax, sh, deg, feats_in, R, t, campos, 
             data[j, F0 + k] = feats_in[i, k - k0]
 
 
+SMALL_BOX = 6  # rasterise boxes at most this many pixels wide without solving for the row spans
+
 CHUNKS = 16  # work split of the sorts (fixed, so that the output does not depend on the thread count)
 
 
@@ -308,32 +310,40 @@ def _rasterize(rows, offsets, data, width, height, out):
             qy0 = max(py0, int(math.floor(v - ry - 0.5)))
             qy1 = min(py0 + ph, int(math.ceil(v + ry + 0.5)))
             ha = np.float32(0.5) * ca
+            hc = np.float32(0.5) * cc
+            small = (qx1 - qx0) <= SMALL_BOX
             for py in range(qy0, qy1):
                 dy = np.float32(py + 0.5) - v
-                bq = cb * dy
-                disc = bq * bq - 4.0 * ha * (np.float32(0.5) * cc * dy * dy - lm)
-                if disc < 0 or ha <= 0:
-                    continue
-                sq = math.sqrt(disc)
-                r0 = max(qx0, int(math.floor(u + (-bq - sq) / (2.0 * ha) - 0.5 - 1e-3)))
-                r1 = min(qx1, int(math.ceil(u + (-bq + sq) / (2.0 * ha) - 0.5 + 1e-3)) + 1)
+                sy = hc * dy * dy
+                if small:  # a few pixels: test them all (cheaper than solving for the span)
+                    r0, r1 = qx0, qx1
+                else:
+                    bq = cb * dy
+                    disc = bq * bq - np.float32(4.0) * ha * (sy - lm)
+                    if disc < 0 or ha <= 0:
+                        continue
+                    sq = math.sqrt(disc)
+                    r0 = max(qx0, int(math.floor(u + (-bq - sq) / (np.float32(2.0) * ha) - np.float32(0.501))))
+                    r1 = min(qx1, int(math.ceil(u + (-bq + sq) / (np.float32(2.0) * ha) - np.float32(0.499))) + 1)
+                rowp = (py - py0) * TILE - px0
                 for px in range(r0, r1):
-                    p = (py - py0) * TILE + (px - px0)
+                    p = rowp + px
                     if done[p]:
                         continue
                     dx = np.float32(px + 0.5) - u
-                    sigma = ha * dx * dx + np.float32(0.5) * cc * dy * dy + cb * dx * dy
+                    sigma = ha * dx * dx + sy + cb * dx * dy
                     if sigma < 0 or sigma > lm:
                         continue
                     alpha = min(np.float32(0.999), o * math.exp(-sigma))
                     if alpha < ALPHA_MIN:
                         continue
-                    tn = T[p] * (np.float32(1.0) - alpha)
+                    tp = T[p]
+                    tn = tp * (np.float32(1.0) - alpha)
                     if tn <= T_MIN:
                         done[p] = True
                         left -= 1
                         continue
-                    wgt = alpha * T[p]
+                    wgt = alpha * tp
                     for c in range(nf):
                         acc[p, c] += wgt * data[j, F0 + c]
                     acc[p, nf] += wgt * z
