@@ -183,7 +183,7 @@ def run_on_dask(cfg, catalog: Catalog, chain, record, console: Console) -> None:
         # a task whose inputs are settled and whose marker is current is answered here: a finished
         # run resumes without sending its tasks through the scheduler
         if not any(isinstance(u, Future) or u["status"] in FAILED for u in ups):
-            done = current(st.name, scene, catalog, h, force)
+            done = current(st.name, scene, catalog, h, force, cfg.get("verify", "size"))
             if done is not None:
                 record(done)
                 return done

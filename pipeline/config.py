@@ -145,6 +145,10 @@ class NavArenaConfig:
     """Root of the data layout."""
     strict: bool = False
     """Exit with status 1 when any (stage, scene) failed (the run still completes the others)."""
+    verify: str = "size"
+    """How a finished (stage, scene)'s outputs are checked against its marker's manifest before it
+    counts as done: size (every file present with its recorded size: a stat each), checksum (also
+    its sha256: reads everything), none. A mismatch recomputes the stage for that scene."""
     synthetic: SyntheticConfig = field(default_factory=SyntheticConfig)
     ingest: IngestConfig = field(default_factory=IngestConfig)
     voxelize: VoxelizeConfig = field(default_factory=VoxelizeConfig)

@@ -8,21 +8,24 @@ import traceback
 
 from pipeline.catalog import Catalog, SceneEntry
 from pipeline.graph import BY_NAME
-from pipeline.markers import read_marker, write_marker
+from pipeline.markers import manifest_problem, output_manifest, read_marker, write_marker
 
 FAILED = ("failed", "skipped")
 
 
-def current(stage_name: str, scene: SceneEntry, catalog: Catalog, config_hash: str, force: bool) -> dict | None:
-    """The result of a (stage, scene) that needs no work (n/a, or its marker current), else None.
-    Cheap (one small file read): the executor asks it before submitting, so that a finished
-    run resumes in seconds without sending thousands of no-op tasks through the scheduler."""
+def current(stage_name: str, scene: SceneEntry, catalog: Catalog, config_hash: str, force: bool,
+            verify: str = "size") -> dict | None:
+    """The result of a (stage, scene) that needs no work (n/a, or its marker current and its
+    outputs as its manifest records them), else None. Cheap (a small file read and a stat per
+    output file): the executor asks it before submitting, so that a finished run resumes in
+    seconds without sending thousands of no-op tasks through the scheduler."""
     base = {"stage": stage_name, "scene_id": scene.scene_id, "scene": scene.name}
     if BY_NAME[stage_name].only_synthetic and not scene.synthetic:
         return {**base, "status": "n/a"}
     marker = catalog.path("markers", scene, stage=stage_name)
     m = None if force else read_marker(marker)
-    if m is not None and m.get("config_hash") == config_hash:
+    if m is not None and m.get("config_hash") == config_hash and \
+            manifest_problem(m.get("manifest"), catalog.root, verify) is None:
         return {**base, "status": "cached", **notes(m.get("info", {}))}
     return None
 
@@ -35,10 +38,14 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
         if up["status"] in FAILED:
             return {**base, "status": "skipped", "error": f"upstream {up['stage']} {up['status']}"}
     stage = BY_NAME[stage_name]
-    done = current(stage_name, scene, catalog, config_hash, force)
+    verify = cfg.get("verify", "size")
+    done = current(stage_name, scene, catalog, config_hash, force, verify)
     if done is not None:
         return done
     marker = catalog.path("markers", scene, stage=stage_name)
+    old = None if force else read_marker(marker)
+    damaged = manifest_problem(old.get("manifest"), catalog.root, verify) \
+        if old is not None and old.get("config_hash") == config_hash else None
     marker.unlink(missing_ok=True)  # outputs are about to change: the old marker must not vouch for them
     t0 = time.perf_counter()
     try:
@@ -47,9 +54,15 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
         return {**base, "status": "failed", "error": f"{type(e).__name__}: {e}",
                 "traceback": traceback.format_exc(limit=6), "duration_s": round(time.perf_counter() - t0, 3)}
     duration = round(time.perf_counter() - t0, 3)
+    try:
+        manifest = output_manifest(info.get("outputs", []), catalog.root)
+    except OSError as e:  # an output the stage named is not there: not done
+        return {**base, "status": "failed", "error": f"{type(e).__name__}: output not readable after the stage: {e}",
+                "duration_s": duration}
     write_marker(marker, {"stage": stage_name, "scene_id": scene.scene_id, "config_hash": config_hash,
-                          "duration_s": duration, "info": info})
-    return {**base, "status": "done", "duration_s": duration, **notes(info)}
+                          "duration_s": duration, "info": info, "manifest": manifest})
+    extra = {"recomputed": f"outputs damaged since the last run: {damaged}"} if damaged else {}
+    return {**base, "status": "done", "duration_s": duration, **extra, **notes(info)}
 
 
 def notes(info: dict) -> dict:

@@ -84,6 +84,39 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
     assert latest["counts"]["align"] == {"done": 1}
 
 
+def test_damaged_outputs_behind_a_marker_are_recomputed(tmp_path, make_cfg):
+    """Markers record their outputs' sizes and sha256: a deleted or truncated output recomputes its
+    stage (verify=size, a stat per file); a same-size change needs verify=checksum."""
+    over = ("stages=[costmap,episodes]", "task=[pointnav]", "task.pointnav.episodes_per_scene=5")
+    s1 = execute(make_cfg(tmp_path, *over))
+    assert set(statuses(s1).values()) == {"done"}
+    sid = s1["results"][0]["scene_id"]
+    m = json.loads((tmp_path / "_markers" / "costmap" / f"{sid}.json").read_text())
+    chunk = next(k for k in m["manifest"] if k.startswith("03_costmaps/") and "/clearance/c/" in k)
+    assert m["manifest"][chunk][0] == (tmp_path / chunk).stat().st_size
+    before = {k: (tmp_path / k).read_bytes() for k in m["manifest"]}
+    (tmp_path / chunk).write_bytes((tmp_path / chunk).read_bytes()[:-7])  # truncated
+    ep = next((tmp_path / "05_episodes").rglob("part-0.parquet"))
+    raw = bytearray(ep.read_bytes())
+    raw[len(raw) // 2] ^= 0xFF  # same size, different bytes
+    ep.write_bytes(bytes(raw))
+    s2 = execute(make_cfg(tmp_path, *over))
+    st = statuses(s2)
+    assert st["costmap"] == "done" and st["align"] == "cached" and st["episodes"] == "cached"
+    redo = next(r for r in s2["results"] if r["stage"] == "costmap")
+    assert chunk in redo["recomputed"] and "bytes" in redo["recomputed"]
+    assert {k: (tmp_path / k).read_bytes() for k in m["manifest"]} == before  # recomputed the same bytes
+    s3 = execute(make_cfg(tmp_path, *over, "verify=checksum"))
+    st = statuses(s3)
+    assert st["episodes"] == "done" and st["costmap"] == "cached"
+    assert "sha256" in next(r for r in s3["results"] if r["stage"] == "episodes")["recomputed"]
+    ep.unlink()  # a deleted output
+    s4 = execute(make_cfg(tmp_path, *over))
+    assert statuses(s4)["episodes"] == "done" and ep.exists()
+    assert "missing" in next(r for r in s4["results"] if r["stage"] == "episodes")["recomputed"]
+    assert set(statuses(execute(make_cfg(tmp_path, *over, "verify=checksum"))).values()) == {"cached"}
+
+
 def test_failing_scene_is_recorded_and_others_complete(tmp_path, make_cfg):
     bad = tmp_path / "bad.ply"
     bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 1000\nproperty float x\nend_header\n")
