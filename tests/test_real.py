@@ -60,14 +60,14 @@ def test_content_excludes_far_floaters_and_bounds_the_grid():
 
 
 def test_unique_cells_match_numpys_row_unique_including_huge_boxes():
-    from navcore.gaussians.content import _unique_rows
+    from navcore.gaussians.content import unique_rows
 
     rng = np.random.default_rng(5)
     small = rng.integers(-40, 40, size=(20_000, 3))
     huge = np.concatenate([small, [[2**40, -2**40, 7], [-2**41, 3, 2**40]]])  # linear key would overflow
     for keys in (small, huge, small[:0]):
         want = np.unique(keys.reshape(-1, 3), axis=0, return_inverse=True, return_counts=True)
-        got = _unique_rows(keys.reshape(-1, 3))
+        got = unique_rows(keys.reshape(-1, 3))
         assert all(np.array_equal(g, w.reshape(g.shape)) for g, w in zip(got, want))
 
 

@@ -73,7 +73,7 @@ def cell_components(cells: np.ndarray) -> tuple[int, np.ndarray]:
     return connected_components(graph, directed=False)
 
 
-def _unique_rows(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def unique_rows(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """np.unique(keys, axis=0, return_inverse=True, return_counts=True) of [N, 3] int64 cells,
     through one int64 per row when the box allows (the same lexicographic order; numpy sorts
     rows as opaque records, 3 s for 1.5 M Gaussians)."""
@@ -102,7 +102,7 @@ def content_mask(means: np.ndarray, cfg: ContentConfig | None = None) -> tuple[n
     cfg = cfg or ContentConfig()
     n = len(means)
     keys = np.floor(means.astype(np.float64) / cfg.cell).astype(np.int64)
-    cells, inv, counts = _unique_rows(keys)
+    cells, inv, counts = unique_rows(keys)
     threshold = max(float(cfg.min_count), cfg.rel_density * float(np.median(counts[inv])))
     dense = np.nonzero(counts >= threshold)[0]
     n_comp, labels = cell_components(cells[dense])
