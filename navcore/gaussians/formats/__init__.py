@@ -34,6 +34,8 @@ READERS = Registry("format", {
 })
 """format name -> reader(path, level=None) of a GaussianScene."""
 FORMATS = tuple(k for k in READERS if k != "ply")
+FOLDER_FORMATS = ("sog", "npy_folder")
+"""Formats whose source may be a folder (SOG: a folder with meta.json / lod-meta.json)."""
 
 
 def detect_format(path: str | Path) -> str:
@@ -70,7 +72,12 @@ def read_gaussians(path: str | Path, fmt: str | None = None, level: int | None =
     fmt = fmt or detect_format(p)
     if fmt not in READERS:
         raise SceneFormatError(p, f"unknown format {fmt!r}; known: {', '.join(FORMATS)}")
-    return READERS[fmt](p, level=level)
+    if p.is_dir() and fmt not in FOLDER_FORMATS:
+        raise SceneFormatError(p, f"is a folder, but {fmt} is a single-file format")
+    try:
+        return READERS[fmt](p, level=level)
+    except OSError as e:  # unreadable, a folder where a file belongs, vanished mid-read, ...
+        raise SceneFormatError(getattr(e, "filename", None) or p, f"cannot be read ({e.strerror or e})") from None
 
 
 __all__ = [

@@ -16,18 +16,44 @@ REQUIRED = ("coord", "color", "opacity", "quat", "scale")
 LABELS = ("instance", "segment")
 
 
+def load_npy(path: Path) -> np.ndarray:
+    """One .npy array, its header checked before anything is allocated: no object arrays, and
+    the shape must fit in the bytes the file holds (a lying shape would otherwise make numpy
+    allocate what it claims)."""
+    fmt = np.lib.format
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as f:
+            version = fmt.read_magic(f)
+            width = 2 if version == (1, 0) else 4
+            header_len = int.from_bytes(f.read(width), "little")
+            if header_len > min(size, 1 << 16):  # numpy would allocate the length it reads first
+                raise SceneFormatError(path, f".npy header claims {header_len:,} bytes (file: {size:,})")
+            f.seek(-width, 1)
+            read_header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+            shape, fortran, dtype = read_header(f)
+            if dtype.hasobject:
+                raise SceneFormatError(path, "is an object (pickled) .npy array; only numeric arrays are read")
+            count = int(np.prod(shape, dtype=object))
+            have = size - f.tell()
+            if count * dtype.itemsize > have:
+                raise SceneFormatError(path, f".npy header declares shape {shape} ({count * dtype.itemsize:,} bytes) but "
+                                             f"the file holds {have:,} bytes of data (truncated or lying header)")
+            arr = np.fromfile(f, dtype=dtype, count=count)
+    except SceneFormatError:
+        raise
+    except Exception as e:  # noqa: BLE001 - numpy's header parser raises many types for corrupt headers
+        raise SceneFormatError(path, f"unreadable .npy ({type(e).__name__}: {e})") from None
+    return arr.reshape(shape, order="F" if fortran else "C")
+
+
 def read_npy_folder(path: str | Path, level: int | None = None) -> GaussianScene:
     """Read a SceneSplat-style folder of .npy arrays."""
     path = Path(path)
     missing = [f"{k}.npy" for k in REQUIRED if not (path / f"{k}.npy").exists()]
     if missing:
         raise SceneFormatError(path, f".npy folder lacks {', '.join(missing)}")
-    arrs = {}
-    for k in REQUIRED:
-        try:
-            arrs[k] = np.load(path / f"{k}.npy", allow_pickle=False)
-        except (ValueError, OSError, EOFError) as e:
-            raise SceneFormatError(path / f"{k}.npy", f"unreadable .npy ({e})") from None
+    arrs = {k: load_npy(path / f"{k}.npy") for k in REQUIRED}
     n = len(arrs["coord"])
     want = {"coord": (n, 3), "color": (n, 3), "quat": (n, 4), "scale": (n, 3)}
     for k, shape in want.items():
@@ -42,10 +68,7 @@ def read_npy_folder(path: str | Path, level: int | None = None) -> GaussianScene
     extras = {}
     for k in LABELS:
         if (path / f"{k}.npy").exists():
-            try:
-                a = np.load(path / f"{k}.npy", allow_pickle=False).reshape(-1)
-            except (ValueError, OSError, EOFError) as e:
-                raise SceneFormatError(path / f"{k}.npy", f"unreadable .npy ({e})") from None
+            a = load_npy(path / f"{k}.npy").reshape(-1)
             if a.shape != (n,) or not np.issubdtype(a.dtype, np.integer):
                 raise SceneFormatError(path / f"{k}.npy", f"holds {a.size} {a.dtype} values, expected {n} integers")
             extras[k] = a.astype(np.int32)

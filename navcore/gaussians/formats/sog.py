@@ -20,12 +20,14 @@ from __future__ import annotations
 import io
 import json
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
 from navcore.gaussians.errors import SceneFormatError
+from navcore.gaussians.formats.limits import check_inflation
 from navcore.gaussians.model import GaussianScene
 
 _SQRT2 = np.sqrt(2.0)
@@ -44,6 +46,7 @@ def _decode_webp(data: bytes, where: str) -> np.ndarray:
         with Image.open(io.BytesIO(data)) as im:
             if im.format != "WEBP":
                 raise SceneFormatError(where, f"is a {im.format} image, SOG property images are WebP")
+            check_inflation(where, 4 * im.size[0] * im.size[1], len(data), f"WebP image of {im.size[0]}x{im.size[1]}")
             return np.asarray(im.convert("RGBA")).reshape(-1, 4)
     except SceneFormatError:
         raise
@@ -164,9 +167,14 @@ def _read_zip(path: Path) -> GaussianScene:
         def load(name: str) -> bytes:
             if name not in names:
                 raise SceneFormatError(path, f".sog archive lacks {name}")
-            return zf.read(name)
+            info = zf.getinfo(name)
+            check_inflation(path, info.file_size, info.compress_size, f".sog member {name}")
+            try:
+                return zf.read(name)
+            except (zipfile.BadZipFile, zlib.error, OSError, EOFError, NotImplementedError) as e:
+                raise SceneFormatError(path, f".sog member {name} is unreadable ({e})") from None
 
-        return decode_sog(_read_json(zf.read(META), f"{path}: {META}"), load, str(path))
+        return decode_sog(_read_json(load(META), f"{path}: {META}"), load, str(path))
 
 
 def lod_levels(lod_meta_path: Path) -> tuple[dict, dict[int, list[int]]]:

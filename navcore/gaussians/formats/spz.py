@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from navcore.gaussians.errors import SceneFormatError
+from navcore.gaussians.formats.limits import check_inflation
 from navcore.gaussians.model import GaussianScene
 
 MAGIC = 0x5053474E
@@ -49,11 +50,29 @@ def _check_header(path, magic, version, sh_deg) -> int:
     return _SH_DIM[sh_deg]
 
 
-def _read_legacy(path: Path, data: bytes) -> tuple[int, int, int, int, dict]:
+def _inflate(path: Path, data: bytes) -> bytes:
+    """The gzip payload, decompressed no further than its header's count allows (a stream that
+    inflates past that, or declares more than MAX_INFLATION x the file, is refused)."""
+    d = zlib.decompressobj(16 + zlib.MAX_WBITS)
     try:
-        raw = gzip.decompress(data)
+        head = d.decompress(data, _LEGACY_HEADER.size)
+        if len(head) < _LEGACY_HEADER.size:
+            return head + d.flush()
+        magic, version, n, sh_deg, _frac, _flags, _ = _LEGACY_HEADER.unpack_from(head)
+        shdim = _check_header(path, magic, version, sh_deg)
+        need = _LEGACY_HEADER.size + n * sum(s for _, s in _attribute_sizes(version, shdim))
+        check_inflation(path, need, len(data), ".spz gzip stream")
+        body = d.decompress(d.unconsumed_tail, need - len(head) + 1)
     except (OSError, EOFError, zlib.error) as e:
         raise SceneFormatError(path, f".spz (v2/v3) is not a valid gzip stream ({e})") from None
+    if len(head) + len(body) > need:
+        raise SceneFormatError(path, f".spz gzip stream inflates past the {need:,} bytes its header declares "
+                                     f"({n:,} Gaussians)")
+    return head + body
+
+
+def _read_legacy(path: Path, data: bytes) -> tuple[int, int, int, int, dict]:
+    raw = _inflate(path, data)
     if len(raw) < _LEGACY_HEADER.size:
         raise SceneFormatError(path, f".spz payload is {len(raw)} bytes, shorter than its 16-byte header")
     magic, version, n, sh_deg, frac, _flags, _ = _LEGACY_HEADER.unpack_from(raw)
@@ -102,6 +121,7 @@ def _read_v4(path: Path, data: bytes) -> tuple[int, int, int, int, dict]:
         if usize != n * s:
             raise SceneFormatError(path, f".spz v4 stream '{name}' holds {usize:,} bytes; {n:,} Gaussians need "
                                          f"{n * s:,}")
+        check_inflation(path, usize, csize, f".spz v4 stream '{name}'")
         if off + csize > len(data):
             raise SceneFormatError(path, f".spz v4 stream '{name}' ({csize:,} bytes at {off:,}) runs past the end "
                                          f"of the file ({len(data):,} bytes): truncated?")

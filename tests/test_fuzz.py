@@ -1,0 +1,85 @@
+"""Hostile input: every reader under hypothesis-drawn corruption (truncation, bit flips, lying and
+huge counts, NaN / inf / 1e30 / denormals, empty files, folders in place of files, decompression
+bombs) ends in the scene's SceneFormatError or a validated scene: no other exception, no hang,
+no allocation beyond a bound on the input's size. `make test-faults` runs 10,000 cases a kind
+(benchmarks.fuzz_readers); here a few dozen each, plus the cases that found real defects."""
+import gzip
+import struct
+import zipfile
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+
+from benchmarks.fuzz_readers import KINDS, READER_OF, apply_case, case_strategy, make_seed, run_case, small_scene
+from navcore.gaussians import SceneFormatError
+from navcore.gaussians.formats import write_sog, write_spz
+from navcore.gaussians.validate import read_validated
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_reader_survives_random_corruption(kind, tmp_path_factory):
+    work = tmp_path_factory.mktemp(kind)
+    seed = make_seed(kind, work / "seed")
+    assert run_case(seed, READER_OF[kind])[0] == "accepted"  # the seed itself is valid
+
+    @settings(max_examples=25, database=None, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(case_strategy())
+    def one(case):
+        path = apply_case(seed, work / "case", *case)
+        outcome, detail = run_case(path, READER_OF[kind])
+        assert outcome in ("accepted", "rejected"), (case, outcome, detail)
+
+    one()
+
+
+def _expect_rejected(path, fmt, match):
+    with pytest.raises(SceneFormatError, match=match) as e:
+        read_validated(path, fmt, scene_id="hostile")
+    assert "hostile" in str(e.value)  # the error names the scene
+
+
+def test_folder_in_place_of_a_file_is_a_format_error(tmp_path):
+    for name, fmt in (("a.ply", "ply"), ("a.splat", "splat"), ("a.spz", "spz")):
+        (tmp_path / name).mkdir()
+        _expect_rejected(tmp_path / name, fmt, "is a folder")
+
+
+def test_decompression_bombs_are_refused_before_they_inflate(tmp_path):
+    s = small_scene(40, 0, 1)
+    write_spz(tmp_path / "ok.spz", s, version=2)
+    payload = gzip.decompress((tmp_path / "ok.spz").read_bytes())
+    # the payload followed by 256 MB of zeros: a 250 KB file
+    (tmp_path / "bomb.spz").write_bytes(gzip.compress(payload + bytes(1 << 28), mtime=0))
+    _expect_rejected(tmp_path / "bomb.spz", "spz", "inflates past")
+    # a header that claims 2^31 Gaussians for a few hundred bytes
+    lying = bytearray(payload)
+    lying[8:12] = struct.pack("<I", 2**31 - 1)
+    (tmp_path / "lying.spz").write_bytes(gzip.compress(bytes(lying), mtime=0))
+    _expect_rejected(tmp_path / "lying.spz", "spz", "decompression bomb or a lying header")
+    # a .sog whose meta.json inflates to 256 MB inside the zip
+    write_sog(tmp_path / "ok.sog", s)
+    with zipfile.ZipFile(tmp_path / "ok.sog") as zf:
+        files = {n: zf.read(n) for n in zf.namelist()}
+    with zipfile.ZipFile(tmp_path / "bomb.sog", "w", zipfile.ZIP_DEFLATED) as zf:
+        for n, d in files.items():
+            zf.writestr(n, d + bytes(1 << 28) if n == "meta.json" else d)
+    _expect_rejected(tmp_path / "bomb.sog", "sog", "decompression bomb")
+
+
+def test_npy_headers_that_lie_allocate_nothing(tmp_path):
+    from navcore.gaussians.formats import write_npy_folder
+
+    s = small_scene(40, 0, 2)
+    write_npy_folder(tmp_path / "f", s)
+    coord = (tmp_path / "f" / "coord.npy").read_bytes()
+    (tmp_path / "f" / "coord.npy").write_bytes(coord.replace(b"(40, 3)", b"(400000000000, 3)"))
+    _expect_rejected(tmp_path / "f", "npy_folder", "lying header")
+    # a version-2 header whose length field claims 4 GB: numpy would allocate it before checking
+    bad = bytearray(coord)
+    bad[6:8] = b"\x02\x00"
+    bad[8:12] = struct.pack("<I", 2**32 - 1)
+    (tmp_path / "f" / "coord.npy").write_bytes(bytes(bad))
+    _expect_rejected(tmp_path / "f", "npy_folder", "header claims")
+    np.save(tmp_path / "f" / "coord.npy", np.array([object()] * 40))  # pickled objects are never loaded
+    _expect_rejected(tmp_path / "f", "npy_folder", "object")
