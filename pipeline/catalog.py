@@ -11,6 +11,7 @@ run summaries) and for walking the roots of partitioned datasets.
 from __future__ import annotations
 
 import hashlib
+import os
 import re
 import string
 from dataclasses import dataclass
@@ -22,6 +23,19 @@ from navcore.gaussians.formats import detect_format
 from navcore.io.datasets import TYPES, Dataset
 
 LAYOUT_FILE = Path(__file__).resolve().parent.parent / "catalogs" / "layout.yaml"
+
+
+SAFE_COMPONENT = re.compile(r"[A-Za-z0-9][A-Za-z0-9._=-]{0,127}")
+"""What a value substituted into a path template may be: one plain path component (no separator,
+no '..', no leading dot), so that a catalog cannot steer a write outside the data root."""
+
+
+def safe_component(value, what: str, where) -> str:
+    v = str(value)
+    if not SAFE_COMPONENT.fullmatch(v) or ".." in v:
+        raise ValueError(f"{where}: {what} {v!r} is not a plain name (letters, digits, '.', '_', '-', '='; no "
+                         f"'/' or '..'): it is used in output paths")
+    return v
 
 
 def scene_id_for(dataset: str, name: str, taken: set[str] | None = None) -> str:
@@ -63,8 +77,8 @@ class Catalog:
             for key in ("name", "path"):
                 if key not in e:
                     raise ValueError(f"catalog {self.file}: scene entry {e} lacks '{key}'")
-            group = e.get("group", "default")
-            sid = e.get("id") or scene_id_for(group, e["name"], taken)
+            group = safe_component(e.get("group", "default"), "group", self.file)
+            sid = safe_component(e.get("id") or scene_id_for(group, e["name"], taken), "id", self.file)
             path = Path(e["path"])
             if not path.is_absolute():
                 path = (self.file.parent / path).resolve()  # relative to the catalog file's folder
@@ -80,8 +94,8 @@ class Catalog:
                 syn["num_gaussians"] = synthetic_num_gaussians
             for k in range(int(syn.get("count", 0))):
                 seed = int(syn.get("first_seed", 0)) + k
-                name = f"{syn.get('prefix', 'synth')}_{seed:04d}"
-                group = syn.get("group", "synthetic")
+                name = safe_component(f"{syn.get('prefix', 'synth')}_{seed:04d}", "synthetic prefix", self.file)
+                group = safe_component(syn.get("group", "synthetic"), "group", self.file)
                 sid = scene_id_for(group, name, taken)
                 taken.add(sid)
                 self.scenes.append(SceneEntry(sid, name, group, "", "synthetic", seed,
@@ -101,13 +115,23 @@ class Catalog:
         return fields
 
     def path(self, dataset: str, scene: SceneEntry | None = None, **extra) -> Path:
-        """Resolve a logical dataset name to a path."""
+        """Resolve a logical dataset name to a path: always inside the data root (a layout entry
+        or a field that would lead elsewhere is refused: the pipeline writes only there)."""
         template, _ = self._entry(dataset)
         fields = self._fields(scene, extra)
+        used = {n for _, n, _, _ in string.Formatter().parse(template) if n}
+        for k in sorted(used & set(fields) - {"root"}):
+            safe_component(fields[k], f"{k} of dataset {dataset!r}", self.file)
         try:
-            return Path(template.format(**fields))
+            p = Path(template.format(**fields))
         except KeyError as e:
             raise KeyError(f"dataset {dataset!r} ({template}) needs the field {e.args[0]!r}") from None
+        # lexical (a data root may hold symlinks to other disks): the fields are plain names, so
+        # only the template itself could lead out
+        if not Path(os.path.normpath(p)).is_relative_to(self.root):
+            raise ValueError(f"layout entry {dataset!r} ({template}) resolves to {p}, outside the data root "
+                             f"{self.root}")
+        return p
 
     def dataset(self, dataset: str, scene: SceneEntry | None = None, **extra) -> Dataset:
         """The typed dataset (load / save / writing) of a logical name, for one scene (and task,

@@ -328,6 +328,29 @@ def test_catalog_paths_ids_and_layout(tmp_path, project_root):
     assert all(Path(s.path).parent == (project_root.parent / "shared" / "data" / "real").resolve() for s in real.scenes)
 
 
+def test_a_catalog_cannot_steer_writes_outside_the_data_root(tmp_path):
+    from pipeline.catalog import Catalog
+
+    def cat(text):
+        f = tmp_path / "c.yaml"
+        f.write_text(text)
+        return f
+
+    for bad in ("{name: a, group: ../../etc, path: a.ply, format: inria_ply}",
+                "{name: a, group: g, id: ../x, path: a.ply, format: inria_ply}",
+                "{name: a, group: /abs, path: a.ply, format: inria_ply}"):
+        with pytest.raises(ValueError, match="not a plain name"):
+            Catalog(cat(f"scenes:\n  - {bad}\n"), tmp_path / "data")
+    c = Catalog(cat("layout:\n  costmaps: '/tmp/elsewhere/{scene_id}.zarr'\n  voxels: '{root}/../up/{scene_id}.zarr'\n"
+                    "scenes:\n  - {name: a, group: g, path: a.ply, format: inria_ply}\n"), tmp_path / "data")
+    for ds in ("costmaps", "voxels"):
+        with pytest.raises(ValueError, match="outside the data root"):
+            c.path(ds, c.scenes[0])
+    with pytest.raises(ValueError, match="not a plain name"):  # a field from the config, e.g. an eval run name
+        c.path("eval_summary", run="../../home")
+    assert c.path("markers", c.scenes[0], stage="align").is_relative_to(tmp_path / "data")
+
+
 def test_catalog_datasets_round_trip_atomically_and_find_partitions(tmp_path, project_root):
     import pyarrow as pa
 
