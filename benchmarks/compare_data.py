@@ -16,7 +16,7 @@ import re
 import sys
 from pathlib import Path
 
-BOOKKEEPING = ("_markers", "_runs", "_hydra", "_submit")
+BOOKKEEPING = ("_markers", "_runs", "_hydra", "_submit", "_locks")
 
 
 def digests(root: Path) -> dict[str, str]:

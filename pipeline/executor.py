@@ -84,9 +84,14 @@ def execute(cfg, console: Console | None = None) -> dict:
     results += [run_finalize(st, cfg, catalog) for st in stages
                 if st.finalize and any(r["stage"] == st.name and r["status"] == "done" for r in results)]
     summary = build_summary(results, started, cat_file, [cfg.scenes.shard, cfg.scenes.num_shards], stages, hashes)
-    latest = write_summary(summary, catalog, started, cfg.scenes.shard)
     print_summary(summary, console)
-    console.print(f"run summary: {latest}")
+    try:
+        latest = write_summary(summary, catalog, started, cfg.scenes.shard)
+        console.print(f"run summary: {latest}")
+    except OSError as e:  # e.g. a full disk: the table above is all there is
+        summary["failures"].append({"stage": "run summary", "scene_id": "*", "scene": "dataset", "status": "failed",
+                                    "error": f"the run summary could not be written: {e}"})
+        console.print(f"[red]the run summary could not be written[/]: {e}")
     return summary
 
 

@@ -3,11 +3,14 @@ failures come back as results, so one bad scene cannot stop the run, and its dow
 are skipped with the reason."""
 from __future__ import annotations
 
+import errno
+import os
 import time
 import traceback
 
 from pipeline.catalog import Catalog, SceneEntry
 from pipeline.graph import BY_NAME
+from pipeline.locks import locked
 from pipeline.markers import manifest_problem, output_manifest, read_marker, write_marker
 
 FAILED = ("failed", "skipped")
@@ -42,6 +45,18 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
     done = current(stage_name, scene, catalog, config_hash, force, verify)
     if done is not None:
         return done
+    try:
+        with locked(catalog.path("locks", stage=stage_name, key=scene.scene_id)) as waited:
+            # another run may have finished this (stage, scene) while we waited for its lock
+            done = current(stage_name, scene, catalog, config_hash, force, verify)
+            if done is not None:
+                return {**done, "waited_s": round(waited, 3)}
+            return _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, verify, base)
+    except OSError as e:  # the lock could not be taken (a full disk, a read-only data root)
+        return {**base, "status": "failed", "error": describe(e, catalog)}
+
+
+def _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, verify, base) -> dict:
     marker = catalog.path("markers", scene, stage=stage_name)
     old = None if force else read_marker(marker)
     damaged = manifest_problem(old.get("manifest"), catalog.root, verify) \
@@ -51,18 +66,27 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
     try:
         info = stage.run(scene, cfg, catalog) or {}
     except Exception as e:  # noqa: BLE001 - recorded, the run goes on
-        return {**base, "status": "failed", "error": f"{type(e).__name__}: {e}",
+        return {**base, "status": "failed", "error": describe(e, catalog),
                 "traceback": traceback.format_exc(limit=6), "duration_s": round(time.perf_counter() - t0, 3)}
     duration = round(time.perf_counter() - t0, 3)
     try:
         manifest = output_manifest(info.get("outputs", []), catalog.root)
-    except OSError as e:  # an output the stage named is not there: not done
-        return {**base, "status": "failed", "error": f"{type(e).__name__}: output not readable after the stage: {e}",
+        write_marker(marker, {"stage": stage_name, "scene_id": scene.scene_id, "config_hash": config_hash,
+                              "duration_s": duration, "info": info, "manifest": manifest})
+    except OSError as e:  # an output gone after the stage, or no room for the marker: not done
+        marker.unlink(missing_ok=True)
+        return {**base, "status": "failed", "error": f"after the stage: {describe(e, catalog)}",
                 "duration_s": duration}
-    write_marker(marker, {"stage": stage_name, "scene_id": scene.scene_id, "config_hash": config_hash,
-                          "duration_s": duration, "info": info, "manifest": manifest})
     extra = {"recomputed": f"outputs damaged since the last run: {damaged}"} if damaged else {}
     return {**base, "status": "done", "duration_s": duration, **extra, **notes(info)}
+
+
+def describe(e: BaseException, catalog: Catalog) -> str:
+    """A task's error for the run summary; a full disk says where and what to do."""
+    if isinstance(e, OSError) and e.errno in (errno.ENOSPC, errno.EDQUOT):
+        return (f"disk full ({os.strerror(e.errno)}) writing {e.filename or 'an output'}: nothing of this "
+                f"(stage, scene) is trusted; free space under {catalog.root} and rerun")
+    return f"{type(e).__name__}: {e}"
 
 
 def notes(info: dict) -> dict:
@@ -76,9 +100,10 @@ def run_finalize(stage, cfg, catalog: Catalog) -> dict:
     base = {"stage": f"{stage.name}:finalize", "scene_id": "*", "scene": "dataset"}
     t0 = time.perf_counter()
     try:
-        info = stage.finalize(cfg, catalog) or {}
+        with locked(catalog.path("locks", stage=stage.name, key="finalize")):  # one writer of dataset files
+            info = stage.finalize(cfg, catalog) or {}
         return {**base, "status": "done", "duration_s": round(time.perf_counter() - t0, 3),
                 "outputs": info.get("outputs", [])}
     except Exception as e:  # noqa: BLE001 - recorded like a scene failure
-        return {**base, "status": "failed", "error": f"{type(e).__name__}: {e}",
+        return {**base, "status": "failed", "error": describe(e, catalog),
                 "traceback": traceback.format_exc(limit=6)}

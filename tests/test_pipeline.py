@@ -117,6 +117,33 @@ def test_damaged_outputs_behind_a_marker_are_recomputed(tmp_path, make_cfg):
     assert set(statuses(execute(make_cfg(tmp_path, *over, "verify=checksum"))).values()) == {"cached"}
 
 
+def test_task_locks_make_a_second_writer_wait_and_die_with_their_holder(tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from pipeline.locks import locked
+
+    lock = tmp_path / "_locks" / "costmap" / "abc.lock"
+    holder = subprocess.Popen([sys.executable, "-c", (
+        "import sys, time; sys.path.insert(0, %r)\n"
+        "from pipeline.locks import locked\n"
+        "from pathlib import Path\n"
+        "with locked(Path(%r)):\n"
+        "    print('held', flush=True); time.sleep(60)") % (str(Path(__file__).parent.parent), str(lock))],
+        stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline().strip() == "held"
+    assert lock.read_text().split()[1] == str(holder.pid)  # the holder names itself
+    t0 = time.perf_counter()
+    killer = __import__("threading").Timer(1.0, lambda: holder.send_signal(signal.SIGKILL))
+    killer.start()
+    with locked(lock) as waited:  # blocks until the kernel releases the killed holder's lock
+        assert waited >= 0.9 and time.perf_counter() - t0 < 30
+        assert lock.read_text().split()[1] == str(os.getpid())
+    holder.wait()
+
+
 def test_failing_scene_is_recorded_and_others_complete(tmp_path, make_cfg):
     bad = tmp_path / "bad.ply"
     bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 1000\nproperty float x\nend_header\n")
