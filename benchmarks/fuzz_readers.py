@@ -136,8 +136,10 @@ def _lie(data: bytes, value: int) -> bytes:
     return data
 
 
-def mutate(data: bytes, op: str, a: int, b: int, poison: float, header: int) -> bytes | None:
-    """The member's new bytes (None: replace the member by a directory)."""
+def mutate(data: bytes, op: str, a: int, b: int, poison: float, header: int, compressed: bool = False) -> bytes | None:
+    """The member's new bytes (None: replace the member by a directory). compressed: the member is
+    stored compressed (a gzip payload, a zip member), so a bomb inflates to 32-256 MB; appended to
+    a plain file it adds 1-4 MB (a big file, not a bomb)."""
     n = len(data)
     if op == "truncate":
         return data[: a % (n + 1)]
@@ -170,7 +172,7 @@ def mutate(data: bytes, op: str, a: int, b: int, poison: float, header: int) -> 
     if op == "directory":
         return None
     if op == "bomb":  # a stream that inflates to far more than its size: the payload, then zeros
-        return data + bytes(min(1 << 28, (a % 8 + 1) << 25))
+        return data + bytes(min(1 << 28, (a % 8 + 1) << 25) if compressed else (a % 4 + 1) << 20)
     if op == "duplicate_tail":
         return data + data[header:][: a % (n + 1)]
     raise ValueError(op)
@@ -214,13 +216,13 @@ def apply_case(seed: Path, work: Path, member: int, op: str, a: int, b: int, poi
         _put(p, new)
     elif kind == "gzip":
         raw = gzip.decompress(p.read_bytes())
-        new = mutate(raw, op, a, b, poison, 16)
+        new = mutate(raw, op, a, b, poison, 16, compressed=True)
         _put(p, None if new is None else gzip.compress(new, mtime=0))
     else:
         name = kind[4:]
         with zipfile.ZipFile(p) as zf:
             files = {n: zf.read(n) for n in zf.namelist()}
-        new = mutate(files[name], op, a, b, poison, _header_len(files[name]))
+        new = mutate(files[name], op, a, b, poison, _header_len(files[name]), compressed=True)
         if new is None:
             del files[name]
         else:

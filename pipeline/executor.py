@@ -12,6 +12,7 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+from navcore.io.atomic import sweep_stale_temporaries
 from pipeline.backends import run_on_dask
 from pipeline.catalog import Catalog, SceneEntry
 from pipeline.graph import closure, config_hashes
@@ -79,6 +80,10 @@ def execute(cfg, console: Console | None = None) -> dict:
             run_on_dask(cfg, catalog, chain, record, console)
     order = {s.name: i for i, s in enumerate(stages)}
     results.sort(key=lambda r: (r["scene_id"], order[r["stage"]]))
+    if any(r["status"] in ("done", "failed") for r in results) and root.exists():
+        # partial outputs of killed runs whose final name this run did not write again
+        for p in sweep_stale_temporaries(root):
+            console.print(f"removed a killed writer's partial output: {p}")
     # dataset-level steps of the stages that have one and computed at least one scene in this run
     # (a fully cached stage leaves its dataset-level files as they are)
     results += [run_finalize(st, cfg, catalog) for st in stages

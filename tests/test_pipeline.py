@@ -296,6 +296,16 @@ def test_interrupted_write_leaves_nothing_trusted(tmp_path, monkeypatch, make_cf
     with atomic_path(final) as tmp:
         tmp.write_text("whole")
     assert final.read_text() == "whole" and not stale.exists() and live.exists()
+    # ... or at the end of the next run that does any work, wherever it lies (a final name with '-')
+    from navcore.io.atomic import sweep_stale_temporaries
+
+    deep = tmp_path / "05_episodes" / "task=pointnav"
+    stale2 = deep / f".tmp-part-0.parquet-{HOST}-{dead.pid}-ab_c"
+    old_dir = deep / f".old-costmaps.zarr-{dead.pid}"
+    for p in (stale2 / "part-0.parquet", old_dir / "x"):
+        p.parent.mkdir(parents=True)
+        p.write_text("partial")
+    assert set(sweep_stale_temporaries(tmp_path)) == {stale2, old_dir} and live.exists()
 
     cfg = make_cfg(tmp_path / "d", "stages=[voxelize]")
     execute(cfg)

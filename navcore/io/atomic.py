@@ -43,6 +43,29 @@ def remove_stale_temporaries(final: Path) -> list[Path]:
     return removed
 
 
+def sweep_stale_temporaries(root: Path) -> list[Path]:
+    """Remove every ``.tmp-*`` / ``.old-*`` under ``root`` left by a dead writer on this host (a
+    killed run's partial outputs whose final name was never written again)."""
+    removed = []
+    for dirpath, dirnames, filenames in os.walk(root):
+        for name in [d for d in dirnames if d.startswith((".tmp-", ".old-"))] + \
+                [f for f in filenames if f.startswith((".tmp-", ".old-"))]:
+            p = Path(dirpath) / name
+            if name.startswith(".tmp-"):
+                parts = name.split("-")
+                # .tmp-{final name}-{host}-{pid}-{random}: the final name may hold '-'
+                host_pid = [(parts[i], parts[i + 1]) for i in range(2, len(parts) - 1) if parts[i] == HOST]
+                dead = bool(host_pid) and host_pid[-1][1].isdigit() and not _alive(int(host_pid[-1][1]))
+            else:
+                pid = name.rsplit("-", 1)[-1]
+                dead = pid.isdigit() and not _alive(int(pid))
+            if dead:
+                shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
+                removed.append(p)
+        dirnames[:] = [d for d in dirnames if not d.startswith((".tmp-", ".old-"))]
+    return removed
+
+
 @contextlib.contextmanager
 def atomic_path(final: str | Path):
     """Yield a temporary path beside ``final``; on success move it to ``final`` (replacing a
