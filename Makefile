@@ -7,7 +7,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
 
-.PHONY: setup dataset test lint test-all test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -101,6 +101,13 @@ submit: $(STAMP)
 
 # the batch-scheduler tests: a one-node SLURM on this machine (scripts/slurm_localhost.sh, root),
 # then make submit (array job, shards, cancel and resubmit) and executor=slurm (dask-jobqueue)
+# issue 14's proof (well under an hour here): the fault-injection scenarios against an undisturbed
+# run, 10,000 fuzz cases a reader layout, then data/08_reports/bench_faults.{json,md}
+test-faults: $(STAMP)
+	$(BIN)/python -m pytest -q -m faults tests/test_faults.py $(ARGS)
+	$(BIN)/python -m benchmarks.fuzz_readers --cases 10000
+	$(BIN)/python -m benchmarks.faults
+
 test-slurm: $(STAMP)
 	scripts/slurm_localhost.sh
 	$(BIN)/python -m pytest -q -m slurm tests/test_slurm.py $(ARGS)

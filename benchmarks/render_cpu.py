@@ -65,7 +65,11 @@ def main(argv=None) -> dict:
     ap.add_argument("--ref-views", type=int, default=3)
     ap.add_argument("--gaussians", type=int, default=1_000_000)
     ap.add_argument("--out", default="data/08_reports")
+    ap.add_argument("--merge", nargs="+", type=Path,
+                    help="instead of measuring: render_cpu.json files of repeated runs -> their medians")
     args = ap.parse_args(argv)
+    if args.merge:
+        return merge(args.merge, args.out)
     emb, rng = Embodiment(), np.random.default_rng(0)
     gs, rooms = canonical_scene(7, args.gaussians)
     rep = {"host": platform.node(), "cpu_cores": os.cpu_count(), "scenes": {}}
@@ -82,6 +86,28 @@ def main(argv=None) -> dict:
         key = f"{w}x{h}"
         rep[f"cpu_fps_{w}"] = min(s[key]["fps"] for s in rep["scenes"].values() if s["n_gaussians"] >= 1_000_000)
     write_report(args.out, "render_cpu.json", rep, omit=("scenes",))
+    return rep
+
+
+def merge(files: list[Path], out) -> dict:
+    """Repeated runs (the machines are shared and noisy): per scene and size, the median of the
+    runs' frames/s; every run's figure kept beside it."""
+    from benchmarks import write_report
+
+    runs = [json.loads(Path(f).read_text()) for f in files]
+    rep = {"host": runs[0]["host"], "cpu_cores": runs[0]["cpu_cores"], "runs": len(runs), "scenes": {}}
+    for name, s0 in runs[0]["scenes"].items():
+        sc = {"n_gaussians": s0["n_gaussians"], "views": s0["views"]}
+        for w, h in SIZES:
+            key = f"{w}x{h}"
+            vals = [r["scenes"][name][key] for r in runs if name in r["scenes"]]
+            med = {k: float(np.median([v[k] for v in vals])) for k in ("fps", "fps_p10", "torch_reference_fps")}
+            sc[key] = {**med, "speedup": med["fps"] / med["torch_reference_fps"], "fps_runs": [v["fps"] for v in vals]}
+        rep["scenes"][name] = sc
+    for w, h in SIZES:
+        key = f"{w}x{h}"
+        rep[f"cpu_fps_{w}"] = min(s[key]["fps"] for s in rep["scenes"].values() if s["n_gaussians"] >= 1_000_000)
+    write_report(out, "render_cpu.json", rep, omit=("scenes",))
     return rep
 
 
