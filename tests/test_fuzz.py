@@ -23,7 +23,7 @@ def test_reader_survives_random_corruption(kind, tmp_path_factory):
     seed = make_seed(kind, work / "seed")
     assert run_case(seed, READER_OF[kind])[0] == "accepted"  # the seed itself is valid
 
-    @settings(max_examples=25, database=None, deadline=None, suppress_health_check=list(HealthCheck))
+    @settings(max_examples=12, database=None, deadline=None, suppress_health_check=list(HealthCheck))
     @given(case_strategy())
     def one(case):
         path = apply_case(seed, work / "case", *case)
