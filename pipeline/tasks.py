@@ -83,9 +83,13 @@ def _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, veri
 
 def describe(e: BaseException, catalog: Catalog) -> str:
     """A task's error for the run summary; a full disk says where and what to do."""
-    if isinstance(e, OSError) and e.errno in (errno.ENOSPC, errno.EDQUOT):
-        return (f"disk full ({os.strerror(e.errno)}) writing {e.filename or 'an output'}: nothing of this "
-                f"(stage, scene) is trusted; free space under {catalog.root} and rerun")
+    cause, seen = e, set()
+    while cause is not None and id(cause) not in seen:  # a library may wrap the OSError
+        seen.add(id(cause))
+        if isinstance(cause, OSError) and cause.errno in (errno.ENOSPC, errno.EDQUOT):
+            return (f"disk full ({os.strerror(cause.errno)}) writing {cause.filename or 'an output'}: nothing of "
+                    f"this (stage, scene) is trusted; free space under {catalog.root} and rerun")
+        cause = cause.__cause__ or cause.__context__
     return f"{type(e).__name__}: {e}"
 
 
