@@ -156,7 +156,7 @@ def test_geodesic_expert_is_taut_valid_and_falls_back_to_ompl(room_with_door):
     seed = f.path_xy(cell_of(cm, 1.0, 0.5))
     geo = f.at_cells(cell_of(cm, 1.0, 0.5)[None])[0]
     seed_ompl(7)
-    planner = ScenePlanner(cm, PlannerConfig(name="geodesic"))
+    planner = ScenePlanner(cm, PlannerConfig(name="geodesic", merge_turn_deg=0.0))  # the taut path itself
     p = planner.plan((a[0], a[1], 0.0), [(b[0], b[1], 0.0)], geo, seed)
     assert planner.fallbacks == 0 and np.allclose(p[0], a) and np.allclose(p[-1], b)
     assert cm.are_motions_valid(np.concatenate([p[:-1], p[1:]], 1)).all()
@@ -169,6 +169,10 @@ def test_geodesic_expert_is_taut_valid_and_falls_back_to_ompl(room_with_door):
     exact = math.sqrt(da**2 - cm.radius**2) + math.sqrt(db**2 - cm.radius**2) + cm.radius * arc
     length = np.hypot(*np.diff(p, axis=0).T).sum()
     assert exact * (1 - 1e-3) <= length <= min(geo, exact * 1.005)  # tauter than the grid's path
+    # merged corners: fewer stops for the turn-then-drive rollout, still valid, barely longer
+    merged = ScenePlanner(cm, PlannerConfig(name="geodesic")).plan((a[0], a[1], 0.0), [(b[0], b[1], 0.0)], geo, seed)
+    assert len(merged) < len(p) and cm.are_motions_valid(np.concatenate([merged[:-1], merged[1:]], 1)).all()
+    assert length <= np.hypot(*np.diff(merged, axis=0).T).sum() <= length * 1.05
     # in line of sight the path is the straight segment
     c1, c2 = cm.cell_centers(np.array([cell_of(cm, 0.5, 0.5), cell_of(cm, 1.5, 2.5)]))
     straight = g.field(cell_of(cm, 1.5, 2.5)[None]).path_xy(cell_of(cm, 0.5, 0.5))

@@ -74,11 +74,11 @@ class Costmap:
         """Straight segment between two positions: every point of it is a valid state."""
         return K.motion_valid(self._f, self._ox, self._oy, self._inv, self._thr, x0, y0, x1, y1)
 
-    def are_motions_valid(self, segments: np.ndarray) -> np.ndarray:
-        """[N, 4] segments (x0, y0, x1, y1) -> [N] bool."""
+    def are_motions_valid(self, segments: np.ndarray, slack: float = 0.0) -> np.ndarray:
+        """[N, 4] segments (x0, y0, x1, y1) -> [N] bool (valid with `slack` metres to spare)."""
         seg = np.ascontiguousarray(np.asarray(segments, dtype=np.float64))
         fn = K.motions_valid if len(seg) >= PARALLEL_BATCH else K.motions_valid_serial
-        return fn(self._f, self._ox, self._oy, self._inv, self._thr, seg)
+        return fn(self._f, self._ox, self._oy, self._inv, self._thr + slack, seg)
 
     def taut_path(self, xy: np.ndarray, step: float, slack: float = 1e-3) -> np.ndarray:
         """[M, 2] valid polyline (metres) -> [K, 2] a shorter one through the same corridor: its

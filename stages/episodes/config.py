@@ -67,6 +67,9 @@ class PlannerConfig:
     """Registry key: geodesic (the episode's grid geodesic made taut, OMPL `fallback` when that
     fails), or an OMPL planner for every episode: rrtconnect (feasible, fast), rrtstar,
     informed_rrtstar, bitstar (asymptotically optimal)."""
+    merge_turn_deg: float = 60.0
+    """geodesic: two consecutive turns the same way that add up to less than this become one corner
+    (outside the bend, when valid): the rollout stops and turns at every vertex (0 = keep the taut path)."""
     fallback: str = "rrtconnect"
     """geodesic: the OMPL planner of an episode whose taut geodesic fails the motion test."""
     max_iterations: int = 20000

@@ -142,7 +142,8 @@ class ScenePlanner:
             [M, 2] (x, y) path vertices from start to a goal, or None if none was found.
         """
         if self.seeded and geodesic_path is not None and len(geodesic_path) >= 2:
-            path = self.costmap.taut_path(geodesic_path, self.cfg.resample_step)
+            path = merge_corners(self.costmap, self.costmap.taut_path(geodesic_path, self.cfg.resample_step),
+                                 math.radians(self.cfg.merge_turn_deg))
             if self.costmap.are_motions_valid(np.concatenate([path[:-1], path[1:]], 1)).all():
                 return path
             self.fallbacks += 1
@@ -185,6 +186,47 @@ class ScenePlanner:
             self.simplifier.reduceVertices(path, 0, 0, 0.33)
             self.simplifier.collapseCloseVertices(path)
         return np.array([(s.getX(), s.getY()) for s in path.getStates()], float)
+
+
+def _turn(a, b, c) -> float:
+    """Signed heading change at b of the polyline a -> b -> c, radians."""
+    h1 = math.atan2(b[1] - a[1], b[0] - a[0])
+    h2 = math.atan2(c[1] - b[1], c[0] - b[0])
+    return (h2 - h1 + math.pi) % (2 * math.pi) - math.pi
+
+
+def merge_corners(costmap, path: np.ndarray, max_turn: float, slack: float = 1e-3) -> np.ndarray:
+    """Fewer vertices for a turn-then-drive robot: a taut path bends around a (disk-dilated)
+    corner in several small turns, each of which the rollout pays with a stop, a turn and a
+    restart. Two consecutive turns the same way, together under `max_turn`, become one corner at
+    the intersection of the segments before and after them, when both new segments are valid
+    motions (with `slack` metres to spare); the corner lies outside the bend, away from the obstacle."""
+    if max_turn <= 0:
+        return path
+    p = [np.asarray(path[0], float)]
+    for k in range(1, len(path) - 1):  # a vertex without a turn costs a stop for nothing
+        if abs(_turn(p[-1], path[k], path[k + 1])) > 1e-6:
+            p.append(np.asarray(path[k], float))
+    p.append(np.asarray(path[-1], float))
+    changed = True
+    while changed and len(p) >= 4:
+        changed = False
+        for i in range(1, len(p) - 2):
+            t1, t2 = _turn(p[i - 1], p[i], p[i + 1]), _turn(p[i], p[i + 1], p[i + 2])
+            if t1 * t2 <= 0 or abs(t1) + abs(t2) > max_turn:
+                continue
+            d1, d2 = p[i] - p[i - 1], p[i + 2] - p[i + 1]
+            den = d1[0] * d2[1] - d1[1] * d2[0]
+            if abs(den) < 1e-12:
+                continue
+            w = p[i + 1] - p[i - 1]
+            x = p[i - 1] + d1 * ((w[0] * d2[1] - w[1] * d2[0]) / den)
+            seg = np.array([[*p[i - 1], *x], [*x, *p[i + 2]]])
+            if costmap.are_motions_valid(seg, slack).all():
+                p[i:i + 2] = [x]
+                changed = True
+                break
+    return np.array(p)
 
 
 def _iterations(n: int):
