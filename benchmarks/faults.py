@@ -54,7 +54,7 @@ def run(root: Path, *over: str, timeout: float = 1800) -> dict:
 
 
 def markers(root: Path) -> set[tuple[str, str]]:
-    return {(p.parent.name, p.stem) for p in (root / "_markers").glob("*/*.json")}
+    return {(p.parent.name, p.stem) for p in (root / "_markers").glob("*/*.json") if not p.stem.startswith("_")}
 
 
 def statuses(summary: dict, status: str) -> set[tuple[str, str]]:

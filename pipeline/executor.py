@@ -17,7 +17,7 @@ from pipeline.backends import run_on_dask
 from pipeline.catalog import Catalog, SceneEntry
 from pipeline.graph import closure, config_hashes
 from pipeline.summary import build_summary, print_summary, write_summary
-from pipeline.tasks import run_finalize, run_task
+from pipeline.tasks import finalize_due, run_finalize, run_task
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 
@@ -86,8 +86,7 @@ def execute(cfg, console: Console | None = None) -> dict:
             console.print(f"removed a killed writer's partial output: {p}")
     # dataset-level steps of the stages that have one and computed at least one scene in this run
     # (a fully cached stage leaves its dataset-level files as they are)
-    results += [run_finalize(st, cfg, catalog) for st in stages
-                if st.finalize and any(r["stage"] == st.name and r["status"] == "done" for r in results)]
+    results += [run_finalize(st, cfg, catalog) for st in stages if finalize_due(st, results, catalog)]
     summary = build_summary(results, started, cat_file, [cfg.scenes.shard, cfg.scenes.num_shards], stages, hashes)
     print_summary(summary, console)
     try:

@@ -62,6 +62,8 @@ def _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, veri
     damaged = manifest_problem(old.get("manifest"), catalog.root, verify) \
         if old is not None and old.get("config_hash") == config_hash else None
     marker.unlink(missing_ok=True)  # outputs are about to change: the old marker must not vouch for them
+    if stage.finalize:  # nor may the dataset-level files built from them (a later run rebuilds them)
+        catalog.path("finalize_marker", stage=stage_name).unlink(missing_ok=True)
     t0 = time.perf_counter()
     try:
         info = stage.run(scene, cfg, catalog) or {}
@@ -99,6 +101,17 @@ def notes(info: dict) -> dict:
     return {k: info[k] for k in ("shortfall", "warnings") if info.get(k)}
 
 
+def finalize_due(stage, results: list[dict], catalog: Catalog) -> bool:
+    """Whether a stage's dataset-level step must run: it computed a scene in this run, or its
+    dataset files were never finished since a scene last changed (a run killed in between: the
+    scene tasks of the next run are all cached, yet the dataset files are missing or stale)."""
+    if not stage.finalize or not any(r["stage"] == stage.name for r in results):
+        return False
+    if any(r["stage"] == stage.name and r["status"] == "done" for r in results):
+        return True
+    return not catalog.path("finalize_marker", stage=stage.name).exists()
+
+
 def run_finalize(stage, cfg, catalog: Catalog) -> dict:
     """A stage's dataset-level step, recorded like a task."""
     base = {"stage": f"{stage.name}:finalize", "scene_id": "*", "scene": "dataset"}
@@ -106,6 +119,8 @@ def run_finalize(stage, cfg, catalog: Catalog) -> dict:
     try:
         with locked(catalog.path("locks", stage=stage.name, key="finalize")):  # one writer of dataset files
             info = stage.finalize(cfg, catalog) or {}
+            write_marker(catalog.path("finalize_marker", stage=stage.name),
+                         {"stage": stage.name, "outputs": info.get("outputs", [])})
         return {**base, "status": "done", "duration_s": round(time.perf_counter() - t0, 3),
                 "outputs": info.get("outputs", [])}
     except Exception as e:  # noqa: BLE001 - recorded like a scene failure
