@@ -256,8 +256,41 @@ def determinism(ref: Path, work: Path) -> dict:
     return result("determinism", len(variants), survived, bad_all, variants=out)
 
 
+def out_of_memory(ref: Path, work: Path) -> dict:
+    """One scene far too large for the worker's memory limit, beside the reference's two: the
+    large scene fails with the reason (its worker killed by Dask's nanny on every try), the two
+    others complete and match the reference."""
+    from benchmarks.fuzz_readers import small_scene
+    from navcore.gaussians.formats import write_inria_ply
+
+    big = work / "big" / "scene.ply"
+    big.parent.mkdir(parents=True)
+    write_inria_ply(big, small_scene(10_000_000, 0, 3))  # 620 MB on disk, well over 1.5 GB once read
+    cat = work / "catalog.yaml"
+    cat.write_text("synthetic: {count: 2, first_seed: 0, prefix: synth, group: synthetic}\n"
+                   f"scenes:\n  - {{name: too_big, group: big, path: {big}, format: inria_ply}}\n")
+    root = work / "oom"
+    r = run(root, f"scenes.catalog={cat}", "executor=local", "executor.n_workers=1", "executor.threads_per_worker=1",
+            "executor.memory_limit=1500MB")
+    fails = r["summary"].get("failures", [])
+    failed_scenes = {f["scene"] for f in fails}
+    reason = next((f["error"] for f in fails if f["scene"] == "too_big" and f["status"] == "failed"), "")
+    shutil.rmtree(big.parent, ignore_errors=True)
+    bad = mismatches(ref, root)
+    # the big scene's outputs (none trusted) are not in the reference; the others must match it
+    bad = [b for b in bad if "/big/" not in b and not any(x in b for x in _scene_ids_of(root, "too_big"))]
+    ok = failed_scenes == {"too_big"} and "memory" in reason
+    return result("out_of_memory", 1, int(ok and not bad), bad, reason=reason[:300],
+                  failed_scenes=sorted(failed_scenes))
+
+
+def _scene_ids_of(root: Path, name: str) -> list[str]:
+    s = json.loads((root / "_runs" / "latest.json").read_text()) if (root / "_runs" / "latest.json").exists() else {}
+    return sorted({r["scene_id"] for r in s.get("results", []) if r["scene"] == name})
+
+
 SCENARIOS = {"kill_run": kill_run, "kill_worker": kill_worker, "full_disk": full_disk, "concurrent": concurrent,
-             "damaged": damaged, "determinism": determinism}
+             "damaged": damaged, "determinism": determinism, "out_of_memory": out_of_memory}
 
 
 def reference(work: Path) -> Path:

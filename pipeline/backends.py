@@ -205,8 +205,11 @@ def run_on_dask(cfg, catalog: Catalog, chain, record, console: Console) -> None:
                 r = fut.result()
             except Exception as e:  # noqa: BLE001 - a killed worker, a lost dependency
                 name, sc = what[fut.key]
-                r = {"stage": name, "scene_id": sc.scene_id, "scene": sc.name, "status": "failed",
-                     "error": f"{type(e).__name__}: {e}"}
+                error = f"{type(e).__name__}: {e}"
+                if type(e).__name__ == "KilledWorker":
+                    error = (f"the worker running it died every time it was tried (out of memory? "
+                             f"executor.memory_limit={cfg.executor.memory_limit}; or killed from outside): {e}")
+                r = {"stage": name, "scene_id": sc.scene_id, "scene": sc.name, "status": "failed", "error": error}
             record(r)
     finally:
         if dask:
