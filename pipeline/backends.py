@@ -15,6 +15,7 @@ import subprocess
 import time
 from dataclasses import dataclass
 
+from distributed.diagnostics.plugin import WorkerPlugin
 from rich.console import Console
 
 from pipeline.catalog import Catalog
@@ -157,13 +158,37 @@ def dask_client(ex):
     return Client(cluster), cluster, Placement()
 
 
-def run_placed(*args) -> dict:
-    """run_task, its result saying where and when it ran (worker name, the GPU it was given, the
-    start time: the scale benchmark measures the scheduler's gaps between tasks from it)."""
+RUNS: dict[str, tuple] = {}
+"""(cfg, catalog) of the runs this worker process serves, by run id (set by RunContext)."""
+
+
+class RunContext(WorkerPlugin):
+    """Worker plugin carrying one run's config and catalog to every worker, once, including the
+    workers that start later or restart after a crash (the scheduler hands registered plugins to
+    each new worker). Tasks name the run by id: neither O(scenes^2) pickled copies in the client
+    (by value, 20,000 tasks took it to 13 GB) nor data that a dying worker can take with it (a
+    scattered copy is lost once every worker that held it has died: the kill_worker fault
+    scenario cancelled every pending task that way)."""
+
+    def __init__(self, run_id: str, cfg, catalog):
+        self.run_id, self.cfg, self.catalog = run_id, cfg, catalog
+        self.name = f"navarena-run-{run_id}"
+
+    def setup(self, worker):
+        RUNS[self.run_id] = (self.cfg, self.catalog)
+
+    def teardown(self, worker):
+        RUNS.pop(self.run_id, None)
+
+
+def run_placed(stage_name: str, scene, run_id: str, *args) -> dict:
+    """run_task of the run `run_id`, its result saying where and when it ran (worker name, the GPU
+    it was given, the start time: the scale benchmark measures the scheduler's gaps from it)."""
     from dask.distributed import get_worker
 
     t0 = time.time()
-    r = run_task(*args)
+    cfg, catalog = RUNS[run_id]
+    r = run_task(stage_name, scene, cfg, catalog, *args)
     r["worker"], r["started"] = str(get_worker().name), round(t0, 3)
     gpu = os.environ.get("CUDA_VISIBLE_DEVICES")
     if gpu:
@@ -191,10 +216,9 @@ def run_on_dask(cfg, catalog: Catalog, chain, record, console: Console) -> None:
             dask["client"], dask["cluster"], dask["placement"] = dask_client(cfg.executor)
             if dask["client"].dashboard_link:
                 console.print(f"Dask dashboard: {dask['client'].dashboard_link}")
-            # the config and the catalog go to the cluster once; tasks refer to them by key (passed
-            # by value, each of 20,000 tasks carried its own pickled copy: the client reached 13 GB)
-            dask["cfg"], dask["catalog"] = dask["client"].scatter([cfg, catalog], broadcast=True, hash=False)
-        return dask["client"].submit(run_placed, st.name, scene, dask["cfg"], dask["catalog"], h, force, *ups,
+            # the config and the catalog go to every worker once, restarted ones included
+            dask["client"].register_plugin(RunContext(run_id, cfg, catalog))
+        return dask["client"].submit(run_placed, st.name, scene, run_id, h, force, *ups,
                                      key=f"{st.name}-{scene.scene_id}-{h}-{run_id}", pure=False,
                                      resources=dask["placement"].resources(st))
     try:

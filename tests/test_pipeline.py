@@ -489,21 +489,29 @@ def test_gpu_job_workers_are_pinned_to_their_own_gpu(monkeypatch):
         assert os.environ["CUDA_VISIBLE_DEVICES"] == want
 
 
-def test_tasks_refer_to_one_scattered_config(tmp_path, make_cfg, monkeypatch):
-    """The config and the catalog travel to the cluster once; each task carries their keys, not a
-    pickled copy (20,000 tasks by value took the client to 13 GB in the scale simulation)."""
-    from dask.distributed import Client, Future
+def test_tasks_refer_to_one_config_that_outlives_workers(tmp_path, make_cfg, monkeypatch):
+    """The config and the catalog travel to the cluster once, as a worker plugin (restarted
+    workers get it too); each task carries the run's id, not a pickled copy (20,000 tasks by
+    value took the client to 13 GB in the scale simulation)."""
+    from dask.distributed import Client
 
-    seen = []
-    submit = Client.submit
+    from pipeline.backends import RunContext
+
+    seen, plugins = [], []
+    submit, register = Client.submit, Client.register_plugin
 
     def spy(self, fn, *args, **kw):
         seen.append(args)
         return submit(self, fn, *args, **kw)
+
+    def spy_plugin(self, plugin, *a, **kw):
+        plugins.append(plugin)
+        return register(self, plugin, *a, **kw)
     monkeypatch.setattr(Client, "submit", spy)
+    monkeypatch.setattr(Client, "register_plugin", spy_plugin)
     cfg = make_cfg(tmp_path / "d", "executor.kind=local", "executor.n_workers=1", "executor.dashboard=false",
                    "executor.processes=false", "stages=[ingest]", "scenes.count=2")
     s = execute(cfg)
     assert not s["failures"] and len(seen) == 4  # synthesize + ingest for 2 scenes
-    assert all(isinstance(a[2], Future) and isinstance(a[3], Future) for a in seen)
-    assert len({a[2].key for a in seen}) == 1  # one copy of the config for all tasks
+    assert len(plugins) == 1 and isinstance(plugins[0], RunContext)
+    assert all(a[2] == plugins[0].run_id and isinstance(a[2], str) for a in seen)  # the run's id, not the config
