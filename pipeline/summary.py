@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as dt
 import json
+import os
 
 from rich.console import Console
 from rich.table import Table
@@ -29,11 +30,13 @@ def build_summary(results: list[dict], started: dt.datetime, cat_file, shard: li
 
 
 def write_summary(summary: dict, catalog: Catalog, started: dt.datetime, shard: int):
-    """run-{time}-shard{k}.json and latest.json under the runs folder; returns latest.json's path."""
+    """run-{time}-shard{k}-{pid}.json and latest.json under the runs folder; returns latest.json's path."""
     runs = catalog.path("runs")
     stamp = started.strftime("%Y%m%dT%H%M%S")
     text = json.dumps(summary, indent=1, default=str)
-    write_text_atomic(runs / f"run-{stamp}-shard{shard}.json", text)
+    # the process id too: two runs started in the same second (two shards, or the same run twice)
+    # must not overwrite each other's summary
+    write_text_atomic(runs / f"run-{stamp}-shard{shard}-{os.getpid()}.json", text)
     write_text_atomic(runs / "latest.json", text)
     return runs / "latest.json"
 
