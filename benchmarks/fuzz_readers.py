@@ -138,7 +138,7 @@ def _lie(data: bytes, value: int) -> bytes:
 
 def mutate(data: bytes, op: str, a: int, b: int, poison: float, header: int, compressed: bool = False) -> bytes | None:
     """The member's new bytes (None: replace the member by a directory). compressed: the member is
-    stored compressed (a gzip payload, a zip member), so a bomb inflates to 32-256 MB; appended to
+    stored compressed (a gzip payload, a zip member), so a bomb inflates to 4-256 MB; appended to
     a plain file it adds 1-4 MB (a big file, not a bomb)."""
     n = len(data)
     if op == "truncate":
@@ -172,7 +172,7 @@ def mutate(data: bytes, op: str, a: int, b: int, poison: float, header: int, com
     if op == "directory":
         return None
     if op == "bomb":  # a stream that inflates to far more than its size: the payload, then zeros
-        return data + bytes(min(1 << 28, (a % 8 + 1) << 25) if compressed else (a % 4 + 1) << 20)
+        return data + bytes((1 << (22 + a % 7)) if compressed else (a % 4 + 1) << 20)  # 4-256 MB inflated
     if op == "duplicate_tail":
         return data + data[header:][: a % (n + 1)]
     raise ValueError(op)
@@ -217,7 +217,7 @@ def apply_case(seed: Path, work: Path, member: int, op: str, a: int, b: int, poi
     elif kind == "gzip":
         raw = gzip.decompress(p.read_bytes())
         new = mutate(raw, op, a, b, poison, 16, compressed=True)
-        _put(p, None if new is None else gzip.compress(new, mtime=0))
+        _put(p, None if new is None else gzip.compress(new, compresslevel=1, mtime=0))  # level 1: bombs are fast to build
     else:
         name = kind[4:]
         with zipfile.ZipFile(p) as zf:
@@ -227,7 +227,7 @@ def apply_case(seed: Path, work: Path, member: int, op: str, a: int, b: int, poi
             del files[name]
         else:
             files[name] = new
-        with zipfile.ZipFile(p, "w", zipfile.ZIP_DEFLATED) as zf:
+        with zipfile.ZipFile(p, "w", zipfile.ZIP_DEFLATED, compresslevel=1) as zf:
             for n, d in files.items():
                 zf.writestr(zipfile.ZipInfo(n, date_time=(1980, 1, 1, 0, 0, 0)), d)
     return target
