@@ -83,3 +83,19 @@ def test_npy_headers_that_lie_allocate_nothing(tmp_path):
     _expect_rejected(tmp_path / "f", "npy_folder", "header claims")
     np.save(tmp_path / "f" / "coord.npy", np.array([object()] * 40))  # pickled objects are never loaded
     _expect_rejected(tmp_path / "f", "npy_folder", "object")
+
+
+def test_ply_headers_with_broken_lines_are_format_errors(tmp_path):
+    from navcore.gaussians.formats import write_inria_ply
+
+    write_inria_ply(tmp_path / "ok.ply", small_scene(40, 3, 4))
+    raw = (tmp_path / "ok.ply").read_bytes()
+    cases = {
+        "joined.ply": raw.replace(b"f_rest_2\n", b"f_rest_2*", 1),        # a newline bit-flipped away
+        "twice.ply": raw.replace(b"f_rest_34\n", b"f_rest_33\n", 1),      # a property declared twice
+        "short.ply": raw.replace(b"property float z\n", b"property float\n", 1),
+        "count.ply": raw.replace(b"element vertex 40", b"element vertex 4\x120", 1),
+    }
+    for name, data in cases.items():
+        (tmp_path / name).write_bytes(data)
+        _expect_rejected(tmp_path / name, "ply", "PLY")

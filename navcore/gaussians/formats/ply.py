@@ -6,6 +6,7 @@ its vertex count is caught before any data is read, with a message that says by 
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +21,8 @@ _PLY_TYPES = {
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }
 _MAX_HEADER_BYTES = 1 << 20
+_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+_REST = re.compile(r"f_rest_[0-9]{1,3}")
 
 
 @dataclass
@@ -50,9 +53,11 @@ def parse_header(path: Path) -> tuple[str, list[PlyElement], int]:
         if not tok or tok[0] in ("ply", "comment", "obj_info"):
             continue
         if tok[0] == "format":
-            fmt = tok[1]
+            fmt = tok[1] if len(tok) > 1 else None
         elif tok[0] == "element":
             try:
+                if len(tok) != 3 or not _NAME.fullmatch(tok[1]) or not tok[2].isdigit():
+                    raise ValueError
                 count = int(tok[2])
             except (IndexError, ValueError):
                 raise SceneFormatError(path, f"bad PLY element line {raw!r}") from None
@@ -62,11 +67,19 @@ def parse_header(path: Path) -> tuple[str, list[PlyElement], int]:
         elif tok[0] == "property":
             if not elements:
                 raise SceneFormatError(path, f"PLY property before any element: {raw!r}")
-            if tok[1] == "list":
+            if len(tok) > 1 and tok[1] == "list":
                 raise SceneFormatError(path, f"PLY list property {tok[-1]!r} is not a 3DGS attribute (mesh PLY?)")
+            if len(tok) != 3 or not _NAME.fullmatch(tok[2]):
+                raise SceneFormatError(path, f"bad PLY property line {raw!r}")
             if tok[1] not in _PLY_TYPES:
                 raise SceneFormatError(path, f"unknown PLY property type {tok[1]!r}")
+            if any(n == tok[2] for n, _ in elements[-1].properties):
+                raise SceneFormatError(path, f"PLY element {elements[-1].name!r} declares property {tok[2]!r} twice")
             elements[-1].properties.append((tok[2], _PLY_TYPES[tok[1]]))
+        elif tok[0] == "format" or tok[0] == "end_header":
+            pass
+        else:
+            raise SceneFormatError(path, f"unknown PLY header line {raw!r}")
     if fmt not in ("binary_little_endian", "binary_big_endian", "ascii"):
         raise SceneFormatError(path, f"unsupported PLY format {fmt!r}")
     return fmt, elements, header_len
@@ -144,7 +157,7 @@ def read_ply(path: str | Path, level: int | None = None) -> GaussianScene:
     _require(path, v, ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
                        "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"], "INRIA 3DGS PLY vertex")
     n = len(v)
-    rest = sorted((p for p in v.dtype.names if p.startswith("f_rest_")), key=lambda s: int(s[7:]))
+    rest = sorted((p for p in v.dtype.names if _REST.fullmatch(p)), key=lambda s: int(s[7:]))
     if len(rest) not in (0, 9, 24, 45):
         raise SceneFormatError(path, f"{len(rest)} f_rest_* properties; expected 0, 9, 24 or 45 (SH degree 0-3)")
     k = len(rest) // 3 + 1
@@ -204,7 +217,7 @@ def _decode_supersplat(path: Path, chunk: np.ndarray, v: np.ndarray, sh_el: np.n
     k = 1
     rest = None
     if sh_el is not None and len(sh_el) == n:
-        names = sorted((p for p in sh_el.dtype.names if p.startswith("f_rest_")), key=lambda s: int(s[7:]))
+        names = sorted((p for p in sh_el.dtype.names if _REST.fullmatch(p)), key=lambda s: int(s[7:]))
         if len(names) in (9, 24, 45):
             k = len(names) // 3 + 1
             # uint8 -> [-4, 4) as in SuperSplat: (x / 256 - 0.5) * 8, channel-major like INRIA
