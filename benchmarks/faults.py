@@ -45,8 +45,8 @@ def start(root: Path, *over: str, log: Path | None = None) -> subprocess.Popen:
                             stderr=subprocess.STDOUT, start_new_session=True)
 
 
-def run(root: Path, *over: str, timeout: float = 1800) -> dict:
-    p = start(root, *over, log=root.parent / f"{root.name}.log")
+def run(root: Path, *over: str, timeout: float = 1800, log: Path | None = None) -> dict:
+    p = start(root, *over, log=log or root.parent / f"{root.name}.log")
     rc = p.wait(timeout)
     summary = json.loads((root / "_runs" / "latest.json").read_text()) if (root / "_runs" / "latest.json").exists() \
         else {}
@@ -163,13 +163,20 @@ def full_disk(ref: Path, work: Path) -> dict:
         return result("full_disk", 0, 0, [], skipped="cannot mount a tmpfs here (needs root)")
     try:
         root = mnt / "data"
-        r1 = run(root)
+        log = work / "full_disk_run1.log"
+        r1 = run(root, log=log)
         fails = r1["summary"].get("failures", [])
+        if not fails:  # no room left for the run summary itself: the console said it
+            import re
+
+            text = re.sub(r"\s+", " ", log.read_text(errors="replace"))
+            fails = [{"stage": m.group(1), "scene_id": m.group(2), "error": "disk full"}
+                     for m in re.finditer(r"failed (\S+) (\w+) \([^)]*\): disk full", text)]
         full = [f for f in fails if "disk full" in f.get("error", "")]
         trusted = [f"{f['stage']}/{f['scene_id']}" for f in full if (root / "_markers" / f["stage"] /
                                                                       f"{f['scene_id']}.json").exists()]
         subprocess.run(["mount", "-o", f"remount,size={size * 3}", str(mnt)], check=True)
-        r2 = run(root)
+        r2 = run(root, log=work / "full_disk_run2.log")
         bad = mismatches(ref, root)
         ok = bool(full) and not trusted and r2["rc"] == 0 and not r2["summary"].get("failures")
         return result("full_disk", len(full), len(full) if ok and not bad else 0, bad,
