@@ -21,6 +21,7 @@ import struct
 import time
 import tracemalloc
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -85,7 +86,7 @@ def make_seed(kind: str, folder: Path) -> Path:
     from navcore.gaussians.formats import write_inria_ply, write_npy_folder, write_sog, write_sog_lod, write_splat, write_spz
 
     folder.mkdir(parents=True, exist_ok=True)
-    s = small_scene(40, {"inria_ply": 3, "spz_v4": 2, "sog": 1}.get(kind, 0), hash(kind) % 1000)
+    s = small_scene(40, {"inria_ply": 3, "spz_v4": 2, "sog": 1}.get(kind, 0), zlib.crc32(kind.encode()) % 1000)
     if kind == "inria_ply":
         write_inria_ply(folder / "s.ply", s)
         return folder / "s.ply"

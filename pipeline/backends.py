@@ -125,10 +125,11 @@ def dask_client(ex):
     for name in list(logging.root.manager.loggerDict):
         if name.startswith(("distributed", "bokeh", "tornado")):
             logging.getLogger(name).setLevel(logging.WARNING)
-    # a worker's death counts against every task it held: hold only the running one (no queue on
-    # the worker), and let a task survive two deaths (a killed or crashed worker, then one more)
-    # before its scene fails; a scene that kills its worker each time (out of memory) fails then
-    dask.config.set({"distributed.scheduler.allowed-failures": 2, "distributed.scheduler.worker-saturation": 1.0})
+    # a worker's death counts against every task it held, queued ones too: a task survives
+    # executor.allowed_failures deaths (preempted or crashed workers) before its scene fails; a
+    # scene that kills its worker each time (out of memory) fails after as many tries
+    dask.config.set({"distributed.scheduler.allowed-failures": int(ex.allowed_failures),
+                     "distributed.scheduler.worker-saturation": 1.0})
     if ex.kind == "address" or ex.address:
         if not ex.address:
             raise ValueError("executor.kind=address needs executor.address=tcp://host:port")

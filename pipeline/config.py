@@ -88,6 +88,9 @@ class ExecutorConfig:
     """Workers are processes (true) or threads (false)."""
     memory_limit: str = "auto"
     """Per-worker memory limit of the LocalCluster."""
+    allowed_failures: int = 5
+    """Worker deaths a task survives (Dask reruns it elsewhere) before its scene fails: a death counts
+    against every task the worker held, queued ones too, so a preemptible cluster needs a few."""
     address: str | None = None
     """tcp://host:port of an existing scheduler; setting it implies kind=address."""
     dashboard: bool = True

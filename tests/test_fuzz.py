@@ -99,3 +99,23 @@ def test_ply_headers_with_broken_lines_are_format_errors(tmp_path):
     for name, data in cases.items():
         (tmp_path / name).write_bytes(data)
         _expect_rejected(tmp_path / name, "ply", "PLY")
+
+
+def test_spz_v4_frame_that_declares_more_than_its_stream_is_refused_before_allocating(tmp_path):
+    import struct as _struct
+
+    import zstandard
+
+    write_spz(tmp_path / "ok.spz", small_scene(40, 0, 5), version=4)
+    data = bytearray((tmp_path / "ok.spz").read_bytes())
+    fields = _struct.Struct("<IIIBBBBI12s").unpack_from(data)  # the v4 header (NGSP, 32 bytes)
+    toc, n_streams = fields[7], fields[6]
+    entries = np.frombuffer(bytes(data), dtype="<u8", count=2 * n_streams, offset=toc).reshape(n_streams, 2).copy()
+    # the first stream replaced by a frame that states 256 MB of content (a few hundred bytes)
+    bomb = zstandard.ZstdCompressor(write_content_size=True).compress(bytes(1 << 28))
+    start = toc + 16 * n_streams
+    body = bytes(data[start + int(entries[0, 0]):])
+    entries[0, 0] = len(bomb)
+    out = bytes(data[:toc]) + entries.astype("<u8").tobytes() + bomb + body
+    (tmp_path / "bomb.spz").write_bytes(out)
+    _expect_rejected(tmp_path / "bomb.spz", "spz", "frame declares")

@@ -126,6 +126,11 @@ def _read_v4(path: Path, data: bytes) -> tuple[int, int, int, int, dict]:
             raise SceneFormatError(path, f".spz v4 stream '{name}' ({csize:,} bytes at {off:,}) runs past the end "
                                          f"of the file ({len(data):,} bytes): truncated?")
         try:
+            # a frame header that states its size makes zstd allocate that size first: check it
+            declared = zstandard.frame_content_size(data[off:off + csize])
+            if declared not in (-1, usize):
+                raise SceneFormatError(path, f".spz v4 stream '{name}' frame declares {declared:,} bytes, the table of "
+                                             f"contents {usize:,}")
             raw = dctx.decompress(data[off:off + csize], max_output_size=usize)
         except zstandard.ZstdError as e:
             raise SceneFormatError(path, f".spz v4 stream '{name}' is not valid ZSTD ({e})") from None
