@@ -337,12 +337,19 @@ def main(argv=None) -> dict:
     ap.add_argument("--kills", type=int, default=20)
     ap.add_argument("--only", default=",".join(SCENARIOS))
     ap.add_argument("--out", default="data/08_reports")
+    ap.add_argument("--merge", nargs="+", type=Path,
+                    help="instead of running: bench_faults.json files, later ones replacing earlier scenarios")
     args = ap.parse_args(argv)
+    rep = {"machine": machine(), "base_overrides": list(BASE), "scenarios": {}}
+    if args.merge:
+        for f in args.merge:
+            r = json.loads(Path(f).read_text())
+            rep["scenarios"].update(r["scenarios"])
+            rep.setdefault("merged_from", []).append({"file": str(f), "scenarios": list(r["scenarios"])})
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
-    ref = reference(work)
-    rep = {"machine": machine(), "base_overrides": list(BASE), "scenarios": {}}
-    for name in args.only.split(","):
+    ref = None if args.merge else reference(work)
+    for name in ([] if args.merge else args.only.split(",")):
         d = work / name
         if d.exists():
             shutil.rmtree(d, ignore_errors=True)

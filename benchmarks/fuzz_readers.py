@@ -344,10 +344,17 @@ def main(argv=None) -> dict:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--work", default="/tmp/navarena_fuzz")
     ap.add_argument("--out", default="data/08_reports")
+    ap.add_argument("--merge", nargs="+", type=Path,
+                    help="instead of fuzzing: fuzz_readers.json files, later ones replacing earlier kinds")
     args = ap.parse_args(argv)
     rep = {"machine": machine(), "cases_per_kind": args.cases, "kinds": {}}
     t0 = time.perf_counter()
-    for kind in args.kinds.split(","):
+    if args.merge:
+        for f in args.merge:
+            r = json.loads(Path(f).read_text())
+            rep["kinds"].update(r["kinds"])
+            rep.setdefault("merged_from", []).append({"file": str(f), "kinds": list(r["kinds"])})
+    for kind in ([] if args.merge else args.kinds.split(",")):
         t = time.perf_counter()
         r = fuzz_kind(kind, args.cases, args.seed, Path(args.work) / kind,
                       log=lambda k, f: print(json.dumps({"kind": k, **f}), flush=True))
