@@ -346,7 +346,15 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--merge", nargs="+", type=Path,
                     help="instead of fuzzing: fuzz_readers.json files, later ones replacing earlier kinds")
+    ap.add_argument("--address-space-gb", type=float, default=16.0,
+                    help="cap this process's address space, so that an allocation a hostile file asks "
+                         "for fails here as a MemoryError (counted) instead of taking the machine")
     args = ap.parse_args(argv)
+    if args.address_space_gb > 0:
+        import resource
+
+        cap = int(args.address_space_gb * (1 << 30))
+        resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
     rep = {"machine": machine(), "cases_per_kind": args.cases, "kinds": {}}
     t0 = time.perf_counter()
     if args.merge:
