@@ -10,7 +10,7 @@ import json
 import os
 from pathlib import Path
 
-from navcore.io.atomic import write_text_atomic
+from navcore.io.atomic import TEMP_PREFIXES, write_text_atomic
 
 VERIFY = ("size", "checksum", "none")
 """How a marker's outputs are checked before the marker is trusted: file sizes (default),
@@ -39,9 +39,9 @@ def _files(path: Path):
         yield path
         return
     for dirpath, dirnames, filenames in os.walk(path):
-        dirnames[:] = sorted(d for d in dirnames if not d.startswith((".tmp-", ".old-")))
+        dirnames[:] = sorted(d for d in dirnames if not d.startswith(TEMP_PREFIXES))
         for f in sorted(filenames):
-            if not f.startswith((".tmp-", ".old-")):
+            if not f.startswith(TEMP_PREFIXES):
                 yield Path(dirpath) / f
 
 

@@ -27,19 +27,39 @@ def _alive(pid: int) -> bool:
     return True
 
 
+TEMP_PREFIXES = (".tmp-", ".old-")
+"""Names of atomic writes in progress: ``.tmp-{final name}-{host}-{pid}-{random}`` (the new
+output) and ``.old-{final name}-{pid}`` (a folder being replaced)."""
+
+
+def _dead_writers(name: str, final: str | None = None) -> bool:
+    """Whether a temporary's writer was on this host and is gone. ``final``: the final name when
+    known (else the host is looked for in the name, which may itself hold '-')."""
+    if name.startswith(".tmp-"):
+        if final is not None:
+            parts = name[len(f".tmp-{final}-"):].split("-")
+            host_pid = [(parts[0], parts[1])] if len(parts) >= 3 else []
+        else:
+            parts = name.split("-")
+            host_pid = [(parts[i], parts[i + 1]) for i in range(2, len(parts) - 1) if parts[i] == HOST][-1:]
+        return bool(host_pid) and host_pid[0][0] == HOST and host_pid[0][1].isdigit() and \
+            not _alive(int(host_pid[0][1]))
+    pid = name.rsplit("-", 1)[-1]
+    return name.startswith(".old-") and pid.isdigit() and not _alive(int(pid))
+
+
+def _remove(p: Path) -> None:
+    shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
+
+
 def remove_stale_temporaries(final: Path) -> list[Path]:
     """Remove the ``.tmp-`` / ``.old-`` siblings of ``final`` left by dead writers on this host."""
     removed = []
-    for p in final.parent.glob(f".tmp-{final.name}-*"):
-        parts = p.name[len(f".tmp-{final.name}-"):].split("-")
-        if len(parts) >= 3 and parts[0] == HOST and parts[1].isdigit() and not _alive(int(parts[1])):
-            shutil.rmtree(p, ignore_errors=True)
-            removed.append(p)
-    for p in final.parent.glob(f".old-{final.name}-*"):
-        pid = p.name.rsplit("-", 1)[-1]
-        if pid.isdigit() and not _alive(int(pid)):
-            shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
-            removed.append(p)
+    for prefix in TEMP_PREFIXES:
+        for p in final.parent.glob(f"{prefix}{final.name}-*"):
+            if _dead_writers(p.name, final.name):
+                _remove(p)
+                removed.append(p)
     return removed
 
 
@@ -48,21 +68,11 @@ def sweep_stale_temporaries(root: Path) -> list[Path]:
     killed run's partial outputs whose final name was never written again)."""
     removed = []
     for dirpath, dirnames, filenames in os.walk(root):
-        for name in [d for d in dirnames if d.startswith((".tmp-", ".old-"))] + \
-                [f for f in filenames if f.startswith((".tmp-", ".old-"))]:
-            p = Path(dirpath) / name
-            if name.startswith(".tmp-"):
-                parts = name.split("-")
-                # .tmp-{final name}-{host}-{pid}-{random}: the final name may hold '-'
-                host_pid = [(parts[i], parts[i + 1]) for i in range(2, len(parts) - 1) if parts[i] == HOST]
-                dead = bool(host_pid) and host_pid[-1][1].isdigit() and not _alive(int(host_pid[-1][1]))
-            else:
-                pid = name.rsplit("-", 1)[-1]
-                dead = pid.isdigit() and not _alive(int(pid))
-            if dead:
-                shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
-                removed.append(p)
-        dirnames[:] = [d for d in dirnames if not d.startswith((".tmp-", ".old-"))]
+        for name in dirnames + filenames:
+            if name.startswith(TEMP_PREFIXES) and _dead_writers(name):
+                _remove(Path(dirpath) / name)
+                removed.append(Path(dirpath) / name)
+        dirnames[:] = [d for d in dirnames if not d.startswith(TEMP_PREFIXES)]
     return removed
 
 

@@ -76,8 +76,6 @@ def parse_header(path: Path) -> tuple[str, list[PlyElement], int]:
             if any(n == tok[2] for n, _ in elements[-1].properties):
                 raise SceneFormatError(path, f"PLY element {elements[-1].name!r} declares property {tok[2]!r} twice")
             elements[-1].properties.append((tok[2], _PLY_TYPES[tok[1]]))
-        elif tok[0] == "format" or tok[0] == "end_header":
-            pass
         else:
             raise SceneFormatError(path, f"unknown PLY header line {raw!r}")
     if fmt not in ("binary_little_endian", "binary_big_endian", "ascii"):
