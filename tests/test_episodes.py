@@ -241,6 +241,10 @@ def test_generator_yields_valid_balanced_episodes(task, room_with_door):
     assert len(res.episodes) == 24
     diff = [e["difficulty"] for e in res.episodes]
     assert {diff.count(n) for n in ("easy", "medium", "hard")} == {8}
+    centres = np.array([[e["goal_position_x"], e["goal_position_y"]] for e in res.episodes]) if task != "objectnav" \
+        else np.array([[3.5, 2.5]] * len(res.episodes))
+    starts = np.array([[e["start_position_x"], e["start_position_y"]] for e in res.episodes])
+    assert (np.hypot(*(starts - centres).T) > tcfg.success_radius).all()  # no start inside its own region
     for e in res.episodes:
         assert 1.0 <= e["geodesic_distance"] <= 30.0 + 1e-6
         assert e["geodesic_distance"] <= e["path_length"] + 1e-6
@@ -275,6 +279,7 @@ def test_stored_episodes_query_with_pandas_and_pass_the_recheck(episode_run):
         if task == "objectnav":
             centres = np.array([g["position"][:2] for g in json.loads(e["goals_json"])])
         success = lambda x, y: bool((np.hypot(*(centres - (x, y)).T) <= r + 1e-9).any())  # noqa: E731
+        assert not success(e["start_position_x"], e["start_position_y"]), (task, eid)  # no trivial episode
         why = check_trajectory(t["position_x"].to_numpy(), t["position_y"].to_numpy(), t["yaw"].to_numpy(),
                                t["linear_velocity"].to_numpy(np.float64), t["angular_velocity"].to_numpy(np.float64),
                                cm, emb.radius, Limits.of(emb), 0.05, success,
@@ -423,3 +428,20 @@ def pc_cast64(col):
     import pyarrow as pa
 
     return col.cast(pa.float64()) if pa.types.is_floating(col.type) else col
+
+
+def test_no_start_inside_its_success_region_even_when_the_geodesic_range_allows_it(room_with_door):
+    """ImageNav with a 1 m region and starts allowed from 0.2 m: every start near the goal is
+    left out (without the rule most of these would start inside and score SR 1 with no step)."""
+    cm = room_with_door
+    g = NavGraph(cm, ~cm.occupancy)
+    ecfg = EpisodesConfig()
+    ecfg.difficulty.balance = False
+    tcfg = TaskConfig(type="imagenav", episodes_per_scene=30, success_radius=1.0, min_geodesic=0.2, max_geodesic=1.6,
+                      trivial_ratio=0.0)
+    gen = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), Embodiment(radius=cm.radius), "t/scene", 5)
+    res = gen.generate()
+    assert len(res.episodes) >= 10
+    d = [math.hypot(e["start_position_x"] - e["goal_position_x"], e["start_position_y"] - e["goal_position_y"])
+         for e in res.episodes]
+    assert min(d) > 1.0

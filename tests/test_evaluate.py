@@ -41,7 +41,8 @@ def test_explicit_stop_outside_the_region_fails(ctx, make_episode):
     _, info = env.step(STOP)
     assert info["done"] and not info["success"] and info["end_reason"] == "stop"
     m = episode_metrics(env.state, 2.0, 1.75, "explicit_stop")
-    assert m["stop_sr"] == 0 and m["sr"] == 0 and m["spl"] == 0 and m["distance_sr"] == 0
+    assert m["stop_sr"] == 0 and m["sr"] == 0 and m["spl"] == 0 and m["osr"] == 0
+    assert math.isnan(m["distance_sr"])  # not defined by an explicit-stop run
     assert m["ne"] == pytest.approx(1.75)
     assert m["soft_spl"] == pytest.approx((1 - 1.75 / 2.0) * 2.0 / 2.0)
     with pytest.raises(RuntimeError):
@@ -57,7 +58,8 @@ def test_distance_protocol_ends_on_entry_and_stop_only_consumes_a_step(ctx, make
     _, info = env.step(MOVE_FORWARD)  # 2.70: inside
     assert info["done"] and info["success"] and info["end_reason"] == "entered"
     m = episode_metrics(env.state, 0.8, 0.3, "distance")
-    assert m["sr"] == 1 and m["distance_sr"] == 1 and m["stop_sr"] == 0
+    assert m["sr"] == 1 and m["distance_sr"] == 1
+    assert math.isnan(m["stop_sr"]) and math.isnan(m["osr"])  # 0 / equal to Distance SR by construction
     assert m["spl"] == pytest.approx(0.8 / max(0.5, 0.8))  # walked 0.5 < geodesic 0.8: SPL 1
     # the budget ends an episode
     env.reset(make_episode(max_steps=3))
@@ -81,11 +83,84 @@ def test_pose_criterion_and_spl_by_hand(ctx, make_episode):
     env.step(STOP)
     m = episode_metrics(env.state, 0.5, 0.25, "explicit_stop")
     assert env.state.path_length == pytest.approx(0.75) and m["spl"] == pytest.approx(0.5 / 0.75)
-    rows = [{"difficulty": "easy", "distance_sr": 1.0, "pose_sr": 0.5}, {"difficulty": "hard", "distance_sr": 0.5,
-                                                                          "pose_sr": 0.0}]
+    rows = [{"difficulty": "easy", "sr": 1.0, "distance_sr": 1.0, "pose_sr": 0.5},
+            {"difficulty": "hard", "sr": 0.5, "distance_sr": 0.5, "pose_sr": 0.0}]
     agg = aggregate(rows)
     assert agg["overall"]["distance_sr"] == 0.75 and agg["overall"]["pose_retention"] == pytest.approx(0.25 / 0.75)
     assert agg["easy"]["episodes"] == 1
+
+
+def test_start_inside_the_region_then_walking_out_is_no_success(ctx, make_episode):
+    """The start pose never counts: Distance SR / OSR need the region entered after an action."""
+    for protocol in ("distance", "explicit_stop"):
+        env = NavEnv(ctx, EnvConfig(render=False, protocol=protocol))
+        env.reset(make_episode(start=(2.6, 0.5, math.pi), goal=(3.0, 0.5), radius=0.5, geodesic=0.2, max_steps=3))
+        for _ in range(3):
+            env.step(MOVE_FORWARD)  # 2.35, 2.10, 1.85: out of the region after the first action
+        s = env.state
+        assert s.done and s.end_reason == "budget" and not s.success
+        m = episode_metrics(s, 0.2, 1.15, protocol)
+        assert m["sr"] == 0 and m["spl"] == 0
+        assert (m["distance_sr"] == 0) if protocol == "distance" else (m["osr"] == 0 and m["stop_sr"] == 0)
+
+
+def test_each_metric_only_from_the_protocol_that_defines_it(ctx, make_episode):
+    env = NavEnv(ctx, EnvConfig(render=False, protocol="explicit_stop"))
+    env.reset(make_episode(start=(2.2, 0.5, 0.0), goal=(3.0, 0.5), geodesic=0.8))
+    for a in (MOVE_FORWARD, MOVE_FORWARD, MOVE_FORWARD, MOVE_FORWARD):  # through the region to 3.2
+        env.step(a)
+    env.step(TURN_LEFT)
+    env.step(TURN_LEFT)
+    m = episode_metrics(env.state, 0.8, 0.2, "explicit_stop")
+    assert m["osr"] == 1 and m["stop_sr"] == 0 and m["sr"] == 0 and math.isnan(m["distance_sr"])
+    rows = [{"difficulty": "easy", **m}]
+    agg = aggregate(rows)["overall"]
+    assert math.isnan(agg["distance_sr"]) and agg["osr"] == 1
+    from stages.evaluate.report import tables
+
+    md = tables({"oracle_explicit_stop": {"protocol": "explicit_stop", "tasks": {"pointnav": aggregate(rows)}}})
+    line = next(x for x in md.splitlines() if x.startswith("| oracle_explicit_stop |"))
+    assert "explicit_stop" in md and line.split("|")[5].strip() == "-"  # Dist. SR column empty
+
+
+def test_collision_rate_per_action_and_per_move(ctx, make_episode):
+    env = NavEnv(ctx, EnvConfig(render=False))
+    env.reset(make_episode(start=(1.0, 0.5, -math.pi / 2), max_steps=10))  # facing the wall at y = 0
+    env.step({"waypoints": [{"x": 0.6}, {"x": 0.6}, {"x": 0.1}]})  # two rejected, one accepted
+    env.step(TURN_LEFT)
+    env.step(TURN_LEFT)
+    env.step(MOVE_FORWARD)
+    m = episode_metrics(env.state, 2.0, 2.0, "distance")
+    assert m["collision_rate"] == pytest.approx(1 / 4)  # 1 of 4 policy actions collided
+    assert m["collision_rate_moves"] == pytest.approx(2 / 4)  # 2 of 4 attempted translations
+
+
+def test_spl_of_an_immediate_success_with_zero_optimum(ctx, make_episode):
+    env = NavEnv(ctx, EnvConfig(render=False, protocol="explicit_stop"))
+    env.reset(make_episode(start=(3.0, 0.5, 0.0), goal=(3.0, 0.5), geodesic=0.0))
+    env.step(STOP)
+    m = episode_metrics(env.state, 0.0, 0.0, "explicit_stop")
+    assert m["sr"] == 1 and m["spl"] == 1 and m["soft_spl"] == 1  # 0/0: no motion needed, none made
+
+
+def test_ne_euclidean_and_geodesic(ctx, make_episode):
+    env = NavEnv(ctx, EnvConfig(render=False))
+    env.reset(make_episode(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), geodesic=2.0))
+    m = episode_metrics(env.state, 2.0, env.geodesic_to_goal(), "distance")
+    assert m["ne"] == pytest.approx(2.0)
+    assert m["ne_geodesic"] == pytest.approx(env.geodesic_to_goal()) and m["ne_geodesic"] >= m["ne"] - 1e-6
+
+
+def test_non_finite_and_malformed_actions_fail_the_episode(ctx, make_episode):
+    env = NavEnv(ctx, EnvConfig(render=False))
+    env.reset(make_episode())
+    for bad in ({"waypoints": [{"x": float("nan")}]}, {"x": float("inf")}, {"v": 0.5, "dt": -1.0},
+                {"waypoints": [{"x": 0.1}] * 1000}, {"waypoints": "far"}, 1.5, "1", True):
+        with pytest.raises(ValueError):
+            env.step(bad)
+    env.step({"x": 0.2, "y": 0.0, "yaw": 0.1})  # navarena-server's flat waypoint
+    assert (env.state.x, env.state.yaw) == pytest.approx((1.2, 0.1))
+    assert all(math.isfinite(v) for v in env.state.pose)
 
 
 def test_dtw_known_answers():
@@ -183,7 +258,7 @@ def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run, make
     assert "random_distance" in tables and "oracle_explicit_stop" in tables and "Table 7" in tables
     from PIL import Image
 
-    plot = np.asarray(Image.open(root / "07_eval" / "distance_sr_by_difficulty.png"))
+    plot = np.asarray(Image.open(root / "07_eval" / "sr_by_difficulty.png"))
     assert plot.ndim == 3 and plot.shape[0] >= 200 and len(np.unique(plot.reshape(-1, plot.shape[2]), axis=0)) > 4
     assert len(list((run / "plots").glob("*.png"))) == 1
     videos = list((run / "videos").glob("*.mp4"))

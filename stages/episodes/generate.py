@@ -166,6 +166,12 @@ class EpisodeGenerator:
             goal_xy, goal_yaw = goal.xy, goal.yaw
             goal_poses = np.array([[goal.xy[0], goal.xy[1], goal.yaw if goal.yaw is not None else 0.0]])
         euclid = float(np.hypot(*(goal_xy - start_xy)))
+        # success-region centres: the goal, or every instance of the ObjectNav category
+        centres = np.ascontiguousarray(
+            [v["centre"] for v in goal.instances] if goal.kind == "object" else goal_xy[None], np.float64)
+        if in_region(start_xy[0], start_xy[1], centres, t.success_radius):
+            self.rejections["start_in_success_region"] += 1  # trivial: SR 1 without a step (Habitat rejects these)
+            return None
         if cm.is_motion_valid(start_xy[0], start_xy[1], goal_xy[0], goal_xy[1]):
             geo = min(geo, euclid)  # in line of sight the geodesic is the straight line
         best = None
@@ -185,9 +191,6 @@ class EpisodeGenerator:
         path, length = best
         final_yaw = goal_yaw if goal.kind in ("image", "object") else None
         ro = as_stored(rollout(path, start_yaw, final_yaw, self.limits, self.ecfg.dt))
-        # success-region centres: the goal, or every instance of the ObjectNav category
-        centres = np.ascontiguousarray(
-            [v["centre"] for v in goal.instances] if goal.kind == "object" else goal.xy[None], np.float64)
         success = lambda x, y: bool(in_region(x, y, centres, t.success_radius))  # noqa: E731
         tol = math.radians(t.heading_tolerance_deg) if goal.kind == "image" else None
         why = check_trajectory(ro["x"], ro["y"], ro["yaw"], ro["v"], ro["w"], cm, self.emb.radius, self.limits,
@@ -251,7 +254,7 @@ class EpisodeGenerator:
         """Start candidates of one field, per difficulty bin it can fill: (bin, nodes, cumulative
         weights). Starts lie within the geodesic limits; PointNav / ImageNav weight them with
         Habitat's near-straight keep probability: the same distribution as its rejection
-        sampling, without the rejected draws. Without balancing, one pool with bin -1."""
+        sampling, without the rejected draws. Starts inside the goal's success region are left out. Without balancing, one pool with bin -1."""
         t, dc = self.task, self.ecfg.difficulty
         d = fld.node_dist
         nodes = np.flatnonzero((d >= t.min_geodesic) & (d <= t.max_geodesic))
@@ -260,7 +263,10 @@ class EpisodeGenerator:
         else:
             euclid = np.hypot(*(self.cm.cell_centers(self.graph.cells[nodes]) - goal.xy).T)
             w = habitat_keep_probability(d[nodes] / np.maximum(euclid, 1e-9), t.trivial_ratio)
-        keep = w > 0
+        centres = np.array([v["centre"] for v in goal.instances]) if goal.kind == "object" else goal.xy[None]
+        xy = self.cm.cell_centers(self.graph.cells[nodes])
+        near = np.hypot(xy[:, None, 0] - centres[None, :, 0], xy[:, None, 1] - centres[None, :, 1]).min(1, initial=np.inf)
+        keep = (w > 0) & (near > t.success_radius)  # no start inside its own success region
         nodes, w = nodes[keep], w[keep]
         if not dc.balance:
             return [(-1, nodes, np.cumsum(w))] if len(nodes) else []

@@ -5,8 +5,11 @@ Actions (any of):
 - discrete ids 0 STOP, 1 MOVE_FORWARD (actions.forward_step), 2 TURN_LEFT, 3 TURN_RIGHT (actions.turn);
 - {"stop": true} (how STOP is sent in every form);
 - waypoints {"waypoints": [{"x", "y", "yaw"}, ...]}: relative moves in the robot frame (ROS: x
-  forward, y left, yaw counter-clockwise, metres / radians), applied in order within one step;
-- velocity {"v", "w", "dt"}: integrated as x = v dt forward, then yaw = w dt.
+  forward, y left, yaw counter-clockwise, metres / radians), applied in order within one step (at
+  most MAX_WAYPOINTS); a single flat waypoint {"x", "y", "yaw"} (navarena-server's random agent
+  sends this form) is one such move;
+- velocity {"v", "w", "dt"}: integrated as x = v dt forward, then yaw = w dt (0 < dt <= MAX_DT).
+Every number must be finite: NaN or inf fails the episode as an agent error (a ValueError).
 A translation is checked as a swept disk on the costmap (its exact straight-motion test); a
 rejected move leaves the pose unchanged and counts as a collision. Turning in place never collides
 (the footprint is a disk).
@@ -28,6 +31,26 @@ from navcore.nav.poses import wrap_angle
 from stages.evaluate.episode import Episode
 
 PROTOCOLS = ("distance", "explicit_stop")
+MAX_WAYPOINTS = 64
+"""Most relative poses one waypoint action may carry."""
+MAX_DT = 10.0
+"""Longest duration of one velocity command, seconds."""
+
+
+def _finite(d: dict, key: str, default: float | None) -> float:
+    """d[key] (or the default) as a finite float; a ValueError names the key otherwise."""
+    if key not in d and default is None:
+        raise ValueError(f"action has no {key!r}")
+    v = d.get(key, default)
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
+        raise ValueError(f"action field {key!r} must be a finite number, got {str(v)[:40]}")
+    return float(v)
+
+
+def _relative_pose(w) -> tuple[float, float, float]:
+    if not isinstance(w, dict):
+        raise ValueError(f"a waypoint is a map {{x, y, yaw}}, got {str(w)[:60]}")
+    return _finite(w, "x", 0.0), _finite(w, "y", 0.0), _finite(w, "yaw", 0.0)
 
 
 @dataclass
@@ -103,9 +126,10 @@ class EpisodeState:
         self.steps = 0
         self.moves = 0          # attempted translations
         self.collisions = 0     # rejected translations
+        self.collided_actions = 0  # policy actions with at least one rejected translation
         self.path_length = 0.0
         self.positions = [(self.x, self.y)]
-        self.ever_in_region = ep.in_region(self.x, self.y)
+        self.ever_in_region = False  # inside the region after some action (the start never counts)
         self.stopped = False
         self.stop_in_region = False
         self.done = False
@@ -161,8 +185,10 @@ class NavEnv:
             s.stop_in_region = s.ep.in_region(s.x, s.y)
             if self.cfg.protocol == "explicit_stop":
                 s.done, s.success, s.end_reason = True, s.stop_in_region, "stop"
+        before = s.collisions
         for dx, dy, dyaw in moves:
             self._move(dx, dy, dyaw)
+        s.collided_actions += s.collisions > before
         inside = s.ep.in_region(s.x, s.y)
         s.ever_in_region |= inside
         if not s.done and self.cfg.protocol == "distance" and inside:
@@ -188,12 +214,20 @@ class NavEnv:
             if action.get("stop"):
                 return True, []
             if "waypoints" in action:
-                return False, [(float(w.get("x", 0.0)), float(w.get("y", 0.0)), float(w.get("yaw", 0.0)))
-                               for w in action["waypoints"]]
+                wps = action["waypoints"]
+                if not isinstance(wps, (list, tuple)) or not 1 <= len(wps) <= MAX_WAYPOINTS:
+                    raise ValueError(f"waypoints must be a list of 1 to {MAX_WAYPOINTS} poses, got {str(wps)[:80]}")
+                return False, [_relative_pose(w) for w in wps]
             if "v" in action:
-                dt = float(action.get("dt", 0.05))
-                return False, [(float(action["v"]) * dt, 0.0, float(action.get("w", 0.0)) * dt)]
-            raise ValueError(f"unknown action {action!r}: expected stop, waypoints or v/w/dt")
+                v, w, dt = (_finite(action, k, d) for k, d in (("v", None), ("w", 0.0), ("dt", 0.05)))
+                if not 0.0 < dt <= MAX_DT:
+                    raise ValueError(f"velocity action dt must be in (0, {MAX_DT}] s, got {dt}")
+                return False, [(v * dt, 0.0, w * dt)]
+            if {"x", "y", "yaw"} & set(action):  # one flat waypoint (navarena-server's random agent)
+                return False, [_relative_pose(action)]
+            raise ValueError(f"unknown action {str(action)[:120]}: expected stop, waypoints, x/y/yaw or v/w/dt")
+        if isinstance(action, bool) or not isinstance(action, (int, np.integer)):
+            raise ValueError(f"unknown action {str(action)[:120]}: a discrete action is an integer 0..3")
         a = int(action)
         if a == STOP:
             return True, []

@@ -1,15 +1,27 @@
 """Metrics: small registered classes, one job each (habitat-lab's habit), computed per episode from
 its final EpisodeState, then aggregated overall and per difficulty.
 
-Per episode: Distance SR (inside the success region at some step: the distance protocol's
-success), Stop SR (STOP issued inside the region), SR (success under the run's protocol), SPL
-(SR x l / max(p, l), l the stored geodesic optimum, p the path walked), SoftSPL ((1 - d_T / d_0)
-x l / max(p, l), geodesic distances to the goal at the end and the start), NE (planar Euclidean
-distance from the final position to the goal, ObjectNav: to the nearest instance centre),
-Collision Rate (rejected / attempted translations), Steps, Pose SR (ImageNav: success and final
-heading within the tolerance of the goal yaw), OSR (ever within the region), DTW and nDTW (exact
-dynamic time warping of the walked positions against the expert's, nDTW = exp(-DTW / (|R| d_th))
-with d_th the success radius). Aggregates are means; Pose Retention = mean Pose SR / mean Distance SR.
+Per episode:
+- SR: success under the run's protocol. Distance SR: the distance protocol's success (the agent
+  entered the success region after at least one action; the start pose never counts), defined in
+  distance-protocol runs only. Stop SR: STOP issued inside the region, and OSR (oracle success: inside
+  the region after some action, stopped or not), defined in explicit-stop runs only: in a distance
+  run Stop SR is 0 by construction (entering ends the episode) and OSR equals Distance SR, so both
+  are NaN there and no table prints a metric from a run whose protocol does not define it.
+- SPL: SR x l / max(p, l), l the stored geodesic optimum, p the path walked; 0/0 (an optimum of 0
+  and no motion) counts as a ratio of 1, so SPL = SR. SoftSPL: (1 - d_T / d_0) x l / max(p, l),
+  geodesic distances to the goal at the end and the start (d_0 = 0: progress 1), same 0/0 rule.
+- NE: planar Euclidean distance from the final position to the goal (ObjectNav: to the nearest
+  instance centre), as the paper. NE geodesic (`ne_geodesic`): the costmap geodesic from the final
+  position to the goal (ObjectNav: to the nearest view point), as Habitat's distance_to_goal.
+- Collision Rate (`collision_rate`): actions with a rejected move / attempted policy actions, the
+  paper's "fraction of attempted policy actions"; `collision_rate_moves`: rejected / attempted
+  translations (one waypoint action may try several).
+- Steps; Pose SR (ImageNav: success and final heading within the tolerance of the goal yaw); DTW and
+  nDTW (exact dynamic time warping of the walked positions against the expert's, nDTW =
+  exp(-DTW / (|R| d_th)) with d_th the success radius).
+Aggregates are means over the episodes where a metric is defined; Pose Retention = mean Pose SR /
+mean SR.
 """
 from __future__ import annotations
 
@@ -28,7 +40,9 @@ METRICS = Registry("metric", {
     "spl": "stages.evaluate.metrics:SPL",
     "soft_spl": "stages.evaluate.metrics:SoftSPL",
     "ne": "stages.evaluate.metrics:NE",
+    "ne_geodesic": "stages.evaluate.metrics:NEGeodesic",
     "collision_rate": "stages.evaluate.metrics:CollisionRate",
+    "collision_rate_moves": "stages.evaluate.metrics:CollisionRateMoves",
     "steps": "stages.evaluate.metrics:Steps",
     "pose_sr": "stages.evaluate.metrics:PoseSR",
     "osr": "stages.evaluate.metrics:OSR",
@@ -55,6 +69,8 @@ def dtw(a: np.ndarray, b: np.ndarray) -> float:
 
 class Metric:
     name = ""
+    protocols: tuple[str, ...] = ("distance", "explicit_stop")
+    """The protocols whose runs define the metric (elsewhere it is NaN)."""
 
     def __call__(self, s, d0: float, d_final: float, protocol: str) -> float:  # pragma: no cover
         raise NotImplementedError
@@ -62,13 +78,15 @@ class Metric:
 
 class DistanceSR(Metric):
     name = "distance_sr"
+    protocols = ("distance",)
 
     def __call__(self, s, d0, d_final, protocol):
-        return float(s.ever_in_region)
+        return float(s.success)
 
 
 class StopSR(Metric):
     name = "stop_sr"
+    protocols = ("explicit_stop",)
 
     def __call__(self, s, d0, d_final, protocol):
         return float(s.stopped and s.stop_in_region)
@@ -81,21 +99,25 @@ class SR(Metric):
         return float(s.success)
 
 
+def efficiency(optimum: float, walked: float) -> float:
+    """l / max(p, l), with 0/0 (optimum 0, no motion) defined as 1."""
+    den = max(walked, optimum)
+    return optimum / den if den > 0 else 1.0
+
+
 class SPL(Metric):
     name = "spl"
 
     def __call__(self, s, d0, d_final, protocol):
-        l = s.ep.geodesic
-        return float(s.success) * l / max(s.path_length, l, 1e-9)
+        return float(s.success) * efficiency(s.ep.geodesic, s.path_length)
 
 
 class SoftSPL(Metric):
     name = "soft_spl"
 
     def __call__(self, s, d0, d_final, protocol):
-        l = s.ep.geodesic
         progress = max(0.0, 1.0 - d_final / d0) if d0 > 0 else 1.0
-        return progress * l / max(s.path_length, l, 1e-9)
+        return progress * efficiency(s.ep.geodesic, s.path_length)
 
 
 class NE(Metric):
@@ -105,8 +127,22 @@ class NE(Metric):
         return s.ep.distance_to_centres(s.x, s.y)
 
 
+class NEGeodesic(Metric):
+    name = "ne_geodesic"
+
+    def __call__(self, s, d0, d_final, protocol):
+        return float(d_final)
+
+
 class CollisionRate(Metric):
     name = "collision_rate"
+
+    def __call__(self, s, d0, d_final, protocol):
+        return s.collided_actions / s.steps if s.steps else 0.0
+
+
+class CollisionRateMoves(Metric):
+    name = "collision_rate_moves"
 
     def __call__(self, s, d0, d_final, protocol):
         return s.collisions / s.moves if s.moves else 0.0
@@ -131,6 +167,7 @@ class PoseSR(Metric):
 
 class OSR(Metric):
     name = "osr"
+    protocols = ("explicit_stop",)
 
     def __call__(self, s, d0, d_final, protocol):
         return float(s.ever_in_region)
@@ -158,20 +195,25 @@ class NDTW(Metric):
 
 
 def episode_metrics(s, d0: float, d_final: float, protocol: str, names=None) -> dict[str, float]:
-    """All (or the named) metrics of one finished episode."""
-    return {n: METRICS[n]()(s, d0, d_final, protocol) for n in (names or METRICS)}
+    """All (or the named) metrics of one finished episode; NaN for a metric the run's protocol does
+    not define."""
+    out = {}
+    for n in names or METRICS:
+        m = METRICS[n]()
+        out[n] = m(s, d0, d_final, protocol) if protocol in m.protocols else math.nan
+    return out
 
 
 def aggregate(rows: list[dict], by: str | None = "difficulty") -> dict:
     """Means of the metric columns overall and per value of `by` (NaNs ignored), plus Pose
-    Retention = Pose SR / Distance SR."""
+    Retention = Pose SR / SR."""
     def summary(rs):
         out = {"episodes": len(rs)}
         for n in METRICS:
             vals = np.array([r[n] for r in rs if n in r], float)
             vals = vals[~np.isnan(vals)]
             out[n] = float(vals.mean()) if len(vals) else math.nan
-        dsr, psr = out.get("distance_sr", math.nan), out.get("pose_sr", math.nan)
+        dsr, psr = out.get("sr", math.nan), out.get("pose_sr", math.nan)
         out["pose_retention"] = psr / dsr if dsr and not math.isnan(psr) else math.nan
         return out
     res = {"overall": summary(rows)}

@@ -9,8 +9,13 @@ from stages.evaluate.metrics import aggregate
 
 TASKS = ("pointnav", "imagenav", "objectnav")
 DIFFICULTIES = ("easy", "medium", "hard")
-TABLE6 = [("distance_sr", "Dist. SR"), ("stop_sr", "Stop SR"), ("spl", "SPL"), ("soft_spl", "SoftSPL"),
-          ("ne", "NE (m)"), ("collision_rate", "CR"), ("steps", "Steps")]
+TABLE6 = [("sr", "SR"), ("distance_sr", "Dist. SR"), ("stop_sr", "Stop SR"), ("osr", "OSR"), ("spl", "SPL"),
+          ("soft_spl", "SoftSPL"), ("ne", "NE (m)"), ("ne_geodesic", "NE geo. (m)"),
+          ("collision_rate", "CR (actions)"), ("steps", "Steps")]
+LEGEND = ("SR: success under the run's protocol. Dist. SR: distance-protocol runs only; Stop SR and OSR: "
+          "explicit-stop runs only ('-' where the run's protocol does not define a metric). NE: planar "
+          "Euclidean, NE geo.: costmap geodesic, to the goal. CR (actions): actions with a rejected move / "
+          "attempted policy actions (per attempted translation: `collision_rate_moves` in the results).")
 
 
 def load_results(parts: dict[str, object]) -> pd.DataFrame:
@@ -25,7 +30,9 @@ def load_results(parts: dict[str, object]) -> pd.DataFrame:
 
 
 def summarize(df: pd.DataFrame) -> dict:
-    out = {"episodes": int(len(df)), "agent_errors": int((df["error"] != "").sum()) if len(df) else 0, "tasks": {}}
+    protocols = sorted(set(df["protocol"])) if len(df) else []
+    out = {"episodes": int(len(df)), "agent_errors": int((df["error"] != "").sum()) if len(df) else 0,
+           "protocol": ",".join(protocols), "tasks": {}}
     for task in TASKS:
         rows = df[df["task"] == task].to_dict("records")
         if rows:
@@ -39,28 +46,29 @@ def _fmt(v) -> str:
 
 def tables(summaries: dict[str, dict]) -> str:
     """Markdown in the layout of the paper's Tables 6 (overall, per task) and 7 (per difficulty)."""
-    lines = ["## Table 6 layout: overall results per task", ""]
+    lines = ["## Table 6 layout: overall results per task", "", LEGEND, ""]
     for task in TASKS:
         runs = {r: s["tasks"][task]["overall"] for r, s in summaries.items() if task in s["tasks"]}
         if not runs:
             continue
         extra = [("pose_sr", "Pose SR"), ("pose_retention", "Pose Ret.")] if task == "imagenav" else []
         cols = TABLE6 + extra
-        lines += [f"### {task}", "", "| agent (run) | episodes | " + " | ".join(c for _, c in cols) + " |",
-                  "|---" * (len(cols) + 2) + "|"]
+        lines += [f"### {task}", "", "| agent (run) | protocol | episodes | " + " | ".join(c for _, c in cols) + " |",
+                  "|---" * (len(cols) + 3) + "|"]
         for r, m in runs.items():
-            lines.append(f"| {r} | {m['episodes']} | " + " | ".join(_fmt(m.get(k)) for k, _ in cols) + " |")
+            lines.append(f"| {r} | {summaries[r].get('protocol', '')} | {m['episodes']} | "
+                         + " | ".join(_fmt(m.get(k)) for k, _ in cols) + " |")
         lines.append("")
-    lines += ["## Table 7 layout: Distance SR / SPL by difficulty", "",
-              "| agent (run) | task | " + " | ".join(f"{d} SR | {d} SPL" for d in DIFFICULTIES) + " |",
-              "|---" * (2 + 2 * len(DIFFICULTIES)) + "|"]
+    lines += ["## Table 7 layout: SR / SPL by difficulty (SR under each run's protocol)", "",
+              "| agent (run) | protocol | task | " + " | ".join(f"{d} SR | {d} SPL" for d in DIFFICULTIES) + " |",
+              "|---" * (3 + 2 * len(DIFFICULTIES)) + "|"]
     for r, s in summaries.items():
         for task, agg in s["tasks"].items():
             cells = []
             for d in DIFFICULTIES:
                 m = agg.get(d, {})
-                cells += [_fmt(m.get("distance_sr")), _fmt(m.get("spl"))]
-            lines.append(f"| {r} | {task} | " + " | ".join(cells) + " |")
+                cells += [_fmt(m.get("sr")), _fmt(m.get("spl"))]
+            lines.append(f"| {r} | {s.get('protocol', '')} | {task} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -77,12 +85,12 @@ def plot_sr_by_difficulty(summaries: dict[str, dict]):
     for ax, task in zip(axes[0], tasks):
         for k, (r, s) in enumerate(summaries.items()):
             agg = s["tasks"].get(task, {})
-            vals = [agg.get(d, {}).get("distance_sr", np.nan) for d in DIFFICULTIES]
-            ax.bar(np.arange(3) + k * width, vals, width, label=r)
+            vals = [agg.get(d, {}).get("sr", np.nan) for d in DIFFICULTIES]
+            ax.bar(np.arange(3) + k * width, vals, width, label=f"{r} ({s.get('protocol', '')})")
         ax.set_xticks(np.arange(3) + 0.4 - width / 2, DIFFICULTIES)
         ax.set_title(task)
         ax.set_ylim(0, 1.05)
-    axes[0][0].set_ylabel("Distance SR")
+    axes[0][0].set_ylabel("SR (run's protocol)")
     axes[0][-1].legend(fontsize=7)
     fig.tight_layout()
     return fig

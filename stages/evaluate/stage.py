@@ -3,7 +3,7 @@
 Outputs under data/07_eval/{run}/: results/scene_id={id}/part-0.parquet (per episode: metrics, the
 executed trajectory, end reason, error), videos/*.mp4 (egocentric view of chosen episodes),
 plots/*.png (top-down trajectories); the dataset-level finalize step adds summary.json, tables.md
-(the layout of the paper's Tables 6 and 7) and, across runs, 07_eval/distance_sr_by_difficulty.png.
+(the layout of the paper's Tables 6 and 7) and, across runs, 07_eval/sr_by_difficulty.png.
 """
 from __future__ import annotations
 
