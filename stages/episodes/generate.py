@@ -254,7 +254,8 @@ class EpisodeGenerator:
         """Start candidates of one field, per difficulty bin it can fill: (bin, nodes, cumulative
         weights). Starts lie within the geodesic limits; PointNav / ImageNav weight them with
         Habitat's near-straight keep probability: the same distribution as its rejection
-        sampling, without the rejected draws. Starts inside the goal's success region are left out. Without balancing, one pool with bin -1."""
+        sampling, without the rejected draws. Starts inside the goal's success region are left
+        out. Without balancing, one pool with bin -1."""
         t, dc = self.task, self.ecfg.difficulty
         d = fld.node_dist
         nodes = np.flatnonzero((d >= t.min_geodesic) & (d <= t.max_geodesic))
