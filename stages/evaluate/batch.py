@@ -22,6 +22,8 @@ class BatchNavEnv:
         self.render_enabled = cfg.render and ctx.renderer is not None
         self.w, self.h = self.envs[0].w, self.envs[0].h
         self._obs: list[dict | None] = [None] * n
+        self.errors: dict[int, str] = {}
+        """Slots whose last action the environment rejected (the reason); the slot's episode failed."""
 
     def reset(self, episodes) -> list[dict]:
         for i, ep in enumerate(episodes):
@@ -40,7 +42,11 @@ class BatchNavEnv:
         for i, (env, a) in enumerate(zip(self.envs, actions)):
             if a is None or env.state is None or env.state.done:
                 continue
-            env.apply(a)
+            try:
+                env.apply(a)
+            except ValueError as e:  # a malformed action fails its own episode only
+                self.errors[i] = f"{type(e).__name__}: {e}"
+                env.state.fail()
             live.append(i)
         self._observe(live)
         return list(self._obs), [e.info() if e.state else {} for e in self.envs]

@@ -81,10 +81,16 @@ class InProcessBatch:
         pass
 
 
-def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | None = None) -> list[dict]:
+def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | None = None,
+                         max_connect_failures: int = 2) -> list[dict]:
     """Episodes through a batch agent (`client`: start(tasks by slot), act(observations by slot) ->
     actions by slot, end(results by slot); e.g. protocol.RemoteBatchAgent), `slots` at a time,
-    one render call per step (BatchNavEnv). A failing client fails the episodes in flight."""
+    one render call per step (BatchNavEnv).
+
+    Every episode gets a result row. A client failure fails the episodes in flight, and the queue
+    goes on (a RemoteBatchAgent reconnects); after `max_connect_failures` consecutive failures to
+    reach the server at all, the rest of the queue fails with that reason instead of waiting for
+    each. An action the environment rejects (NaN, malformed) fails only its own slot."""
     from stages.evaluate.batch import BatchNavEnv
 
     benv = BatchNavEnv(ctx, slots, cfg)
@@ -94,6 +100,24 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
     running: dict[int, tuple] = {}
     rows = []
     obs = {}
+    unreachable = 0
+
+    def finish(i, error=""):
+        ep, d0, t0 = running.pop(i)
+        env = benv.envs[i]
+        if error:
+            env.state.fail()
+        rows.append(result_row(env, ep, d0, error, time.perf_counter() - t0))
+        s = env.state
+        return {"episode_id": ep.episode_id, "success": bool(s.success), "steps": s.steps, "end_reason": s.end_reason}
+
+    def fail_all(e):
+        nonlocal unreachable
+        unreachable = unreachable + 1 if isinstance(e, ConnectionError) else 0
+        for i in list(running):
+            finish(i, f"{type(e).__name__}: {e}")
+        if hasattr(client, "close"):
+            client.close()  # the next start reconnects: no stray frame of these episodes is read
 
     def start(free):
         new = {}
@@ -106,43 +130,35 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
         if new:
             client.start(new)
 
-    def finish(i, error=""):
-        ep, d0, t0 = running.pop(i)
-        env = benv.envs[i]
-        if error:
-            env.state.fail()
-        rows.append(result_row(env, ep, d0, error, time.perf_counter() - t0))
-        return {"episode_id": ep.episode_id, "success": bool(env.state.success), "steps": env.state.steps}
-
-    try:
-        start(range(slots))
-    except Exception as e:  # noqa: BLE001
-        for i in list(running):
-            finish(i, f"{type(e).__name__}: {e}")
-    while running:
+    while queue or running:
+        if unreachable >= max_connect_failures:
+            while queue:  # the server is gone: record the rest without waiting for each
+                ep = queue.pop(0)
+                benv.envs[0].reset(ep)
+                running[0] = (ep, benv.envs[0].geodesic_to_goal(), time.perf_counter())
+                finish(0, "ConnectionError: agent server unreachable (earlier episodes of this scene could not connect)")
+            break
         try:
+            start([i for i in range(slots) if i not in running])
             actions = client.act({i: obs[i] for i in running})
             acts = [actions.get(i) if i in running else None for i in range(slots)]
             missing = [i for i in running if acts[i] is None]
             if missing:
                 raise RuntimeError(f"batch_action has no action for slot(s) {missing}")
-            out, _ = benv.step(acts)
         except Exception as e:  # noqa: BLE001 - the client failed: the episodes in flight fail
-            for i in list(running):
-                finish(i, f"{type(e).__name__}: {e}")
-            break
+            fail_all(e)
+            continue
+        unreachable = 0
+        out, _ = benv.step(acts)
         for i in running:
             obs[i] = out[i]
         done = [i for i in list(running) if benv.envs[i].state.done]
         if done:
-            ended = {i: finish(i) for i in done}
+            ended = {i: finish(i, benv.errors.pop(i, "")) for i in done}
             try:
                 client.end(ended)
-                start(done)
             except Exception as e:  # noqa: BLE001
-                for i in list(running):
-                    finish(i, f"{type(e).__name__}: {e}")
-                break
-    order = {ep.episode_id + ep.task: k for k, ep in enumerate(episodes)}
-    rows.sort(key=lambda r: order.get(r["episode_id"] + r["task"], 0))
+                fail_all(e)
+    order = {(ep.task, ep.episode_id): k for k, ep in enumerate(episodes)}
+    rows.sort(key=lambda r: order.get((r["task"], r["episode_id"]), 0))
     return rows

@@ -15,6 +15,8 @@ def main(argv=None) -> None:
     ap.add_argument("--host", default="127.0.0.1")
     ap.add_argument("--port", type=int, default=8000)
     ap.add_argument("--port-file", default=None, help="write the bound port here once listening (port 0 = any)")
+    ap.add_argument("--action-space", default="native", choices=["native", "waypoint", "velocity"],
+                    help="native: action_id / stop; waypoint, velocity: navarena-server's forms (their bench)")
     args = ap.parse_args(argv)
 
     def ready(port):
@@ -23,5 +25,5 @@ def main(argv=None) -> None:
                 f.write(str(port))
         print(f"serving agent {args.agent!r} on ws://{args.host}:{port}", flush=True)
 
-    serve_agent(lambda: make_agent(args.agent), args.host, args.port, ready)
+    serve_agent(lambda: make_agent(args.agent), args.host, args.port, ready, action_space=args.action_space)
 
