@@ -267,6 +267,25 @@ def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run, make
         frames = [f.to_ndarray(format="rgb24") for f in c.decode(video=0)]
     first = res[res["task"] == "pointnav"].sort_values("episode_id").iloc[0]
     assert frames[0].shape == (24, 32, 3) and len(frames) == first["steps"] + 1  # reset + every step
+    # results.json in navarena-bench's protocol 2.x layout, validated against the schema
+    import jsonschema
+
+    from stages.evaluate.bench_results import RESULTS_SCHEMA, validate
+
+    for name, n in (("oracle_explicit_stop", 6), ("random_distance", len(rnd))):
+        doc = json.loads((root / "07_eval" / name / "results.json").read_text())
+        validate(doc)
+        assert doc["meta"]["evaluation_protocol_version"].startswith("2.")
+        assert doc["run_summary"]["num_episodes"] == len(doc["episode_results"]) == n
+        assert all((root / "07_eval" / name / p).exists() for p in doc["artifacts"]["results_parquet"])
+    assert doc["meta"]["success_policy"] == "geometric_distance" and doc["metric_results"]["overall"]["stop_sr"]["value"] is None
+    oracle = json.loads((run / "results.json").read_text())
+    assert oracle["run_summary"]["success_rate"] == pytest.approx(res["sr"].mean())
+    assert {e["status"] for e in oracle["episode_results"]} == {"success"} and oracle["artifacts"]["videos"]
+    broken = json.loads((run / "results.json").read_text())
+    broken["episode_results"][0]["num_steps"] = -1
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(broken, RESULTS_SCHEMA)
 
 
 def test_batched_loop_equals_the_single_loop_for_in_process_agents(ctx, make_episode):

@@ -96,8 +96,9 @@ def plot_sr_by_difficulty(summaries: dict[str, dict]):
     return fig
 
 
-def write_reports(catalog, run: str) -> dict:
-    """summary.json and tables.md of `run`, the tables of every run and the cross-run plot."""
+def write_reports(catalog, run: str, agent: str = "") -> dict:
+    """summary.json, tables.md and results.json (navarena-bench's layout) of `run`, the tables of
+    every run and the cross-run plot."""
     import matplotlib.pyplot as plt
 
     summaries = {}
@@ -111,8 +112,19 @@ def write_reports(catalog, run: str) -> dict:
             summaries[name] = summarize(df)
     outputs = []
     if run in summaries:
+        from stages.evaluate import bench_results
+
+        root = catalog.dataset("eval_summary", run=run).path.parent
+        rel = lambda p: str(p.relative_to(root))  # noqa: E731
+        artifacts = {"results_parquet": sorted(rel(ds.path) for ds in by_run[run].values()),
+                     "videos": sorted(rel(p) for p in (root / "videos").glob("*.mp4")),
+                     "plots": sorted(rel(p) for p in (root / "plots").glob("*.png")),
+                     "summary": "summary.json", "tables": "tables.md"}
+        doc = bench_results.build(load_results(by_run[run]), run, agent, artifacts)
+        bench_results.validate(doc)
         for ds, data in ((catalog.dataset("eval_summary", run=run), summaries[run]),
-                         (catalog.dataset("eval_tables", run=run), tables({run: summaries[run]}))):
+                         (catalog.dataset("eval_tables", run=run), tables({run: summaries[run]})),
+                         (catalog.dataset("eval_bench_results", run=run), doc)):
             ds.save(data)
             outputs.append(str(ds.path))
     all_tables, plot = catalog.dataset("eval_all_tables"), catalog.dataset("eval_sr_plot")

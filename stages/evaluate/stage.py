@@ -3,7 +3,8 @@
 Outputs under data/07_eval/{run}/: results/scene_id={id}/part-0.parquet (per episode: metrics, the
 executed trajectory, end reason, error), videos/*.mp4 (egocentric view of chosen episodes),
 plots/*.png (top-down trajectories); the dataset-level finalize step adds summary.json, tables.md
-(the layout of the paper's Tables 6 and 7) and, across runs, 07_eval/sr_by_difficulty.png.
+(the layout of the paper's Tables 6 and 7), results.json (navarena-bench's protocol 2.x layout,
+stages.evaluate.bench_results) and, across runs, 07_eval/sr_by_difficulty.png.
 """
 from __future__ import annotations
 
@@ -178,4 +179,5 @@ def finalize(cfg, catalog) -> dict:
     """summary.json and tables.md of this run (all its scenes on disk), and the cross-run plot."""
     from stages.evaluate.report import write_reports
 
-    return write_reports(catalog, run_name(OmegaConf.to_object(cfg.evaluate)))
+    ecfg = OmegaConf.to_object(cfg.evaluate)
+    return write_reports(catalog, run_name(ecfg), ecfg.agent)
