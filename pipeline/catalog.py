@@ -101,6 +101,33 @@ class Catalog:
                 self.scenes.append(SceneEntry(sid, name, group, "", "synthetic", seed,
                                               syn.get("num_gaussians")))
 
+    @classmethod
+    def for_root(cls, root: str | Path) -> "Catalog":
+        """The layout of an existing data root without a catalog file (readers of a finished
+        dataset: scenes are found from what is on disk, see scene_ids)."""
+        cat = cls.__new__(cls)
+        cat.file, cat.root = LAYOUT_FILE, Path(root).resolve()
+        if not cat.root.is_dir():
+            raise FileNotFoundError(f"data root {cat.root} does not exist")
+        cat.layout = dict(yaml.safe_load(LAYOUT_FILE.read_text()))
+        cat.scenes = []
+        return cat
+
+    def scene_ids(self, dataset: str = "episodes", **extra) -> list[str]:
+        """Scene ids for which `dataset` exists on disk (any value of its other fields), sorted."""
+        template, _ = self._entry(dataset)
+        free = [n for _, n, _, _ in string.Formatter().parse(template) if n and n not in ("root",) and n not in extra]
+        found = self.find(dataset, **extra)
+        pos = free.index("scene_id")
+        return sorted({k.split("/")[pos] for k in found})
+
+    def scene(self, scene_id: str) -> SceneEntry:
+        """The catalog entry of a scene id, or a bare entry (id only) for a root without a catalog."""
+        for s in self.scenes:
+            if s.scene_id == scene_id:
+                return s
+        return SceneEntry(safe_component(scene_id, "scene id", self.file), scene_id, "default", "", "")
+
     def _entry(self, dataset: str) -> tuple[str, str | None]:
         if dataset not in self.layout:
             raise KeyError(f"dataset {dataset!r} is not in the layout ({', '.join(self.layout)})")

@@ -1,0 +1,187 @@
+"""Observations on demand: PyTorch datasets over a data root's stored expert trajectories that
+render egocentric RGB-D at the expert's poses when asked, so a policy trains from the 22 M-episode
+release without a stored frame.
+
+    from pipeline.observations import ExpertObservationStream
+    stream = ExpertObservationStream("data", split="train", tasks=["pointnav"], batch_size=256, stride=4)
+    for batch in torch.utils.data.DataLoader(stream, batch_size=None, num_workers=2):
+        batch["rgb"]     # uint8 [B, H, W, 3] (on the renderer's device with device_output=True)
+        batch["depth"]   # float32 [B, H, W], metres along the optical axis (0: nothing hit)
+        batch["pose"]    # float32 [B, 3]: x, y, yaw in the aligned frame
+        batch["velocity"], batch["waypoint"], batch["action_id"]   # the expert's actions, both forms
+
+ExpertObservationStream (IterableDataset) reads one scene at a time and renders a whole batch of
+one scene in one call (gsplat on a GPU renders thousands of frames a second; the CPU renderer
+otherwise); DataLoader workers split the scenes. ExpertObservations (map-style Dataset) indexes
+every step of the chosen scenes for random access; its __getitems__ renders a sampled batch
+grouped by scene (the DataLoader calls it with the whole batch of indices). Both are
+deterministic for a seed.
+"""
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+
+import numpy as np
+import pandas as pd
+import torch
+
+from navcore.nav.embodiment import Embodiment
+from navcore.seeds import stream_seed
+from pipeline.catalog import Catalog
+
+STEP_COLUMNS = ["episode_id", "step", "position_x", "position_y", "yaw", "linear_velocity", "angular_velocity",
+                "dx", "dy", "dyaw", "action_id"]
+
+
+def expert_steps(catalog: Catalog, scene_id: str, tasks, split: str | None = None, stride: int = 1,
+                 episodes: int | None = None) -> pd.DataFrame:
+    """The expert steps of one scene (every `stride`-th of each episode, its last always kept), with
+    task and split columns; at most `episodes` episodes per task (the first by id)."""
+    scene = catalog.scene(scene_id)
+    parts = []
+    for task in tasks:
+        eps_ds = catalog.dataset("episodes", scene, task=task)
+        if not eps_ds.exists():
+            continue
+        eps = eps_ds.load(["episode_id", "split"]).to_pandas()
+        if split:
+            eps = eps[eps["split"] == split]
+        eps = eps.sort_values("episode_id")
+        if episodes is not None:
+            eps = eps.head(episodes)
+        if not len(eps):
+            continue
+        tr = catalog.dataset("trajectories", scene, task=task).load(STEP_COLUMNS).to_pandas()
+        tr = tr[tr["episode_id"].isin(set(eps["episode_id"]))]
+        tr = tr.sort_values(["episode_id", "step"], kind="stable")
+        last = tr.groupby("episode_id")["step"].transform("max")
+        tr = tr[(tr["step"] % max(1, stride) == 0) | (tr["step"] == last)]
+        tr = tr.merge(eps, on="episode_id", how="left")
+        tr.insert(0, "task", task)
+        parts.append(tr)
+    out = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=["task", *STEP_COLUMNS, "split"])
+    out["scene_id"] = scene_id
+    return out
+
+
+class _Renderers:
+    """One Renderer per scene, the most recent `keep` kept (the aligned scene loads once)."""
+
+    def __init__(self, catalog: Catalog, backend: str, keep: int = 2):
+        self.catalog, self.backend, self.keep = catalog, backend, keep
+        self.cache: OrderedDict[str, object] = OrderedDict()
+
+    def get(self, scene_id: str):
+        if scene_id not in self.cache:
+            from navcore.render import Renderer
+
+            gs, _ = self.catalog.dataset("aligned", self.catalog.scene(scene_id)).load(view_dependent=True)
+            self.cache[scene_id] = Renderer(gs, self.backend)
+            while len(self.cache) > self.keep:
+                self.cache.popitem(last=False)
+        self.cache.move_to_end(scene_id)
+        return self.cache[scene_id]
+
+
+class _Base:
+    def __init__(self, root, split: str | None = None, tasks=("pointnav", "imagenav", "objectnav"), scenes=None,
+                 stride: int = 1, episodes_per_scene: int | None = None, width: int | None = None,
+                 height: int | None = None, embodiment: Embodiment | None = None, renderer: str = "auto",
+                 device_output: bool = False, seed: int = 0):
+        self.catalog = Catalog.for_root(root)
+        self.split, self.tasks, self.stride, self.episodes = split, list(tasks), int(stride), episodes_per_scene
+        self.emb = embodiment or Embodiment()
+        self.width, self.height = int(width or self.emb.image_width), int(height or self.emb.image_height)
+        self.backend, self.device_output, self.seed = renderer, device_output, seed
+        self.scene_ids = sorted(scenes) if scenes else self.catalog.scene_ids("trajectories")
+        self._renderers: _Renderers | None = None
+
+    def _steps(self, scene_id: str) -> pd.DataFrame:
+        return expert_steps(self.catalog, scene_id, self.tasks, self.split, self.stride, self.episodes)
+
+    def render(self, scene_id: str, rows: pd.DataFrame) -> dict:
+        """One batch: frames at the rows' poses (one render call) and the rows' expert actions."""
+        from navcore.render.camera import embodiment_camera
+
+        if self._renderers is None:  # built in the process that iterates (DataLoader workers)
+            self._renderers = _Renderers(self.catalog, self.backend)
+        poses = rows[["position_x", "position_y", "yaw"]].to_numpy(np.float64)
+        vm, k, w, h = embodiment_camera(self.emb, poses, self.width, self.height)
+        out = self._renderers.get(scene_id).render(vm, k, w, h)
+        rgb = (out.rgb * 255.0 + 0.5).clamp(0, 255).to(torch.uint8)
+        depth = out.depth
+        if not self.device_output:
+            rgb, depth = rgb.cpu(), depth.cpu()
+        f32 = lambda cols: torch.from_numpy(rows[cols].to_numpy(np.float32, copy=True))  # noqa: E731
+        return {"rgb": rgb, "depth": depth, "pose": torch.from_numpy(poses.astype(np.float32)),
+                "velocity": f32(["linear_velocity", "angular_velocity"]), "waypoint": f32(["dx", "dy", "dyaw"]),
+                "action_id": torch.from_numpy(rows["action_id"].to_numpy(np.int64, copy=True)),
+                "step": torch.from_numpy(rows["step"].to_numpy(np.int64, copy=True)),
+                "episode_id": rows["episode_id"].tolist(), "task": rows["task"].tolist(),
+                "scene_id": [scene_id] * len(rows)}
+
+
+class ExpertObservationStream(_Base, torch.utils.data.IterableDataset):
+    """Batches of rendered expert steps, one scene at a time (see the module docstring).
+
+    Args:
+        root: data root. split / tasks / scenes: which episodes (None: all). stride: every n-th
+            step of each trajectory (20 Hz stored; 4 -> 5 Hz). episodes_per_scene: at most this
+            many per task and scene. width / height / embodiment: the camera (default: the
+            embodiment's). renderer: auto | gsplat | cpu. batch_size: frames per render call.
+            shuffle: scene order and steps within a scene, reshuffled per epoch (set_epoch).
+            device_output: leave rgb / depth on the renderer's device.
+    """
+
+    def __init__(self, root, batch_size: int = 64, shuffle: bool = False, **kw):
+        super().__init__(root, **kw)
+        self.batch_size, self.shuffle, self.epoch = int(batch_size), shuffle, 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def __iter__(self):
+        info = torch.utils.data.get_worker_info()
+        scenes = list(self.scene_ids)
+        rng = np.random.default_rng(stream_seed(self.seed, "observations", str(self.epoch)) % 2**32)
+        if self.shuffle:
+            rng.shuffle(scenes)
+        if info is not None:
+            scenes = scenes[info.id::info.num_workers]
+        for sid in scenes:
+            steps = self._steps(sid)
+            if self.shuffle:
+                steps = steps.iloc[rng.permutation(len(steps))]
+            for a in range(0, len(steps), self.batch_size):
+                yield self.render(sid, steps.iloc[a:a + self.batch_size])
+
+    def __len__(self) -> int:  # batches (reads the step tables once)
+        return sum(math.ceil(len(self._steps(s)) / self.batch_size) for s in self.scene_ids)
+
+
+class ExpertObservations(_Base, torch.utils.data.Dataset):
+    """Every expert step of the chosen scenes, by index (map-style; the index holds all their
+    steps in memory, so choose scenes / episodes_per_scene / stride for large releases, or use the
+    stream). __getitems__ renders a sampled batch with one render call per scene it touches."""
+
+    def __init__(self, root, **kw):
+        super().__init__(root, **kw)
+        self.index = pd.concat([self._steps(s) for s in self.scene_ids], ignore_index=True)
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def __getitem__(self, i: int) -> dict:
+        return self.__getitems__([i])[0]
+
+    def __getitems__(self, indices) -> list[dict]:
+        rows = self.index.iloc[list(indices)]
+        out: list[dict | None] = [None] * len(rows)
+        pos = np.arange(len(rows))
+        for sid, g in rows.groupby("scene_id", sort=True):
+            where = pos[(rows["scene_id"] == sid).to_numpy()]
+            batch = self.render(sid, g)
+            for j, p in enumerate(where):
+                out[p] = {k: v[j] for k, v in batch.items()}
+        return out
