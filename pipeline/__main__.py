@@ -1,4 +1,5 @@
-"""CLI: ``python -m pipeline [overrides]`` or ``navarena [overrides]`` (Hydra)."""
+"""CLI: ``python -m pipeline [overrides]`` or ``navarena [overrides]`` (Hydra); ``navarena
+render-episodes ...`` and ``navarena export-lerobot ...`` are tools over a finished data root."""
 from __future__ import annotations
 
 import sys
@@ -20,7 +21,16 @@ def _app(cfg) -> None:
         sys.exit(code)
 
 
+TOOLS = {"render-episodes": "pipeline.render_episodes", "export-lerobot": "pipeline.lerobot_export"}
+"""Subcommands beside the Hydra pipeline run: ``navarena render-episodes --help``."""
+
+
 def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] in TOOLS:
+        import importlib
+
+        importlib.import_module(TOOLS[sys.argv[1]]).main(sys.argv[2:])
+        return
     _app()
 
 

@@ -84,7 +84,11 @@ class _Renderers:
         return self.cache[scene_id]
 
 
-class _Base:
+class SceneFrames:
+    """Which expert steps of a data root (split, tasks, scenes, stride) and how to render them (the
+    embodiment's camera at width x height, renderer backend); shared by the datasets, the LeRobot
+    export and render-episodes."""
+
     def __init__(self, root, split: str | None = None, tasks=("pointnav", "imagenav", "objectnav"), scenes=None,
                  stride: int = 1, episodes_per_scene: int | None = None, width: int | None = None,
                  height: int | None = None, embodiment: Embodiment | None = None, renderer: str = "auto",
@@ -100,19 +104,24 @@ class _Base:
     def _steps(self, scene_id: str) -> pd.DataFrame:
         return expert_steps(self.catalog, scene_id, self.tasks, self.split, self.stride, self.episodes)
 
-    def render(self, scene_id: str, rows: pd.DataFrame) -> dict:
-        """One batch: frames at the rows' poses (one render call) and the rows' expert actions."""
+    def frames(self, scene_id: str, poses: np.ndarray):
+        """RGB uint8 [B, H, W, 3] and depth float32 [B, H, W] torch tensors at robot poses [B, 3]
+        (one render call; on the renderer's device with device_output)."""
         from navcore.render.camera import embodiment_camera
 
         if self._renderers is None:  # built in the process that iterates (DataLoader workers)
             self._renderers = _Renderers(self.catalog, self.backend)
-        poses = rows[["position_x", "position_y", "yaw"]].to_numpy(np.float64)
-        vm, k, w, h = embodiment_camera(self.emb, poses, self.width, self.height)
+        vm, k, w, h = embodiment_camera(self.emb, np.asarray(poses, np.float64), self.width, self.height)
         out = self._renderers.get(scene_id).render(vm, k, w, h)
         rgb = (out.rgb * 255.0 + 0.5).clamp(0, 255).to(torch.uint8)
-        depth = out.depth
-        if not self.device_output:
-            rgb, depth = rgb.cpu(), depth.cpu()
+        if self.device_output:
+            return rgb, out.depth
+        return rgb.cpu(), out.depth.cpu()
+
+    def render(self, scene_id: str, rows: pd.DataFrame) -> dict:
+        """One batch: frames at the rows' poses (one render call) and the rows' expert actions."""
+        poses = rows[["position_x", "position_y", "yaw"]].to_numpy(np.float64)
+        rgb, depth = self.frames(scene_id, poses)
         f32 = lambda cols: torch.from_numpy(rows[cols].to_numpy(np.float32, copy=True))  # noqa: E731
         return {"rgb": rgb, "depth": depth, "pose": torch.from_numpy(poses.astype(np.float32)),
                 "velocity": f32(["linear_velocity", "angular_velocity"]), "waypoint": f32(["dx", "dy", "dyaw"]),
@@ -122,7 +131,7 @@ class _Base:
                 "scene_id": [scene_id] * len(rows)}
 
 
-class ExpertObservationStream(_Base, torch.utils.data.IterableDataset):
+class ExpertObservationStream(SceneFrames, torch.utils.data.IterableDataset):
     """Batches of rendered expert steps, one scene at a time (see the module docstring).
 
     Args:
@@ -160,7 +169,7 @@ class ExpertObservationStream(_Base, torch.utils.data.IterableDataset):
         return sum(math.ceil(len(self._steps(s)) / self.batch_size) for s in self.scene_ids)
 
 
-class ExpertObservations(_Base, torch.utils.data.Dataset):
+class ExpertObservations(SceneFrames, torch.utils.data.Dataset):
     """Every expert step of the chosen scenes, by index (map-style; the index holds all their
     steps in memory, so choose scenes / episodes_per_scene / stride for large releases, or use the
     stream). __getitems__ renders a sampled batch with one render call per scene it touches."""

@@ -1,0 +1,107 @@
+"""LeRobot export: a split of a stored run, loaded back with the lerobot package's own
+LeRobotDataset (CPU renderer, a few tiny episodes)."""
+import hashlib
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+
+def _lerobot():
+    """lerobot's LeRobotDataset. The CPU torch here has no matching CPU torchvision wheel: the
+    PyPI one is built against CUDA torch, its C++ operators cannot load, and its Python part then
+    fails at import on one unguarded fake registration (torchvision::nms). Declaring that
+    operator's schema first lets the pure-Python torchvision (transforms, which lerobot imports)
+    load; nothing here calls the operator. With a matching torchvision this does nothing."""
+    pytest.importorskip("torchcodec", reason="torchcodec needs FFmpeg 5 shared libraries (scripts/system_packages.sh)")
+    try:
+        torch.ops.torchvision.nms
+    except (AttributeError, RuntimeError):
+        torch.library.define("torchvision::nms", "(Tensor dets, Tensor scores, float iou_threshold) -> Tensor")
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    return LeRobotDataset
+
+
+@pytest.fixture(scope="module")
+def exported(episode_run, tmp_path_factory):
+    from pipeline.lerobot_export import export_lerobot
+
+    root, _, _ = episode_run
+    out = tmp_path_factory.mktemp("lerobot") / "navarena_train"
+    res = export_lerobot(root, out, split="train", tasks=["pointnav", "objectnav"], fps=5, width=48, height=36,
+                         episodes_per_scene=2, renderer="cpu", episodes_per_file=3)
+    return root, out, res
+
+
+def test_lerobot_dataset_class_loads_the_export(exported):
+    from navcore.nav.embodiment import Embodiment
+    from navcore.render import Renderer
+    from navcore.render.camera import embodiment_camera
+    from pipeline.catalog import Catalog
+
+    root, out, res = exported
+    LeRobotDataset = _lerobot()
+    ds = LeRobotDataset("navarena/test_train", root=out)
+    assert ds.num_episodes == res["episodes"] == 4 and len(ds) == res["frames"]
+    assert ds.fps == 5 and set(ds.meta.video_keys) == {"observation.images.rgb"}
+    assert len(list((out / "data/chunk-000").glob("*.parquet"))) == 2  # 3 episodes a file
+    meta = pd.read_parquet(out / "meta/episodes/chunk-000/file-000.parquet")
+    cat = Catalog.for_root(root)
+    for ep in range(ds.num_episodes):
+        m = meta.iloc[ep]
+        lo, hi = int(m["dataset_from_index"]), int(m["dataset_to_index"])
+        items = [ds[i] for i in range(lo, hi)]
+        assert [int(it["frame_index"]) for it in items] == list(range(hi - lo))
+        task = m["navarena/task"]
+        assert items[0]["task"] == ("Navigate to the point goal." if task == "pointnav" else items[0]["task"])
+        if task == "objectnav":
+            assert items[0]["task"].startswith("Navigate to the ") and items[0]["task"] != "Navigate to the point goal."
+        # the trajectory at 5 Hz: every 4th stored 20 Hz row and the last
+        tr = cat.dataset("trajectories", cat.scene(m["navarena/scene_id"]), task=task).load().to_pandas()
+        tr = tr[tr["episode_id"] == m["navarena/episode_id"]].sort_values("step")
+        steps = tr["step"].to_numpy()
+        keep = tr[(steps % 4 == 0) | (steps == steps[-1])]
+        state = torch.stack([it["observation.state"] for it in items]).numpy()
+        assert np.allclose(state, keep[["position_x", "position_y", "yaw"]].to_numpy(), atol=1e-5)
+        # waypoint actions integrate to the next state; the last frame's is zero
+        wp = torch.stack([it["action.waypoint"] for it in items]).numpy().astype(np.float64)
+        x, y, yaw = state[:-1, 0], state[:-1, 1], state[:-1, 2]
+        nx = x + np.cos(yaw) * wp[:-1, 0] - np.sin(yaw) * wp[:-1, 1]
+        ny = y + np.sin(yaw) * wp[:-1, 0] + np.cos(yaw) * wp[:-1, 1]
+        assert np.allclose(np.stack([nx, ny], 1), state[1:, :2], atol=1e-4) and not wp[-1].any()
+        assert np.allclose(np.angle(np.exp(1j * (yaw + wp[:-1, 2] - state[1:, 2]))), 0, atol=1e-4)
+        v = torch.stack([it["action"] for it in items]).numpy()
+        assert (np.abs(v[:, 0]) <= Embodiment().max_linear_velocity + 1e-5).all()
+    # pixels: H.264 of the CPU render (PSNR), depth exact
+    it = ds[3]
+    gs, _ = cat.dataset("aligned", cat.scene(meta.iloc[0]["navarena/scene_id"])).load()
+    vm, k, w, h = embodiment_camera(Embodiment(), it["observation.state"].numpy()[None].astype(np.float64), 48, 36)
+    ref = Renderer(gs, "cpu").render(vm, k, w, h)
+    rgb = it["observation.images.rgb"].permute(1, 2, 0).numpy()  # float [0, 1], CHW from the decoder
+    mse = float(np.mean((rgb - ref.rgb[0].numpy()) ** 2))
+    assert 10 * math.log10(1 / max(mse, 1e-12)) > 30
+    assert torch.equal(it["observation.depth"][..., 0], ref.depth[0])
+    # action chunks through lerobot's own delta_timestamps
+    chunked = LeRobotDataset("navarena/test_train", root=out, delta_timestamps={"action": [0.0, 0.2, 0.4]})
+    a = chunked[0]
+    assert a["action"].shape == (3, 2) and torch.equal(a["action"][1], ds[1]["action"])
+
+
+def test_lerobot_export_is_deterministic(exported, tmp_path):
+    from pipeline.lerobot_export import export_lerobot
+
+    root, out, _ = exported
+    again = tmp_path / "again"
+    export_lerobot(root, again, split="train", tasks=["pointnav", "objectnav"], fps=5, width=48, height=36,
+                   episodes_per_scene=2, renderer="cpu", episodes_per_file=3)
+    digest = lambda d: {str(p.relative_to(d)): hashlib.sha256(p.read_bytes()).hexdigest()  # noqa: E731
+                        for p in sorted(d.rglob("*")) if p.is_file()}
+    assert digest(again) == digest(out)
+    with pytest.raises(ValueError, match="divide"):
+        export_lerobot(root, tmp_path / "x", fps=3)
+    with pytest.raises(ValueError, match="no episodes"):
+        export_lerobot(root, tmp_path / "y", split="no_such_split", renderer="cpu")
+    assert not (tmp_path / "y").exists()
