@@ -8,6 +8,7 @@ import time
 import msgpack
 import numpy as np
 import pytest
+from sdk_like import AGENTS, SdkLikeClient, SdkLikeServer
 
 from stages.evaluate.agents import make_agent
 from stages.evaluate.env import EnvConfig
@@ -23,7 +24,6 @@ from stages.evaluate.protocol.codec import (
     parse_action,
     unpack,
 )
-from tests.sdk_like import AGENTS, SdkLikeClient, SdkLikeServer
 
 
 def test_encodings_round_trip():
