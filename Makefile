@@ -109,6 +109,7 @@ submit: $(STAMP)
 test-faults: $(STAMP)
 	$(BIN)/python -m pytest -q -m faults tests/test_faults.py $(ARGS)
 	$(BIN)/python -m benchmarks.fuzz_readers --cases 10000
+	$(BIN)/python -m benchmarks.fuzz_frames --cases 10000
 	$(BIN)/python -m benchmarks.faults
 
 test-slurm: $(STAMP)

@@ -324,8 +324,16 @@ def markdown(rep: dict) -> str:
     if fz:
         lines += ["", "| reader | cases |", "|---|---|"]
         lines += [f"| {k} | {v:,} |" for k, v in fz["cases_per_reader"].items()]
-        lines += ["", f"Fuzzing: {fz['fuzz_cases']:,} cases, {fz['fuzz_crashes']} crashes, {fz['fuzz_hangs']} hangs "
-                  "(`python -m benchmarks.fuzz_readers`)."]
+        lines += ["", f"Reader fuzzing: {fz['fuzz_cases']:,} cases, {fz['fuzz_crashes']} crashes, {fz['fuzz_hangs']} "
+                  "hangs (`python -m benchmarks.fuzz_readers`)."]
+    ff = rep.get("fuzz_frames")
+    if ff:
+        lines += ["", "| agent-server frame (side:type) | cases |", "|---|---|"]
+        lines += [f"| {k} | {v:,} |" for k, v in ff["cases_per_frame_type"].items()]
+        lines += ["", f"Frame fuzzing: {sum(ff['cases_per_frame_type'].values()):,} cases, {ff['crashes']} crashes "
+                  f"(memory included), {ff['hangs']} hangs (`python -m benchmarks.fuzz_frames`)."]
+    if "fuzz_cases" in rep:
+        lines += ["", f"All fuzzing: {rep['fuzz_cases']:,} cases, {rep['fuzz_crashes']} crashes, {rep['fuzz_hangs']} hangs."]
     return "\n".join(lines) + "\n"
 
 
@@ -367,6 +375,15 @@ def main(argv=None) -> dict:
         f = json.loads(fz.read_text())
         rep["fuzz"] = {k: f[k] for k in ("fuzz_cases", "fuzz_crashes", "fuzz_hangs", "cases_per_reader")}
         rep.update({k: f[k] for k in ("fuzz_cases", "fuzz_crashes", "fuzz_hangs")})
+    ff = Path(args.out) / "fuzz_frames.json"
+    if ff.exists():  # frames (benchmarks.fuzz_frames) count into the fuzz totals too
+        f = json.loads(ff.read_text())
+        rep["fuzz_frames"] = {"cases_per_frame_type": {k: v["cases"] for k, v in f["kinds"].items()},
+                              "crashes": f["fuzz_frame_crashes"], "hangs": f["fuzz_frame_hangs"],
+                              "peak_rss_mb": f.get("peak_rss_mb")}
+        for ours, theirs in (("fuzz_cases", "fuzz_frame_cases"), ("fuzz_crashes", "fuzz_frame_crashes"),
+                             ("fuzz_hangs", "fuzz_frame_hangs")):
+            rep[ours] = rep.get(ours, 0) + f[theirs]
     write_report(args.out, "bench_faults.json", rep)
     (Path(args.out) / "bench_faults.md").write_text(markdown(rep))
     return rep

@@ -119,3 +119,45 @@ def test_spz_v4_frame_that_declares_more_than_its_stream_is_refused_before_alloc
     out = bytes(data[:toc]) + entries.astype("<u8").tobytes() + bomb + body
     (tmp_path / "bomb.spz").write_bytes(out)
     _expect_rejected(tmp_path / "bomb.spz", "spz", "frame declares")
+
+
+# ---- agent-server frames: a hostile server against the evaluator, a hostile client against ours ----
+from benchmarks.fuzz_frames import CLIENT_KINDS, SERVER_KINDS  # noqa: E402
+
+
+@pytest.mark.parametrize("spec", [f"client:{k}" for k in CLIENT_KINDS] + [f"server:{k}" for k in SERVER_KINDS])
+def test_hostile_frames_end_in_recorded_failures(spec):
+    """A few dozen drawn frames a type (`make test-faults` runs 10,000): the evaluator accepts,
+    skips or rejects each with ProtocolError / ValueError; serve_agent answers each with a
+    well-formed frame or nothing; no hang, no MemoryError."""
+    from benchmarks.fuzz_frames import run
+
+    rep = run([spec], cases=25, seed=0, time_limit=5.0)[spec]
+    assert rep["cases"] == 25 and rep["crashes"] == rep["hangs"] == rep["memory"] == 0, rep["examples"]
+
+
+def test_frames_that_found_defects():
+    import msgpack
+
+    from navcore.nav.actions import ActionSpace
+    from stages.evaluate.agents import make_agent
+    from stages.evaluate.protocol.codec import ProtocolError, decode_value, unpack
+    from stages.evaluate.protocol.server import Session
+
+    # a list as the frame type: was a TypeError (unhashable) instead of a protocol error
+    with pytest.raises(ProtocolError):
+        unpack(msgpack.packb({"type": [1], "payload": {}, "seq": 1, "timestamp": 0}))
+    with pytest.raises(ProtocolError):  # seq True is not an int seq
+        unpack(msgpack.packb({"type": "action", "payload": {}, "seq": True, "timestamp": 0}))
+    # an image whose PNG header disagrees with its declared shape, and one too large to decode
+    from benchmarks.fuzz_frames import png_image
+
+    with pytest.raises(ProtocolError):
+        decode_value({"rgb": png_image(8, 8, declared=[2**20, 2**20, 3])})
+    with pytest.raises(ProtocolError):
+        decode_value({"rgb": png_image(2000, 1000)}, max_pixels=1 << 20)
+    # serve_agent never raises, whatever arrives
+    s = Session(lambda: make_agent("random"), "native", ActionSpace())
+    for data in (b"", b"\xc1", msgpack.packb([1, 2]), msgpack.packb({"type": "observation", "payload": {}, "seq": 3,
+                                                                     "timestamp": 0})):
+        assert unpack(s.respond(data))["type"] == "error"

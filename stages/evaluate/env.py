@@ -21,6 +21,7 @@ inside the region). Either way the episode ends after its step budget (max_steps
 from __future__ import annotations
 
 import math
+import reprlib
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -37,20 +38,60 @@ MAX_DT = 10.0
 """Longest duration of one velocity command, seconds."""
 
 
+_REPR = reprlib.Repr()
+_REPR.maxlevel, _REPR.maxdict, _REPR.maxlist, _REPR.maxtuple, _REPR.maxstring, _REPR.maxother = 2, 4, 4, 4, 40, 40
+
+
+def brief(v) -> str:
+    """A bounded repr of a value from an agent (a hostile one may be huge or deeply nested)."""
+    return _REPR.repr(v)
+
+
 def _finite(d: dict, key: str, default: float | None) -> float:
     """d[key] (or the default) as a finite float; a ValueError names the key otherwise."""
     if key not in d and default is None:
         raise ValueError(f"action has no {key!r}")
     v = d.get(key, default)
     if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v):
-        raise ValueError(f"action field {key!r} must be a finite number, got {str(v)[:40]}")
+        raise ValueError(f"action field {key!r} must be a finite number, got {brief(v)}")
     return float(v)
 
 
 def _relative_pose(w) -> tuple[float, float, float]:
     if not isinstance(w, dict):
-        raise ValueError(f"a waypoint is a map {{x, y, yaw}}, got {str(w)[:60]}")
+        raise ValueError(f"a waypoint is a map {{x, y, yaw}}, got {brief(w)}")
     return _finite(w, "x", 0.0), _finite(w, "y", 0.0), _finite(w, "yaw", 0.0)
+
+
+def decode_action(action, actions: ActionSpace) -> tuple[bool, list[tuple[float, float, float]]]:
+    """(stop?, relative moves [(dx, dy, dyaw)]) of an action in any accepted form; a ValueError
+    names what is wrong with a malformed or non-finite one."""
+    if isinstance(action, dict):
+        if action.get("stop"):
+            return True, []
+        if "waypoints" in action:
+            wps = action["waypoints"]
+            if not isinstance(wps, (list, tuple)) or not 1 <= len(wps) <= MAX_WAYPOINTS:
+                raise ValueError(f"waypoints must be a list of 1 to {MAX_WAYPOINTS} poses, got {brief(wps)}")
+            return False, [_relative_pose(w) for w in wps]
+        if "v" in action:
+            v, w, dt = (_finite(action, k, d) for k, d in (("v", None), ("w", 0.0), ("dt", 0.05)))
+            if not 0.0 < dt <= MAX_DT:
+                raise ValueError(f"velocity action dt must be in (0, {MAX_DT}] s, got {dt}")
+            return False, [(v * dt, 0.0, w * dt)]
+        if {"x", "y", "yaw"} & set(action):  # one flat waypoint (navarena-server's random agent)
+            return False, [_relative_pose(action)]
+        raise ValueError(f"unknown action {brief(action)}: expected stop, waypoints, x/y/yaw or v/w/dt")
+    if isinstance(action, bool) or not isinstance(action, (int, np.integer)):
+        raise ValueError(f"unknown action {brief(action)}: a discrete action is an integer 0..3")
+    a = int(action)
+    if a == STOP:
+        return True, []
+    if a == MOVE_FORWARD:
+        return False, [(actions.forward_step, 0.0, 0.0)]
+    if a in (TURN_LEFT, TURN_RIGHT):
+        return False, [(0.0, 0.0, actions.turn if a == TURN_LEFT else -actions.turn)]
+    raise ValueError(f"unknown discrete action {a} (0 stop, 1 forward, 2 left, 3 right)")
 
 
 @dataclass
@@ -210,32 +251,7 @@ class NavEnv:
         return float(geodesic_potential(f.grid, cm.origin[0], cm.origin[1], cm.resolution, self.state.x, self.state.y))
 
     def _decode(self, action) -> tuple[bool, list[tuple[float, float, float]]]:
-        if isinstance(action, dict):
-            if action.get("stop"):
-                return True, []
-            if "waypoints" in action:
-                wps = action["waypoints"]
-                if not isinstance(wps, (list, tuple)) or not 1 <= len(wps) <= MAX_WAYPOINTS:
-                    raise ValueError(f"waypoints must be a list of 1 to {MAX_WAYPOINTS} poses, got {str(wps)[:80]}")
-                return False, [_relative_pose(w) for w in wps]
-            if "v" in action:
-                v, w, dt = (_finite(action, k, d) for k, d in (("v", None), ("w", 0.0), ("dt", 0.05)))
-                if not 0.0 < dt <= MAX_DT:
-                    raise ValueError(f"velocity action dt must be in (0, {MAX_DT}] s, got {dt}")
-                return False, [(v * dt, 0.0, w * dt)]
-            if {"x", "y", "yaw"} & set(action):  # one flat waypoint (navarena-server's random agent)
-                return False, [_relative_pose(action)]
-            raise ValueError(f"unknown action {str(action)[:120]}: expected stop, waypoints, x/y/yaw or v/w/dt")
-        if isinstance(action, bool) or not isinstance(action, (int, np.integer)):
-            raise ValueError(f"unknown action {str(action)[:120]}: a discrete action is an integer 0..3")
-        a = int(action)
-        if a == STOP:
-            return True, []
-        if a == MOVE_FORWARD:
-            return False, [(self.cfg.actions.forward_step, 0.0, 0.0)]
-        if a in (TURN_LEFT, TURN_RIGHT):
-            return False, [(0.0, 0.0, self.turn if a == TURN_LEFT else -self.turn)]
-        raise ValueError(f"unknown discrete action {a} (0 stop, 1 forward, 2 left, 3 right)")
+        return decode_action(action, self.cfg.actions)
 
     def _move(self, dx: float, dy: float, dyaw: float) -> None:
         s = self.state

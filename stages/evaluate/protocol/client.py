@@ -23,6 +23,27 @@ from stages.evaluate.protocol.codec import (
     unpack,
 )
 
+REPLY_MAX_PIXELS = 1 << 20
+"""An image inside an action reply (which needs none) decodes only up to this size."""
+
+
+def is_reply(frame: dict, seq: int, kind: str, episode_seq: int) -> bool:
+    """Whether a checked frame is the reply (of type `kind`) to our request `seq` (True), a stale
+    frame to skip (False: an earlier request's late or duplicate reply, an error frame of an
+    earlier episode), or breaks the protocol (ProtocolError: an error frame of the running episode,
+    a fatal one, a reply to a request not yet sent, a wrong type for our request)."""
+    if frame["type"] == "error":
+        if frame["seq"] >= episode_seq or frame["payload"].get("fatal"):
+            raise ProtocolError(error_message(frame))
+        return False
+    if frame["seq"] == seq:
+        if frame["type"] != kind:
+            raise ProtocolError(f"expected a {kind} frame, got {frame['type']!r}")
+        return True
+    if frame["seq"] > seq:
+        raise ProtocolError(f"{frame['type']} answers observation {frame['seq']}, not {seq}")
+    return False
+
 
 class RemoteAgent:
     """An agent served over WebSocket (single-slot flow), used like an in-process agent.
@@ -80,15 +101,8 @@ class RemoteAgent:
                     frame = unpack(self.ws.recv(timeout=left))
                 except TimeoutError:
                     break
-                if frame["type"] == "error":
-                    if frame["seq"] >= self.episode_seq or frame["payload"].get("fatal"):
-                        raise ProtocolError(error_message(frame))
-                elif frame["seq"] == seq and frame["type"] == kind:
+                if is_reply(frame, seq, kind, self.episode_seq):
                     return frame
-                elif frame["seq"] > seq:
-                    raise ProtocolError(f"{frame['type']} answers observation {frame['seq']}, not {seq}")
-                elif frame["seq"] == seq:
-                    raise ProtocolError(f"expected a {kind} frame, got {frame['type']!r}")
                 self.stale_frames += 1  # a duplicate or late reply of an earlier request
             else:
                 raise ProtocolError(f"more than {self.stale_limit} stale frames before the reply to {seq}")
@@ -102,7 +116,7 @@ class RemoteAgent:
 
     def act(self, obs: dict):
         seq = self._send("observation", encode_observation(obs, self.image_format))
-        return parse_action(decode_value(self._reply(seq, "action")["payload"]))
+        return parse_action(decode_value(self._reply(seq, "action")["payload"], max_pixels=REPLY_MAX_PIXELS))
 
     def end(self, result: dict) -> None:
         if self.ws is not None:
@@ -133,7 +147,7 @@ class RemoteBatchAgent(RemoteAgent):
     def act(self, observations: dict) -> dict:
         seq = self._send("batch_observation", {"observations": {str(k): encode_observation(o, self.image_format)
                                                                 for k, o in observations.items()}})
-        payload = decode_value(self._reply(seq, "batch_action")["payload"])
+        payload = decode_value(self._reply(seq, "batch_action")["payload"], max_pixels=REPLY_MAX_PIXELS)
         acts = payload.get("actions", {}) if isinstance(payload, dict) else None
         if not isinstance(acts, dict):
             raise ProtocolError("batch_action payload has no actions map")

@@ -8,6 +8,8 @@ import time
 import msgpack
 import numpy as np
 
+from stages.evaluate.env import brief
+
 FRAME_TYPES = {"observation", "action", "episode_start", "episode_end", "error", "batch_observation",
                "batch_action", "batch_episode_start", "batch_episode_end"}
 
@@ -45,7 +47,7 @@ def encode_image(img: np.ndarray, fmt: str = "jpeg", quality: int = 90) -> dict:
     return {"__image__": True, "data": buf.getvalue(), "format": fmt, "shape": list(img.shape)}
 
 
-def decode_value(v, _depth: int = 0):
+def decode_value(v, _depth: int = 0, max_pixels: int = MAX_IMAGE_PIXELS):
     """Undo encode_array / encode_image anywhere in a nested payload. Hostile values (a shape that
     does not match the bytes, a dtype outside b/i/u/f, an image larger than MAX_IMAGE_PIXELS or
     unlike its declared shape, nesting deeper than MAX_DEPTH) raise ProtocolError: nothing is
@@ -57,14 +59,14 @@ def decode_value(v, _depth: int = 0):
             if v.get("__ndarray__"):
                 return _decode_array(v)
             if v.get("__image__"):
-                return _decode_image(v)
+                return _decode_image(v, max_pixels)
         except ProtocolError:
             raise
         except Exception as e:  # noqa: BLE001 - any decoder failure is the frame's fault
-            raise ProtocolError(f"undecodable array / image: {type(e).__name__}: {str(e)[:120]}") from e
-        return {k: decode_value(x, _depth + 1) for k, x in v.items()}
+            raise ProtocolError(f"undecodable array / image: {type(e).__name__}: {str(e)[:200]}") from e
+        return {k: decode_value(x, _depth + 1, max_pixels) for k, x in v.items()}
     if isinstance(v, list):
-        return [decode_value(x, _depth + 1) for x in v]
+        return [decode_value(x, _depth + 1, max_pixels) for x in v]
     return v
 
 
@@ -72,7 +74,7 @@ def _shape(v) -> tuple[int, ...]:
     shape = v.get("shape")
     if not isinstance(shape, (list, tuple)) or len(shape) > MAX_NDIM or \
             not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in shape):
-        raise ProtocolError(f"bad array shape {str(shape)[:60]}")
+        raise ProtocolError(f"bad array shape {brief(shape)}")
     return tuple(shape)
 
 
@@ -80,7 +82,7 @@ def _dtype(name) -> np.dtype:
     try:
         dt = np.dtype(name)
     except TypeError as e:
-        raise ProtocolError(f"bad dtype {str(name)[:40]}") from e
+        raise ProtocolError(f"bad dtype {brief(name)}") from e
     if dt.kind not in "biuf" or dt.itemsize > 16 or dt.fields is not None or dt.subdtype is not None:
         raise ProtocolError(f"arrays of dtype {dt} are not accepted (b, i, u, f only)")
     return dt
@@ -100,15 +102,15 @@ def _decode_array(v) -> np.ndarray:
     return _from_bytes(v, _dtype(v.get("dtype")), _shape(v))
 
 
-def _decode_image(v) -> np.ndarray:
+def _decode_image(v, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray:
     shape = _shape(v)
-    if len(shape) != 3 or shape[2] not in (1, 3, 4) or shape[0] * shape[1] > MAX_IMAGE_PIXELS:
-        raise ProtocolError(f"images are HxWx{{1,3,4}} of at most {MAX_IMAGE_PIXELS} pixels, got {list(shape)}")
+    if len(shape) != 3 or shape[2] not in (1, 3, 4) or shape[0] * shape[1] > max_pixels:
+        raise ProtocolError(f"images are HxWx{{1,3,4}} of at most {max_pixels} pixels, got {list(shape)}")
     fmt = v.get("format")
     if fmt == "raw":
         return _from_bytes(v, _dtype(v.get("dtype", "|u1")), shape)
     if fmt not in ("jpeg", "png"):
-        raise ProtocolError(f"unknown image format {str(fmt)[:20]!r}")
+        raise ProtocolError(f"unknown image format {brief(fmt)!r}")
     from PIL import Image
 
     img = Image.open(io.BytesIO(v["data"]))
@@ -144,17 +146,20 @@ def unpack(data) -> dict:
     except Exception as e:  # noqa: BLE001
         raise ProtocolError(f"not a msgpack frame: {type(e).__name__}: {e}") from e
     if not isinstance(frame, dict) or not {"type", "payload", "seq", "timestamp"} <= set(frame):
-        raise ProtocolError(f"a frame must be a map with type, payload, seq and timestamp, got {str(frame)[:120]}")
-    if frame["type"] not in FRAME_TYPES or not isinstance(frame["payload"], dict) or \
-            not isinstance(frame["seq"], int):
-        raise ProtocolError(f"malformed frame: type {frame.get('type')!r}, seq {frame.get('seq')!r}")
+        raise ProtocolError(f"a frame must be a map with type, payload, seq and timestamp, got {brief(frame)}")
+    kind, seq = frame["type"], frame["seq"]
+    if not isinstance(kind, str) or kind not in FRAME_TYPES or not isinstance(frame["payload"], dict) or \
+            not isinstance(seq, int) or isinstance(seq, bool):
+        raise ProtocolError(f"malformed frame: type {brief(kind)}, seq {brief(seq)}")
     return frame
 
 
 def error_message(frame: dict) -> str:
     """The text of an error frame (their servers send {error}, fatal optional)."""
     p = frame["payload"]
-    return f"server error: {str(p.get('error'))[:400]}" + (" (fatal)" if p.get("fatal") else "")
+    err = p.get("error")
+    text = err[:400] if isinstance(err, str) else brief(err)
+    return f"server error: {text}" + (" (fatal)" if p.get("fatal") else "")
 
 
 def parse_action(payload: dict):
@@ -177,9 +182,9 @@ def parse_action(payload: dict):
     if "action_id" in payload:
         a = payload["action_id"]
         if isinstance(a, bool) or not isinstance(a, int):
-            raise ProtocolError(f"action_id must be an integer, got {str(a)[:40]}")
+            raise ProtocolError(f"action_id must be an integer, got {brief(a)}")
         return a
-    raise ProtocolError(f"action payload has none of stop, waypoints, x/y/yaw, v/w/dt, action_id: {str(payload)[:120]}")
+    raise ProtocolError(f"action payload has none of stop, waypoints, x/y/yaw, v/w/dt, action_id: {brief(payload)}")
 
 
 ACTION_SPACES = ("native", "waypoint", "velocity")
@@ -197,7 +202,7 @@ def action_payload(action, space: str = "native", forward_step: float = 0.25, tu
         if space == "native" or action.get("stop") or ("waypoints" in action and space == "waypoint") or \
                 ("v" in action and space == "velocity"):
             return _stop_form(space, dt) if action.get("stop") else action
-        raise ValueError(f"cannot express {str(action)[:80]} in the {space} action space")
+        raise ValueError(f"cannot express {brief(action)} in the {space} action space")
     a = int(action)
     if space == "native":
         return {"stop": True} if a == 0 else {"action_id": a}

@@ -8,6 +8,7 @@ observation before episode_start or for a slot that was never started, an agent 
 from __future__ import annotations
 
 from navcore.nav.actions import ActionSpace
+from stages.evaluate.env import brief
 from stages.evaluate.protocol.codec import ProtocolError, action_payload, decode_value, pack, unpack
 
 
@@ -20,6 +21,24 @@ class Session:
 
     def payload(self, action) -> dict:
         return action_payload(action, self.space, self.actions.forward_step, self.actions.turn)
+
+    def respond(self, data) -> bytes | None:
+        """One received frame (bytes) -> the packed reply, or None. Never raises: every problem
+        becomes an error frame with the seq of the frame that caused it (-1: unreadable)."""
+        kind, seq = "", -1
+        try:
+            frame = unpack(data)
+            kind, seq = frame["type"], frame["seq"]
+            reply = self.handle(kind, decode_value(frame["payload"]), seq)
+        except Exception as e:  # noqa: BLE001 - the connection and the server go on
+            reply = "error", {"error": f"{type(e).__name__}: {str(e)[:400]}",
+                              "fatal": kind in ("observation", "batch_observation")}
+        if reply is None:
+            return None
+        try:
+            return pack(reply[0], reply[1], seq)
+        except Exception as e:  # noqa: BLE001 - an agent's reply that msgpack cannot carry
+            return pack("error", {"error": f"unsendable reply: {type(e).__name__}: {str(e)[:200]}", "fatal": True}, seq)
 
     def handle(self, kind: str, p: dict, seq: int) -> tuple[str, dict] | None:
         """One decoded frame -> the reply (type, payload), or None."""
@@ -44,7 +63,7 @@ class Session:
             obs = _map(p, "observations")
             missing = [s for s in obs if str(s) not in self.agents]
             if missing:
-                return "error", {"error": f"batch_observation for slots never started: {missing[:8]}", "fatal": False}
+                return "error", {"error": f"batch_observation for slots never started: {brief(missing)}", "fatal": False}
             return "batch_action", {"actions": {s: self.payload(self.agents[str(s)].act(o)) for s, o in obs.items()}}
         elif kind == "batch_episode_end":
             for slot in _map(p, "episodes"):
@@ -80,16 +99,9 @@ def serve_agent(agent_factory, host: str = "127.0.0.1", port: int = 8000, ready=
     def handler(ws):
         session = Session(agent_factory, action_space, actions)
         for data in ws:
-            kind, seq = "", -1
-            try:
-                frame = unpack(data)
-                kind, seq = frame["type"], frame["seq"]
-                reply = session.handle(kind, decode_value(frame["payload"]), seq)
-            except Exception as e:  # noqa: BLE001 - the connection and the server go on
-                reply = "error", {"error": f"{type(e).__name__}: {str(e)[:400]}",
-                                  "fatal": kind in ("observation", "batch_observation")}
+            reply = session.respond(data)
             if reply is not None:
-                ws.send(pack(reply[0], reply[1], seq))
+                ws.send(reply)
 
     with serve(handler, host, port, max_size=max_frame_bytes, compression=None, ping_interval=None) as server:
         if ready:
