@@ -223,15 +223,17 @@ def run(kinds: list[str], cases: int, seed: int, time_limit: float) -> dict:
         stats = {"cases": 0, "crashes": 0, "hangs": 0, "memory": 0, "outcomes": {}, "peak_traced_mb": 0.0,
                  "max_case_s": 0.0, "examples": []}
         session = Session(lambda: make_agent("depth_reactive"), "waypoint", ActionSpace())
-        if side == "server":  # an episode in progress, so observations reach the agent
-            session.respond(msgpack.packb(base_frame("episode_start", 1), use_bin_type=True))
-            session.respond(msgpack.packb(base_frame("batch_episode_start", 2), use_bin_type=True))
+        starts = [msgpack.packb(base_frame(k, n), use_bin_type=True)
+                  for n, k in enumerate(("episode_start", "batch_episode_start"), 1)]
 
         @settings(max_examples=cases, deadline=None, database=None, derandomize=True,
                   suppress_health_check=list(HealthCheck))
         @given(st.data())
         def case(d):
             data = mutate(d.draw, st, anyval, special, kind, 5)
+            if side == "server":  # episodes in progress (an agent that raised ended the last), so
+                for f in starts:  # observations reach the agents
+                    session.respond(f)
             traced = stats["cases"] % TRACE_EVERY == 0  # tracemalloc slows every allocation: a sample
             if traced:
                 tracemalloc.start()
