@@ -161,3 +161,17 @@ def test_frames_that_found_defects():
     for data in (b"", b"\xc1", msgpack.packb([1, 2]), msgpack.packb({"type": "observation", "payload": {}, "seq": 3,
                                                                      "timestamp": 0})):
         assert unpack(s.respond(data))["type"] == "error"
+
+
+def test_quaternions_near_float32_max_normalize_to_unit(tmp_path):
+    """Found by the 10,000-case npy_folder run: components of 3.4e38 have a norm above float32's
+    range, and dividing by it in float32 gave zero quaternions in a 'validated' scene."""
+    from navcore.gaussians.formats import write_npy_folder
+
+    gs = small_scene(4, 0, 1)
+    gs.quats[1] = [3.4e38, 3.4e38, 0.0, 0.0]
+    gs.quats[2] = [3.4e38, 0.0, 0.0, 0.0]
+    write_npy_folder(tmp_path / "s", gs)
+    scene, _ = read_validated(tmp_path / "s", "npy_folder", scene_id="hostile")
+    assert np.allclose(np.linalg.norm(scene.quats.astype(np.float64), axis=1), 1, atol=1e-6)
+    assert np.allclose(scene.quats[1], [2 ** -0.5, 2 ** -0.5, 0, 0], atol=1e-6)

@@ -72,7 +72,8 @@ def sanitize(scene: GaussianScene, path, scene_id: str | None = None,
     clean = scene.subset(keep) if report.n_kept < n else scene
     qk = qn[keep]
     report.renormalized_quats = int((np.abs(qk - 1.0) > 1e-3).sum())
-    clean.quats = (clean.quats / qk[:, None].astype(np.float32)).astype(np.float32)
+    # in float64: a norm above float32's range (components near 3.4e38) would turn into inf
+    clean.quats = (clean.quats.astype(np.float64) / qk[:, None]).astype(np.float32)
     return clean, report
 
 
