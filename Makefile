@@ -106,10 +106,21 @@ submit: $(STAMP)
 # then make submit (array job, shards, cancel and resubmit) and executor=slurm (dask-jobqueue)
 # issue 14's proof (well under an hour here): the fault-injection scenarios against an undisturbed
 # run, 10,000 fuzz cases a reader layout, then data/08_reports/bench_faults.{json,md}
+# the fuzzers are single-threaded: three side by side on the two cores (readers split in two
+# halves of about equal time), then the halves' reports merged
+FUZZ_A = sog,spz_v2,supersplat_ply,npy_folder
+FUZZ_B = spz_v3,inria_ply,splat,spz_v4,sog_lod
 test-faults: $(STAMP)
 	$(BIN)/python -m pytest -q -m faults tests/test_faults.py $(ARGS)
-	$(BIN)/python -m benchmarks.fuzz_readers --cases 10000
-	$(BIN)/python -m benchmarks.fuzz_frames --cases 10000
+	mkdir -p data/08_reports
+	$(BIN)/python -m benchmarks.fuzz_frames --cases 10000 > data/fuzz_frames.log 2>&1 & f=$$!; \
+	$(BIN)/python -m benchmarks.fuzz_readers --cases 10000 --kinds $(FUZZ_A) --work /tmp/navarena_fuzz_a \
+	    --out data/08_reports/fuzz_a > data/fuzz_a.log 2>&1 & a=$$!; \
+	$(BIN)/python -m benchmarks.fuzz_readers --cases 10000 --kinds $(FUZZ_B) --work /tmp/navarena_fuzz_b \
+	    --out data/08_reports/fuzz_b; b=$$?; \
+	wait $$a; ra=$$?; wait $$f; rf=$$?; tail -3 data/fuzz_frames.log data/fuzz_a.log; test $$b$$ra$$rf = 000
+	$(BIN)/python -m benchmarks.fuzz_readers --merge data/08_reports/fuzz_a/fuzz_readers.json \
+	    data/08_reports/fuzz_b/fuzz_readers.json
 	$(BIN)/python -m benchmarks.faults
 
 test-slurm: $(STAMP)
