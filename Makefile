@@ -111,8 +111,9 @@ submit: $(STAMP)
 FUZZ_A = sog,spz_v2,supersplat_ply,npy_folder
 FUZZ_B = spz_v3,inria_ply,splat,spz_v4,sog_lod
 test-faults: $(STAMP)
-	$(BIN)/python -m pytest -q -m faults tests/test_faults.py $(ARGS)
 	mkdir -p data/08_reports
+	NAVARENA_FAULTS_KILLS=20 NAVARENA_FAULTS_REPORT=data/08_reports/faults_scenarios.json \
+	    $(BIN)/python -m pytest -q -m faults tests/test_faults.py $(ARGS)
 	$(BIN)/python -m benchmarks.fuzz_frames --cases 10000 > data/fuzz_frames.log 2>&1 & f=$$!; \
 	$(BIN)/python -m benchmarks.fuzz_readers --cases 10000 --kinds $(FUZZ_A) --work /tmp/navarena_fuzz_a \
 	    --out data/08_reports/fuzz_a > data/fuzz_a.log 2>&1 & a=$$!; \
@@ -121,7 +122,7 @@ test-faults: $(STAMP)
 	wait $$a; ra=$$?; wait $$f; rf=$$?; tail -3 data/fuzz_frames.log data/fuzz_a.log; test $$b$$ra$$rf = 000
 	$(BIN)/python -m benchmarks.fuzz_readers --merge data/08_reports/fuzz_a/fuzz_readers.json \
 	    data/08_reports/fuzz_b/fuzz_readers.json
-	$(BIN)/python -m benchmarks.faults
+	$(BIN)/python -m benchmarks.faults --merge data/08_reports/faults_scenarios.json
 
 test-slurm: $(STAMP)
 	scripts/slurm_localhost.sh

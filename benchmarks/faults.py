@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import fcntl
+import hashlib
 import json
 import os
 import shutil
@@ -300,13 +301,42 @@ SCENARIOS = {"kill_run": kill_run, "kill_worker": kill_worker, "full_disk": full
              "damaged": damaged, "determinism": determinism, "out_of_memory": out_of_memory}
 
 
+def code_digest() -> str:
+    """What the reference's bytes depend on: the packages' code, the configs and catalogs, the base
+    overrides. A reference made by other code is stale (its bytes legitimately differ)."""
+    h = hashlib.sha256(repr(BASE).encode())
+    for top in ("navcore", "stages", "pipeline", "conf", "catalogs"):
+        for f in sorted((PROJECT / top).rglob("*")):
+            if f.is_file() and f.suffix in (".py", ".yaml", ".json", ".csv", ".txt"):
+                h.update(str(f.relative_to(PROJECT)).encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()
+
+
 def reference(work: Path) -> Path:
+    """The undisturbed run every scenario compares with, reused while the code it was made with is
+    today's (its digest is stored beside it), made again otherwise."""
     ref = work / "reference"
-    if not (ref / "_runs" / "latest.json").exists():
+    stamp, digest = work / "reference.code.sha256", code_digest()
+    if not stamp.exists() or stamp.read_text() != digest or not (ref / "_runs" / "latest.json").exists():
+        shutil.rmtree(ref, ignore_errors=True)
+        stamp.unlink(missing_ok=True)
         r = run(ref)
         if r["rc"] != 0 or r["summary"].get("failures"):
             raise RuntimeError(f"the undisturbed reference run failed: {r['summary'].get('failures')}")
+        stamp.write_text(digest)
     return ref
+
+
+def run_scenario(name: str, ref: Path, work: Path, kills: int = 20) -> dict:
+    """One scenario in a fresh folder work/name, timed."""
+    d = work / name
+    if d.exists():
+        shutil.rmtree(d, ignore_errors=True)
+    d.mkdir(parents=True)
+    t0 = time.perf_counter()
+    r = SCENARIOS[name](ref, d, kills) if name == "kill_run" else SCENARIOS[name](ref, d)
+    r["seconds"] = round(time.perf_counter() - t0, 1)
+    return r
 
 
 def markdown(rep: dict) -> str:
@@ -358,14 +388,7 @@ def main(argv=None) -> dict:
     work.mkdir(parents=True, exist_ok=True)
     ref = None if args.merge else reference(work)
     for name in ([] if args.merge else args.only.split(",")):
-        d = work / name
-        if d.exists():
-            shutil.rmtree(d, ignore_errors=True)
-        d.mkdir(parents=True)
-        t0 = time.perf_counter()
-        r = SCENARIOS[name](ref, d, args.kills) if name == "kill_run" else SCENARIOS[name](ref, d)
-        r["seconds"] = round(time.perf_counter() - t0, 1)
-        rep["scenarios"][name] = r
+        rep["scenarios"][name] = r = run_scenario(name, ref, work, args.kills)
         print(json.dumps(r), flush=True)
     rep["faults_injected"] = sum(r["injected"] for r in rep["scenarios"].values())
     rep["faults_survived"] = sum(r["survived"] for r in rep["scenarios"].values())

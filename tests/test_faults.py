@@ -1,6 +1,14 @@
 """Fault injection (slow; `make test-faults`): each scenario of benchmarks.faults against an
 undisturbed reference run, asserting that every injected fault was survived and every stored
-byte matches. The full-disk scenario needs root (it mounts a tmpfs) and is skipped otherwise."""
+byte matches. The full-disk scenario needs root (it mounts a tmpfs) and is skipped otherwise.
+
+NAVARENA_FAULTS_KILLS sets the whole-run kill points (6 here, 20 in `make test-faults`);
+NAVARENA_FAULTS_REPORT names a bench_faults.json the module writes the scenarios' figures to, so
+that `make test-faults` runs each scenario once (the benchmark then merges the fuzzing figures)."""
+import json
+import os
+from pathlib import Path
+
 import pytest
 
 from benchmarks import faults
@@ -9,17 +17,28 @@ pytestmark = [pytest.mark.slow, pytest.mark.faults]
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    work = tmp_path_factory.mktemp("faults")
+def reference():
+    """The reference lives in faults' work folder, reused while the code is unchanged."""
+    work = Path(os.environ.get("NAVARENA_FAULTS_WORK", "/tmp/navarena_faults"))
+    work.mkdir(parents=True, exist_ok=True)
     return faults.reference(work), work
 
 
+@pytest.fixture(scope="module")
+def report():
+    scenarios: dict = {}
+    yield scenarios
+    out = os.environ.get("NAVARENA_FAULTS_REPORT")
+    if out and scenarios:
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+        Path(out).write_text(json.dumps({"scenarios": scenarios}, indent=1))
+
+
 @pytest.mark.parametrize("name", list(faults.SCENARIOS))
-def test_fault_is_survived_and_outputs_match(name, reference):
+def test_fault_is_survived_and_outputs_match(name, reference, report):
     ref, work = reference
-    d = work / name
-    d.mkdir()
-    r = faults.SCENARIOS[name](ref, d, 6) if name == "kill_run" else faults.SCENARIOS[name](ref, d)
+    r = faults.run_scenario(name, ref, work, kills=int(os.environ.get("NAVARENA_FAULTS_KILLS", "6")))
+    report[name] = r
     if r.get("skipped"):
         pytest.skip(r["skipped"])
     assert r["injected"] > 0, r
