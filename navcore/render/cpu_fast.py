@@ -7,15 +7,17 @@ camera sees rather than to the scene:
 1. cull: one pass over the means with a conservative test (near / far plane on the mean depth,
    gsplat's rule; the image rectangle widened by an upper bound on each Gaussian's footprint,
    from its largest standard deviation), so only candidates get the full projection;
-2. project the candidates (EWA with the clamped Jacobian, eps2d, opacity-aware box) and
-   evaluate their colour (SH at the view direction) in parallel;
-3. order: a stable LSD radix sort of the depth keys (float bits; ties keep the Gaussian index
-   order) and a counting sort into 16x16 tiles, so each tile's list is by depth then index,
-   gsplat's order;
+2. order: a stable LSD radix sort of the candidates' depth keys (float bits; ties keep the
+   Gaussian index order, gsplat's order);
+3. project the candidates (EWA with the clamped Jacobian, eps2d, opacity-aware box) and
+   evaluate their colour (SH at the view direction) in parallel, reading them in index order and
+   writing each row at its depth rank, then a counting sort into 16x16 tiles, so each tile's
+   list is by depth then index;
 4. rasterise: tiles in parallel, each Gaussian visiting only the pixels of its box inside the
    tile (outside the box its alpha is below 1/255 by construction of the box, so gsplat skips
-   them too), front to back with the exclusive stop at T <= 1e-4, a tile ending when all its
-   pixels are done.
+   them too), and within a row only the span where alpha >= 1/255; a per-row bitmask of finished
+   pixels skips a whole span once all its pixels are done; front to back with the exclusive stop
+   at T <= 1e-4, a tile ending when all its pixels are done.
 
 The scene is prepared once (`prepare`): float32 means, the 3D covariances, opacities, SH
 coefficients and each Gaussian's largest standard deviation.
@@ -85,32 +87,22 @@ def _cull(means, smax, opac, R, t, fx, fy, cx, cy, width, height, near, far, lim
 
 
 @numba.njit(cache=True, inline="always")
-def _sh_colour(sh, i, dx, dy, dz, deg, out, j, col):
-    """out[j, col:col + 3] = max(SH(i) at the unit direction (dx, dy, dz) + 0.5, 0) (3DGS basis)."""
-    for c in range(3):
-        v = C0 * sh[i, 0, c]
-        if deg >= 1:
-            v += -C1 * dy * sh[i, 1, c] + C1 * dz * sh[i, 2, c] - C1 * dx * sh[i, 3, c]
-        out[j, col + c] = v
+def _sh_channel(sh, i, c, dx, dy, dz, deg):
+    """max(SH(i) channel c at the unit direction (dx, dy, dz) + 0.5, 0) (3DGS basis), rounded to
+    float32 after each degree's terms."""
+    v = np.float32(C0 * sh[i, 0, c] + (-C1 * dy * sh[i, 1, c] + C1 * dz * sh[i, 2, c] - C1 * dx * sh[i, 3, c])
+                   if deg >= 1 else C0 * sh[i, 0, c])
     if deg >= 2:
         xx, yy, zz, xy, yz, xz = dx * dx, dy * dy, dz * dz, dx * dy, dy * dz, dx * dz
-        b4, b5, b6, b7, b8 = C2[0] * xy, C2[1] * yz, C2[2] * (2 * zz - xx - yy), C2[3] * xz, C2[4] * (xx - yy)
-        for c in range(3):
-            out[j, col + c] += (b4 * sh[i, 4, c] + b5 * sh[i, 5, c] + b6 * sh[i, 6, c] + b7 * sh[i, 7, c]
-                                + b8 * sh[i, 8, c])
+        v = np.float32(v + (C2[0] * xy * sh[i, 4, c] + C2[1] * yz * sh[i, 5, c] + C2[2] * (2 * zz - xx - yy) * sh[i, 6, c]
+                            + C2[3] * xz * sh[i, 7, c] + C2[4] * (xx - yy) * sh[i, 8, c]))
         if deg >= 3:
-            b9 = C3[0] * dy * (3 * xx - yy)
-            b10 = C3[1] * xy * dz
-            b11 = C3[2] * dy * (4 * zz - xx - yy)
-            b12 = C3[3] * dz * (2 * zz - 3 * xx - 3 * yy)
-            b13 = C3[4] * dx * (4 * zz - xx - yy)
-            b14 = C3[5] * dz * (xx - yy)
-            b15 = C3[6] * dx * (xx - 3 * yy)
-            for c in range(3):
-                out[j, col + c] += (b9 * sh[i, 9, c] + b10 * sh[i, 10, c] + b11 * sh[i, 11, c] + b12 * sh[i, 12, c]
-                                    + b13 * sh[i, 13, c] + b14 * sh[i, 14, c] + b15 * sh[i, 15, c])
-    for c in range(3):
-        out[j, col + c] = max(out[j, col + c] + np.float32(0.5), np.float32(0.0))
+            v = np.float32(v + (C3[0] * dy * (3 * xx - yy) * sh[i, 9, c] + C3[1] * xy * dz * sh[i, 10, c]
+                                + C3[2] * dy * (4 * zz - xx - yy) * sh[i, 11, c]
+                                + C3[3] * dz * (2 * zz - 3 * xx - 3 * yy) * sh[i, 12, c]
+                                + C3[4] * dx * (4 * zz - xx - yy) * sh[i, 13, c] + C3[5] * dz * (xx - yy) * sh[i, 14, c]
+                                + C3[6] * dx * (xx - 3 * yy) * sh[i, 15, c]))
+    return max(v + np.float32(0.5), np.float32(0.0))
 
 
 # per-row render data: u, v, rx, ry (px), conic a, b, c, opacity, depth, ln(255 opacity) (alpha >=
@@ -120,18 +112,21 @@ U, V, RX, RY, CA, CB, CC, OP, Z, LM, F0 = range(11)
 
 @numba.njit(cache=True, parallel=True)
 def _project(idx, means, cov, opac, ext, lmax, sh, deg, feats_in, R, t, campos, fx, fy, cx, cy, width, height, eps2d,
-             lim_lo_x, lim_hi_x, lim_lo_y, lim_hi_y, data, box):
-    """EWA projection of the candidates idx into data[j] (see U..F0) and box[j] = (x0, x1, y0, y1),
-    the tile range (x1 = x0 when culled). Features: the SH colour (deg >= 0) then feats_in[idx[j]]."""
+             lim_lo_x, lim_hi_x, lim_lo_y, lim_hi_y, pos, data, box):
+    """EWA projection of the candidates idx into row r = pos[j] of data (see U..F0) and box[r] =
+    (x0, x1, y0, y1), the tile range (x1 = x0 when culled). Features: the SH colour (deg >= 0) then
+    feats_in[idx[j]]. Reading in index order and writing each row at its depth rank leaves the
+    rows depth-ordered without a gather."""
     tw = (width + TILE - 1) // TILE
     th = (height + TILE - 1) // TILE
     nf = data.shape[1] - F0
     for j in numba.prange(idx.shape[0]):
         i = idx[j]
-        box[j, 0] = 0
-        box[j, 1] = 0
-        box[j, 2] = 0
-        box[j, 3] = 0
+        r = pos[j]
+        box[r, 0] = 0
+        box[r, 1] = 0
+        box[r, 2] = 0
+        box[r, 3] = 0
         mx, my, mz = means[i, 0], means[i, 1], means[i, 2]
         x = R[0, 0] * mx + R[0, 1] * my + R[0, 2] * mz + t[0]
         y = R[1, 0] * mx + R[1, 1] * my + R[1, 2] * mz + t[1]
@@ -178,18 +173,20 @@ def _project(idx, means, cov, opac, ext, lmax, sh, deg, feats_in, R, t, campos, 
         y1 = min(max(int(math.ceil((v + ry) / TILE)), 0), th)
         if x1 <= x0 or y1 <= y0:
             continue
-        box[j, 0], box[j, 1], box[j, 2], box[j, 3] = x0, x1, y0, y1
-        data[j, U], data[j, V], data[j, RX], data[j, RY] = u, v, rx, ry
-        data[j, CA], data[j, CB], data[j, CC] = cc / det, -cb / det, ca / det
-        data[j, OP], data[j, Z], data[j, LM] = opac[i], z, lmax[i]
+        box[r, 0], box[r, 1], box[r, 2], box[r, 3] = x0, x1, y0, y1
+        data[r, U], data[r, V], data[r, RX], data[r, RY] = u, v, rx, ry
+        data[r, CA], data[r, CB], data[r, CC] = cc / det, -cb / det, ca / det
+        data[r, OP], data[r, Z], data[r, LM] = opac[i], z, lmax[i]
         k0 = 0
         if deg >= 0:
             dx, dy, dz = mx - campos[0], my - campos[1], mz - campos[2]
             nrm = max(math.sqrt(dx * dx + dy * dy + dz * dz), 1e-12)
-            _sh_colour(sh, i, dx / nrm, dy / nrm, dz / nrm, deg, data, j, F0)
+            ux, uy, uz = dx / nrm, dy / nrm, dz / nrm
+            for c in range(3):
+                data[r, F0 + c] = _sh_channel(sh, i, c, ux, uy, uz, deg)
             k0 = 3
         for k in range(k0, nf):
-            data[j, F0 + k] = feats_in[i, k - k0]
+            data[r, F0 + k] = feats_in[i, k - k0]
 
 
 SMALL_BOX = 6  # rasterise boxes at most this many pixels wide without solving for the row spans
@@ -198,15 +195,22 @@ CHUNKS = 16  # work split of the sorts (fixed, so that the output does not depen
 
 
 @numba.njit(cache=True, parallel=True)
-def _depth_order(data, box):
-    """Rows with a non-empty tile range, sorted by depth; stable (ties keep the row order, i.e.
-    the Gaussian index order): a parallel LSD radix sort of the depth's float bits, 3 x 11 bits."""
-    live = np.nonzero(box[:, 1] > box[:, 0])[0].astype(np.int32)
-    n = live.shape[0]
-    ka = np.empty(n, np.uint32)
-    for k in numba.prange(n):
-        ka[k] = np.float32(data[live[k], Z]).view(np.uint32)  # positive floats order as their bits
-    va = live
+def _depths(idx, means, R, t, z):
+    """Camera depth of the candidates (the same float32 arithmetic as the projection's)."""
+    for j in numba.prange(idx.shape[0]):
+        i = idx[j]
+        z[j] = R[2, 0] * means[i, 0] + R[2, 1] * means[i, 1] + R[2, 2] * means[i, 2] + t[2]
+
+
+@numba.njit(cache=True, parallel=True)
+def _depth_order(z):
+    """Positions of z in increasing order; stable (ties keep their order, i.e. the Gaussian index
+    order, as gsplat): a parallel LSD radix sort of the float bits (positive floats order as their
+    bits), 3 x 11 bits, with a fixed work split so that the result does not depend on the thread
+    count."""
+    n = z.shape[0]
+    ka = z.view(np.uint32).copy()
+    va = np.arange(n).astype(np.int32)
     kb = np.empty_like(ka)
     vb = np.empty_like(va)
     hist = np.zeros((CHUNKS, 2048), np.int64)
@@ -227,27 +231,13 @@ def _depth_order(data, box):
             lo, hi = c * n // CHUNKS, (c + 1) * n // CHUNKS
             for k in range(lo, hi):
                 d = (ka[k] >> shift) & 2047
-                p = hist[c, d]
-                hist[c, d] = p + 1
-                kb[p] = ka[k]
-                vb[p] = va[k]
+                q = hist[c, d]
+                hist[c, d] = q + 1
+                kb[q] = ka[k]
+                vb[q] = va[k]
         ka, kb = kb, ka
         va, vb = vb, va
     return va
-
-
-@numba.njit(cache=True, parallel=True)
-def _gather(order, data, box):
-    """data and box rows in the given order (one pass, so that rasterisation reads them in order)."""
-    d2 = np.empty((order.shape[0], data.shape[1]), np.float32)
-    b2 = np.empty((order.shape[0], 4), np.int32)
-    for k in numba.prange(order.shape[0]):
-        j = order[k]
-        for c in range(data.shape[1]):
-            d2[k, c] = data[j, c]
-        for c in range(4):
-            b2[k, c] = box[j, c]
-    return d2, b2
 
 
 @numba.njit(cache=True, parallel=True)
@@ -295,7 +285,7 @@ def _rasterize(rows, offsets, data, width, height, out):
         ph = min(TILE, height - py0)
         T = np.ones(TILE * TILE, np.float32)
         acc = np.zeros((TILE * TILE, nf + 2), np.float32)
-        done = np.zeros(TILE * TILE, np.bool_)
+        done = np.zeros(TILE, np.uint32)  # per tile row, bit x set once pixel x is finished
         left = pw * ph
         for k in range(offsets[tt], offsets[tt + 1]):
             j = rows[k]
@@ -325,10 +315,16 @@ def _rasterize(rows, offsets, data, width, height, out):
                     sq = math.sqrt(disc)
                     r0 = max(qx0, int(math.floor(u + (-bq - sq) / (np.float32(2.0) * ha) - np.float32(0.501))))
                     r1 = min(qx1, int(math.ceil(u + (-bq + sq) / (np.float32(2.0) * ha) - np.float32(0.499))) + 1)
+                if r1 <= r0:
+                    continue
+                span = ((np.uint32(1) << np.uint32(r1 - r0)) - np.uint32(1)) << np.uint32(r0 - px0)
+                dm = done[py - py0]
+                if dm & span == span:  # every pixel of the span finished: nothing to composite
+                    continue
                 rowp = (py - py0) * TILE - px0
                 for px in range(r0, r1):
                     p = rowp + px
-                    if done[p]:
+                    if dm >> np.uint32(px - px0) & np.uint32(1):
                         continue
                     dx = np.float32(px + 0.5) - u
                     sigma = ha * dx * dx + sy + cb * dx * dy
@@ -340,7 +336,7 @@ def _rasterize(rows, offsets, data, width, height, out):
                     tp = T[p]
                     tn = tp * (np.float32(1.0) - alpha)
                     if tn <= T_MIN:
-                        done[p] = True
+                        dm |= np.uint32(1) << np.uint32(px - px0)
                         left -= 1
                         continue
                     wgt = alpha * tp
@@ -349,6 +345,7 @@ def _rasterize(rows, offsets, data, width, height, out):
                     acc[p, nf] += wgt * z
                     acc[p, nf + 1] += wgt
                     T[p] = tn
+                done[py - py0] = dm
             if left == 0:
                 break
         for py in range(ph):
@@ -379,12 +376,17 @@ def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: 
     else:
         feats_in, d = np.zeros((n, 0), np.float32), deg
     nf = feats_in.shape[1] + (3 if d >= 0 else 0)
+    # depth ranks first (stable: ties keep the index order, as gsplat), so that the projection
+    # writes each row at its place front to back
+    z = np.empty(len(idx), np.float32)
+    _depths(idx, g["means"], R, t, z)
+    pos = np.empty(len(idx), np.int32)
+    pos[_depth_order(z)] = np.arange(len(idx), dtype=np.int32)
     data = np.empty((len(idx), F0 + nf), np.float32)
     box = np.empty((len(idx), 4), np.int32)
     campos = (-R.T.astype(np.float64) @ t.astype(np.float64)).astype(np.float32)
     _project(idx, g["means"], g["cov"], g["opacities"], g["ext"], g["lmax"], g["sh"], d, feats_in, R, t, campos, fx, fy, cx,
-             cy, width, height, eps2d, lo_x, hi_x, lo_y, hi_y, data, box)
-    data, box = _gather(_depth_order(data, box), data, box)
+             cy, width, height, eps2d, lo_x, hi_x, lo_y, hi_y, pos, data, box)
     rows, offsets = _bin(box, -(-width // TILE), -(-height // TILE))
     out = np.zeros((height, width, nf + 2), np.float32)
     _rasterize(rows, offsets, data, width, height, out)
