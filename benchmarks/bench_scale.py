@@ -224,8 +224,8 @@ def report(args) -> dict:
     st = {"default": measure(Path(args.data))}
     if args.real_root and Path(args.real_root).exists():
         st["real_indoor"] = measure(Path(args.real_root))
-    rc, gpu, sm, sl, cs = (load(out, n) for n in ("render_cpu.json", "release_gpu.json", "sim.json", "slurm.json",
-                                                  "cost.json"))
+    rc, gpu, sm, sl, cs, ab = (load(out, n) for n in ("render_cpu.json", "release_gpu.json", "sim.json", "slurm.json",
+                                                      "cost.json", "render_cpu_ab.json"))
     d = st["default"]
     rep = {"host": platform.node(), "cpu_cores": os.cpu_count(), "before": BEFORE, "storage": st,
            "bytes_per_scene_ratio": max(s["ratio_with_maps"] for s in d["scenes"]),
@@ -236,7 +236,7 @@ def report(args) -> dict:
            "release_core_hours": cs and cs["release_core_hours"], "release_gpu_hours": cs and cs["release_gpu_hours"],
            "cost": cs, "cpu_fps_160": rc and rc["cpu_fps_160"], "cpu_fps_640": rc and rc["cpu_fps_640"],
            "cpu_psnr_min": gpu and min(v["psnr_min"] for v in gpu["agreement"].values()),
-           "render_cpu": rc, "render_gpu": gpu and {k: gpu[k] for k in ("device", "agreement_gaussians", "agreement")}}
+           "render_cpu": rc, "render_cpu_ab": ab, "render_gpu": gpu and {k: gpu[k] for k in ("device", "agreement_gaussians", "agreement")}}
     write(out, "bench_scale.json", rep)
     md = markdown(rep)
     (out / "bench_scale.md").write_text(md)
@@ -312,6 +312,17 @@ def markdown(r: dict) -> str:
                 runs = ", ".join(f"{x:.1f}" for x in v.get("fps_runs", [v["fps"]]))
                 L.append(f"| {name} | {s['n_gaussians']:,} | {size} | {v['fps']:.1f} | {runs} | {v['fps_p10']:.1f} | "
                          f"{v['torch_reference_fps']:.2f} | {v['speedup']:.0f}x |")
+        ab = r.get("render_cpu_ab")
+        if ab:
+            L += ["", f"Against revision {ab['against']}'s renderer, interleaved view by view in one run (`python -m "
+                  f"benchmarks.render_cpu --against {ab['against']}`):", "",
+                  "| scene | size | that revision ms | ours ms | speed-up | frames identical to the byte |",
+                  "|---|---|---|---|---|---|"]
+            for name, s in ab["scenes"].items():
+                for size in ("160x120", "640x480"):
+                    v = s[size]
+                    L.append(f"| {name} | {size} | {v['rev_ms']:.1f} | {v['ours_ms']:.1f} | {v['speedup']:.2f}x | "
+                             f"{v['identical_frames']} of {s['views']} |")
         if r["render_gpu"]:
             L += ["", "Agreement with gsplat (H100, 1 M Gaussians, 10 views):", ""]
             for size, v in r["render_gpu"]["agreement"].items():

@@ -5,6 +5,10 @@ view per call, medians over the views.
 
     python -m benchmarks.render_cpu [--real-root /tmp/real2] [--views 20] [--out data/08_reports]
         -> render_cpu.json
+    python -m benchmarks.render_cpu --against REV [--real-root ...]   -> render_cpu_ab.json
+        the working tree's compiled renderer against git revision REV's, the two interleaved view
+        by view in one process (the fair comparison on a shared machine), with how many frames
+        came out identical to the byte
 """
 from __future__ import annotations
 
@@ -46,6 +50,49 @@ def scene_fps(gs, poses, emb, ref_views: int) -> dict:
     return out
 
 
+def revision_renderer(rev: str):
+    """navcore/render/cpu_fast.py as it was at git revision rev, imported as its own module."""
+    import importlib.util
+    import subprocess
+    import tempfile
+
+    src = subprocess.run(["git", "show", f"{rev}:navcore/render/cpu_fast.py"], cwd=Path(__file__).parent.parent,
+                         check=True, capture_output=True, text=True).stdout
+    path = Path(tempfile.mkdtemp(prefix="navarena_rev_")) / f"cpu_fast_{rev[:12]}.py"
+    path.write_text(src)
+    spec = importlib.util.spec_from_file_location(path.stem, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def scene_ab(gs, poses, emb, old) -> dict:
+    """Median ms a frame of rev's renderer and ours on the same views, interleaved."""
+    from navcore.render import cpu_fast as new
+    from navcore.render.camera import embodiment_camera
+
+    g_old, g_new = old.prepare(gs), new.prepare(gs)
+    deg = int(round(np.sqrt(g_new["sh"].shape[1]))) - 1
+    out = {"n_gaussians": len(gs.means), "views": len(poses)}
+    for w, h in SIZES:
+        vm, K, _, _ = embodiment_camera(emb, poses, w, h)
+        old.render_one(g_old, vm[0], K[0], w, h, deg)
+        new.render_one(g_new, vm[0], K[0], w, h, deg)
+        t_old, t_new, same = [], [], 0
+        for i in range(len(vm)):
+            t0 = time.perf_counter()
+            a = old.render_one(g_old, vm[i], K[i], w, h, deg)
+            t1 = time.perf_counter()
+            b = new.render_one(g_new, vm[i], K[i], w, h, deg)
+            t_old.append(t1 - t0)
+            t_new.append(time.perf_counter() - t1)
+            same += all(np.array_equal(x, y) for x, y in zip(a, b))
+        out[f"{w}x{h}"] = {"rev_ms": 1000 * float(np.median(t_old)), "ours_ms": 1000 * float(np.median(t_new)),
+                           "speedup": float(np.median(t_old) / np.median(t_new)), "identical_frames": same}
+        print(w, h, out[f"{w}x{h}"], flush=True)
+    return out
+
+
 def free_poses(costmap, k: int, rng) -> np.ndarray:
     iy, ix = np.nonzero(costmap.clearance >= costmap.radius + costmap.margin)
     pick = rng.choice(len(ix), k, replace=False)
@@ -67,13 +114,21 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--merge", nargs="+", type=Path,
                     help="instead of measuring: render_cpu.json files of repeated runs -> their medians")
+    ap.add_argument("--against", metavar="REV", help="compare with git revision REV's compiled renderer instead")
     args = ap.parse_args(argv)
     if args.merge:
         return merge(args.merge, args.out)
     emb, rng = Embodiment(), np.random.default_rng(0)
+    old = revision_renderer(args.against) if args.against else None
+
+    def measure(gs, poses):
+        return scene_ab(gs, poses, emb, old) if old else scene_fps(gs, poses, emb, args.ref_views)
+
     gs, rooms = canonical_scene(7, args.gaussians)
     rep = {"host": platform.node(), "cpu_cores": os.cpu_count(), "scenes": {}}
-    rep["scenes"]["synthetic"] = scene_fps(gs, room_poses(rooms, args.views, rng), emb, args.ref_views)
+    if old:
+        rep["against"] = args.against
+    rep["scenes"]["synthetic"] = measure(gs, room_poses(rooms, args.views, rng))
     if args.real_root:
         from navcore.io.datasets import AlignedGaussianDataset, CostmapDataset, GaussianDataset
 
@@ -81,7 +136,10 @@ def main(argv=None) -> dict:
             d, meta = ing.parent, json.loads(ing.read_text())
             gs, _ = AlignedGaussianDataset(d / "alignment.json", GaussianDataset(d / "gaussians.zarr")).load()
             cm = CostmapDataset(args.real_root / "03_costmaps" / f"{meta['scene_id']}.zarr").load(emb.name)
-            rep["scenes"][meta["name"]] = scene_fps(gs, free_poses(cm, args.views, rng), emb, args.ref_views)
+            rep["scenes"][meta["name"]] = measure(gs, free_poses(cm, args.views, rng))
+    if old:
+        write_report(args.out, "render_cpu_ab.json", rep, omit=("scenes",))
+        return rep
     for w, h in SIZES:
         key = f"{w}x{h}"
         rep[f"cpu_fps_{w}"] = min(s[key]["fps"] for s in rep["scenes"].values() if s["n_gaussians"] >= 1_000_000)
