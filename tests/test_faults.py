@@ -4,7 +4,9 @@ byte matches. The full-disk scenario needs root (it mounts a tmpfs) and is skipp
 
 NAVARENA_FAULTS_KILLS sets the whole-run kill points (6 here, 20 in `make test-faults`);
 NAVARENA_FAULTS_REPORT names a bench_faults.json the module writes the scenarios' figures to, so
-that `make test-faults` runs each scenario once (the benchmark then merges the fuzzing figures)."""
+that `make test-faults` runs each scenario once (the benchmark then merges the fuzzing figures);
+NAVARENA_FAULTS_WORK moves the work folder (/tmp/navarena_faults, shared with the benchmark: its
+reference run is reused while the code that made it is today's)."""
 import json
 import os
 from pathlib import Path
