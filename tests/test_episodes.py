@@ -445,3 +445,39 @@ def test_no_start_inside_its_success_region_even_when_the_geodesic_range_allows_
     d = [math.hypot(e["start_position_x"] - e["goal_position_x"], e["start_position_y"] - e["goal_position_y"])
          for e in res.episodes]
     assert min(d) > 1.0
+
+
+def test_view_depths_reach_the_first_wall(room_with_door):
+    cm = room_with_door  # walls: x in [0, 0.05) and [2.0, 2.05) (door y in [2.0, 2.8)), x in [3.95, 4.0)
+    d = cm.view_depths((1.0, 1.0), [0.0, math.pi])
+    assert d[0] == pytest.approx(1.0, abs=0.06) and d[1] == pytest.approx(0.95, abs=0.06)
+    through = cm.view_depths((1.0, 2.4), [0.0])[0]  # through the door to the far wall
+    assert through == pytest.approx(2.95, abs=0.06)
+    assert cm.view_depths((1.0, 2.4), [0.0], max_range=1.5)[0] == pytest.approx(1.5)
+    diag = cm.view_depths((1.0, 1.0), [math.atan2(-1.0, 1.0)])[0]  # towards (2, 0): the corner, ~1.41 m
+    assert diag == pytest.approx(math.sqrt(2) * 0.95, abs=0.1)
+
+
+def test_imagenav_goal_cameras_do_not_face_a_wall_at_arms_length(room_with_door):
+    """Every stored goal camera sees at least goal_view_min_depth (median of its field of view);
+    with the rule off, random yaws in these 2 m-wide rooms often face a wall closer than that."""
+    cm = room_with_door
+    g = NavGraph(cm, ~cm.occupancy)
+    ecfg = EpisodesConfig()
+    ecfg.difficulty.balance = False
+    emb = Embodiment(radius=cm.radius)
+    half = math.radians(emb.hfov_deg) / 2
+
+    def view(e):
+        cam = json.loads(e["goal_camera_json"])
+        return float(np.median(cm.view_depths(cam["position"][:2], cam["yaw"] + np.linspace(-half, half, 9))))
+
+    depths = {}
+    for need in (1.5, 0.0):
+        tcfg = TaskConfig(type="imagenav", episodes_per_scene=40, success_radius=0.5, min_geodesic=0.5,
+                          max_geodesic=6.0, trivial_ratio=0.0, starts_per_goal=2, goal_view_min_depth=need)
+        res = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), emb, "t/scene", 7).generate()
+        assert len(res.episodes) >= 30
+        depths[need] = [view(e) for e in res.episodes]
+    assert min(depths[1.5]) >= 1.5
+    assert sum(d < 1.5 for d in depths[0.0]) >= 5  # the rule has something to do here

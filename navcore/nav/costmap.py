@@ -60,6 +60,31 @@ class Costmap:
         """[ny, nx] bool M_occ (cell centres that are not valid states)."""
         return self.clearance < self.radius + self.margin
 
+    def view_depths(self, xy, angles, max_range: float = 10.0) -> np.ndarray:
+        """[K] free distance (metres) from the point xy along each angle (radians) to the first
+        obstacle of the obstacle layer (clearance under one cell) or the map's edge, at most
+        max_range: sphere tracing on the clearance, so a ray costs a few steps in open space.
+        Cells without floor support do not stop a ray (they are no obstacle to the eye)."""
+        a = np.asarray(angles, float)
+        dirs = np.column_stack([np.cos(a), np.sin(a)])
+        res = self.resolution
+        ny, nx = self.clearance.shape
+        d = np.zeros(len(a))
+        alive = np.ones(len(a), bool)
+        for _ in range(int(max_range / res) + 2):  # at least one cell a step
+            p = np.asarray(xy, float)[None, :] + d[:, None] * dirs
+            ix = np.floor((p[:, 0] - self.origin[0]) / res).astype(np.int64)
+            iy = np.floor((p[:, 1] - self.origin[1]) / res).astype(np.int64)
+            inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+            c = np.where(inside, self.clearance[iy.clip(0, ny - 1), ix.clip(0, nx - 1)], 0.0)
+            alive &= inside & ~((c >= 0) & (c < res))
+            if not alive.any():
+                break
+            # the clearance is measured from cell centres: step a cell short of it to stay in the free disk
+            d = np.where(alive, np.minimum(d + np.maximum(c - res, res), max_range), d)
+            alive &= d < max_range
+        return d
+
     def is_state_valid(self, x: float, y: float) -> bool:  # replaced per instance by the fast path
         """Single pose (metres); yaw is irrelevant for a disk footprint."""
         return K.state_valid(self._f, self._ox, self._oy, self._inv, self._thr, x, y)

@@ -28,6 +28,14 @@ class TaskConfig:
     trivial_ratio: float = 1.1
     """Habitat's rule against near-straight episodes: a pair with geodesic / euclidean below this is
     kept only with probability 20 (r - 0.98)^2 (PointNav and ImageNav; 0 disables)."""
+    goal_view_min_depth: float = 1.5
+    """ImageNav: the goal camera must look at least this far (metres): the median free distance of
+    9 rays across its horizontal field of view, cast on the costmap's obstacle layer. A goal yaw
+    facing a wall at arm's length gives an image of one surface that no agent can place; up to
+    `goal_view_tries` yaws are drawn, and a goal position where none passes is dropped
+    (`goal_view_blocked`). 0 disables."""
+    goal_view_tries: int = 8
+    """ImageNav: yaws drawn per goal position for `goal_view_min_depth`."""
     starts_per_goal: int = 10
     """Episodes drawn from one goal's distance field (one Dijkstra serves them all)."""
     categories: list[str] = field(default_factory=lambda: list(OBJECTNAV_CATEGORIES))

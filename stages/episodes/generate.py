@@ -249,6 +249,20 @@ class EpisodeGenerator:
             row["goals_json"] = goal.goals_json
         return row
 
+    def _goal_yaw(self, xy: np.ndarray) -> float | None:
+        """An ImageNav goal yaw whose camera sees at least goal_view_min_depth (median over its
+        field of view; see TaskConfig), from up to goal_view_tries uniform draws; None if none."""
+        t = self.task
+        half = math.radians(self.emb.hfov_deg) / 2
+        for _ in range(max(1, t.goal_view_tries)):
+            yaw = float(self.rng.uniform(-math.pi, math.pi))
+            if t.goal_view_min_depth <= 0:
+                return yaw
+            depth = self.cm.view_depths(xy, yaw + np.linspace(-half, half, 9), max_range=4 * t.goal_view_min_depth)
+            if np.median(depth) >= t.goal_view_min_depth:
+                return yaw
+        return None
+
     # ---- sampling loop -----------------------------------------------------------------------
     def _start_pool(self, fld, goal: Goal) -> list[tuple[int, np.ndarray, np.ndarray]]:
         """Start candidates of one field, per difficulty bin it can fill: (bin, nodes, cumulative
@@ -318,7 +332,11 @@ class EpisodeGenerator:
                 node = int(self.rng.integers(len(self.graph.cells)))
                 cell = self.graph.cells[node]
                 xy = self.cm.cell_centers(cell[None])[0]
-                yaw = float(self.rng.uniform(-math.pi, math.pi)) if t.type == "imagenav" else None
+                yaw = self._goal_yaw(xy) if t.type == "imagenav" else None
+                if t.type == "imagenav" and yaw is None:
+                    attempts += 1
+                    self.rejections["goal_view_blocked"] += 1
+                    continue
                 goal = Goal("image" if t.type == "imagenav" else "position", cell[None], xy=xy, yaw=yaw)
                 fld = self.graph.field(goal.sources, t.max_geodesic)
                 pool = self._start_pool(fld, goal)
