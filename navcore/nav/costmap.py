@@ -66,13 +66,14 @@ class Costmap:
         max_range: sphere tracing on the clearance, so a ray costs a few steps in open space.
         Cells without floor support do not stop a ray (they are no obstacle to the eye)."""
         a = np.asarray(angles, float)
+        o = np.asarray(xy, float)[None, :]
         dirs = np.column_stack([np.cos(a), np.sin(a)])
         res = self.resolution
         ny, nx = self.clearance.shape
         d = np.zeros(len(a))
         alive = np.ones(len(a), bool)
         for _ in range(int(max_range / res) + 2):  # at least one cell a step
-            p = np.asarray(xy, float)[None, :] + d[:, None] * dirs
+            p = o + d[:, None] * dirs
             ix = np.floor((p[:, 0] - self.origin[0]) / res).astype(np.int64)
             iy = np.floor((p[:, 1] - self.origin[1]) / res).astype(np.int64)
             inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)

@@ -389,7 +389,7 @@ def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: 
              cy, width, height, eps2d, lo_x, hi_x, lo_y, hi_y, pos, data, box)
     rows, offsets = _bin(box, -(-width // TILE), -(-height // TILE))
     out = np.zeros((height, width, nf + 2), np.float32)
-    with numba.parallel_chunksize(1):  # tiles hand out one at a time: their costs differ by orders
+    with numba.parallel_chunksize(1):  # tiles one at a time: a static split left one thread the costly half
         _rasterize(rows, offsets, data, width, height, out)
     alpha = out[..., nf + 1]
     dep = out[..., nf] / np.maximum(alpha, np.float32(1e-10))
