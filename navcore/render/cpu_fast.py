@@ -9,15 +9,16 @@ camera sees rather than to the scene:
    from its largest standard deviation), so only candidates get the full projection;
 2. order: a stable LSD radix sort of the candidates' depth keys (float bits; ties keep the
    Gaussian index order, gsplat's order);
-3. project the candidates (EWA with the clamped Jacobian, eps2d, opacity-aware box) and
-   evaluate their colour (SH at the view direction) in parallel, reading them in index order and
-   writing each row at its depth rank, then a counting sort into 16x16 tiles, so each tile's
-   list is by depth then index;
+3. project the candidates (EWA with the clamped Jacobian, eps2d, opacity-aware box) in
+   parallel, reading them in index order and writing each row at its depth rank, then a counting
+   sort into 16x16 tiles, so each tile's list is by depth then index;
 4. rasterise: tiles in parallel, each Gaussian visiting only the pixels of its box inside the
    tile (outside the box its alpha is below 1/255 by construction of the box, so gsplat skips
    them too), and within a row only the span where alpha >= 1/255; a per-row bitmask of finished
    pixels skips a whole span once all its pixels are done; front to back with the exclusive stop
-   at T <= 1e-4, a tile ending when all its pixels are done.
+   at T <= 1e-4, a tile ending when all its pixels are done. A Gaussian's colour (SH at the view
+   direction) is evaluated when it first contributes to a tile: in a real room only about a
+   quarter of the candidates reach a pixel, and the SH coefficients are most of the bytes read.
 
 The scene is prepared once (`prepare`): float32 means, the 3D covariances, opacities, SH
 coefficients and each Gaussian's largest standard deviation.
@@ -106,23 +107,24 @@ def _sh_channel(sh, i, c, dx, dy, dz, deg):
 
 
 # per-row render data: u, v, rx, ry (px), conic a, b, c, opacity, depth, ln(255 opacity) (alpha >=
-# 1/255 iff sigma <= it), then the features
-U, V, RX, RY, CA, CB, CC, OP, Z, LM, F0 = range(11)
+# 1/255 iff sigma <= it)
+U, V, RX, RY, CA, CB, CC, OP, Z, LM = range(10)
+NDATA = 10
 
 
 @numba.njit(cache=True, parallel=True)
-def _project(idx, means, cov, opac, ext, lmax, sh, deg, feats_in, R, t, campos, fx, fy, cx, cy, width, height, eps2d,
-             lim_lo_x, lim_hi_x, lim_lo_y, lim_hi_y, pos, data, box):
-    """EWA projection of the candidates idx into row r = pos[j] of data (see U..F0) and box[r] =
-    (x0, x1, y0, y1), the tile range (x1 = x0 when culled). Features: the SH colour (deg >= 0) then
-    feats_in[idx[j]]. Reading in index order and writing each row at its depth rank leaves the
-    rows depth-ordered without a gather."""
+def _project(idx, means, cov, opac, ext, lmax, R, t, fx, fy, cx, cy, width, height, eps2d,
+             lim_lo_x, lim_hi_x, lim_lo_y, lim_hi_y, pos, data, box, gid):
+    """EWA projection of the candidates idx into row r = pos[j] of data (see U..LM), box[r] =
+    (x0, x1, y0, y1), the tile range (x1 = x0 when culled), and gid[r] = idx[j]. Reading in index
+    order and writing each row at its depth rank leaves the rows depth-ordered without a gather.
+    The colour is not evaluated here: the rasteriser does it for the Gaussians that contribute."""
     tw = (width + TILE - 1) // TILE
     th = (height + TILE - 1) // TILE
-    nf = data.shape[1] - F0
     for j in numba.prange(idx.shape[0]):
         i = idx[j]
         r = pos[j]
+        gid[r] = i
         box[r, 0] = 0
         box[r, 1] = 0
         box[r, 2] = 0
@@ -177,16 +179,22 @@ def _project(idx, means, cov, opac, ext, lmax, sh, deg, feats_in, R, t, campos, 
         data[r, U], data[r, V], data[r, RX], data[r, RY] = u, v, rx, ry
         data[r, CA], data[r, CB], data[r, CC] = cc / det, -cb / det, ca / det
         data[r, OP], data[r, Z], data[r, LM] = opac[i], z, lmax[i]
-        k0 = 0
-        if deg >= 0:
-            dx, dy, dz = mx - campos[0], my - campos[1], mz - campos[2]
-            nrm = max(math.sqrt(dx * dx + dy * dy + dz * dz), 1e-12)
-            ux, uy, uz = dx / nrm, dy / nrm, dz / nrm
-            for c in range(3):
-                data[r, F0 + c] = _sh_channel(sh, i, c, ux, uy, uz, deg)
-            k0 = 3
-        for k in range(k0, nf):
-            data[r, F0 + k] = feats_in[i, k - k0]
+
+
+@numba.njit(cache=True, inline="always")
+def _features(i, means, sh, deg, feats_in, campos, col):
+    """col = Gaussian i's composited features: the SH colour at the view direction (deg >= 0) then
+    feats_in[i]."""
+    k0 = 0
+    if deg >= 0:
+        dx, dy, dz = means[i, 0] - campos[0], means[i, 1] - campos[1], means[i, 2] - campos[2]
+        nrm = max(math.sqrt(dx * dx + dy * dy + dz * dz), 1e-12)
+        ux, uy, uz = dx / nrm, dy / nrm, dz / nrm
+        for c in range(3):
+            col[c] = _sh_channel(sh, i, c, ux, uy, uz, deg)
+        k0 = 3
+    for k in range(k0, col.shape[0]):
+        col[k] = feats_in[i, k - k0]
 
 
 SMALL_BOX = 6  # rasterise boxes at most this many pixels wide without solving for the row spans
@@ -273,11 +281,11 @@ def _bin(box, tw, th):
 
 
 @numba.njit(cache=True, parallel=True)
-def _rasterize(rows, offsets, data, width, height, out):
-    """out[H, W, C + 2] = (sum w f, sum w z, sum w) per pixel, front to back per tile."""
+def _rasterize(rows, offsets, data, gid, means, sh, deg, feats_in, campos, nf, width, height, out):
+    """out[H, W, nf + 2] = (sum w f, sum w z, sum w) per pixel, front to back per tile; a
+    Gaussian's features (`_features`) are evaluated when it first contributes to a tile."""
     tw = (width + TILE - 1) // TILE
     nt = offsets.shape[0] - 1
-    nf = data.shape[1] - F0
     for tt in numba.prange(nt):
         ty, tx = tt // tw, tt % tw
         px0, py0 = tx * TILE, ty * TILE
@@ -285,24 +293,43 @@ def _rasterize(rows, offsets, data, width, height, out):
         ph = min(TILE, height - py0)
         T = np.ones(TILE * TILE, np.float32)
         acc = np.zeros((TILE * TILE, nf + 2), np.float32)
+        col = np.empty(nf, np.float32)
+        hit_p = np.empty(TILE * TILE, np.int32)  # the current Gaussian's composited pixels and weights
+        hit_w = np.empty(TILE * TILE, np.float32)
         done = np.zeros(TILE, np.uint32)  # per tile row, bit x set once pixel x is finished
         left = pw * ph
         for k in range(offsets[tt], offsets[tt + 1]):
             j = rows[k]
             u, v, rx, ry = data[j, U], data[j, V], data[j, RX], data[j, RY]
-            ca, cb, cc = data[j, CA], data[j, CB], data[j, CC]
-            o, z = data[j, OP], data[j, Z]
-            lm = data[j, LM]
-            # pixels whose centre lies in the box (alpha < 1/255 outside it); per row, only the
-            # span where sigma <= ln(255 o), i.e. alpha >= 1/255 (widened by a rounding margin)
+            # pixels whose centre lies in the box (alpha < 1/255 outside it)
             qx0 = max(px0, int(math.floor(u - rx - 0.5)))
             qx1 = min(px0 + pw, int(math.ceil(u + rx + 0.5)))
             qy0 = max(py0, int(math.floor(v - ry - 0.5)))
             qy1 = min(py0 + ph, int(math.ceil(v + ry + 0.5)))
+            if qx1 <= qx0 or qy1 <= qy0:
+                continue
+            # skip the Gaussian when every pixel of its box in this tile is finished (bit tests only)
+            bm = ((np.uint32(1) << np.uint32(qx1 - qx0)) - np.uint32(1)) << np.uint32(qx0 - px0)
+            hidden = True
+            for py in range(qy0, qy1):
+                if done[py - py0] & bm != bm:
+                    hidden = False
+                    break
+            if hidden:
+                continue
+            ca, cb, cc = data[j, CA], data[j, CB], data[j, CC]
+            o, z = data[j, OP], data[j, Z]
+            lm = data[j, LM]
+            # per row, only the span where sigma <= ln(255 o), i.e. alpha >= 1/255 (widened by a
+            # rounding margin)
             ha = np.float32(0.5) * ca
             hc = np.float32(0.5) * cc
             small = (qx1 - qx0) <= SMALL_BOX
+            m = 0
             for py in range(qy0, qy1):
+                dm = done[py - py0]
+                if dm & bm == bm:
+                    continue
                 dy = np.float32(py + 0.5) - v
                 sy = hc * dy * dy
                 if small:  # a few pixels: test them all (cheaper than solving for the span)
@@ -315,12 +342,11 @@ def _rasterize(rows, offsets, data, width, height, out):
                     sq = math.sqrt(disc)
                     r0 = max(qx0, int(math.floor(u + (-bq - sq) / (np.float32(2.0) * ha) - np.float32(0.501))))
                     r1 = min(qx1, int(math.ceil(u + (-bq + sq) / (np.float32(2.0) * ha) - np.float32(0.499))) + 1)
-                if r1 <= r0:
-                    continue
-                span = ((np.uint32(1) << np.uint32(r1 - r0)) - np.uint32(1)) << np.uint32(r0 - px0)
-                dm = done[py - py0]
-                if dm & span == span:  # every pixel of the span finished: nothing to composite
-                    continue
+                    if r1 <= r0:
+                        continue
+                    span = ((np.uint32(1) << np.uint32(r1 - r0)) - np.uint32(1)) << np.uint32(r0 - px0)
+                    if dm & span == span:  # every pixel of the span finished: nothing to composite
+                        continue
                 rowp = (py - py0) * TILE - px0
                 for px in range(r0, r1):
                     p = rowp + px
@@ -339,13 +365,20 @@ def _rasterize(rows, offsets, data, width, height, out):
                         dm |= np.uint32(1) << np.uint32(px - px0)
                         left -= 1
                         continue
-                    wgt = alpha * tp
-                    for c in range(nf):
-                        acc[p, c] += wgt * data[j, F0 + c]
-                    acc[p, nf] += wgt * z
-                    acc[p, nf + 1] += wgt
+                    hit_p[m] = p
+                    hit_w[m] = alpha * tp
+                    m += 1
                     T[p] = tn
                 done[py - py0] = dm
+            if m > 0:
+                _features(gid[j], means, sh, deg, feats_in, campos, col)
+                for q in range(m):
+                    p = hit_p[q]
+                    wgt = hit_w[q]
+                    for c in range(nf):
+                        acc[p, c] += wgt * col[c]
+                    acc[p, nf] += wgt * z
+                    acc[p, nf + 1] += wgt
             if left == 0:
                 break
         for py in range(ph):
@@ -382,15 +415,16 @@ def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: 
     _depths(idx, g["means"], R, t, z)
     pos = np.empty(len(idx), np.int32)
     pos[_depth_order(z)] = np.arange(len(idx), dtype=np.int32)
-    data = np.empty((len(idx), F0 + nf), np.float32)
+    data = np.empty((len(idx), NDATA), np.float32)
     box = np.empty((len(idx), 4), np.int32)
+    gid = np.empty(len(idx), np.int64)
+    _project(idx, g["means"], g["cov"], g["opacities"], g["ext"], g["lmax"], R, t, fx, fy, cx, cy, width, height, eps2d,
+             lo_x, hi_x, lo_y, hi_y, pos, data, box, gid)
     campos = (-R.T.astype(np.float64) @ t.astype(np.float64)).astype(np.float32)
-    _project(idx, g["means"], g["cov"], g["opacities"], g["ext"], g["lmax"], g["sh"], d, feats_in, R, t, campos, fx, fy, cx,
-             cy, width, height, eps2d, lo_x, hi_x, lo_y, hi_y, pos, data, box)
     rows, offsets = _bin(box, -(-width // TILE), -(-height // TILE))
     out = np.zeros((height, width, nf + 2), np.float32)
     with numba.parallel_chunksize(1):  # tiles one at a time: a static split left one thread the costly half
-        _rasterize(rows, offsets, data, width, height, out)
+        _rasterize(rows, offsets, data, gid, g["means"], g["sh"], d, feats_in, campos, nf, width, height, out)
     alpha = out[..., nf + 1]
     dep = out[..., nf] / np.maximum(alpha, np.float32(1e-10))
     return out[..., :nf], dep, alpha
