@@ -248,10 +248,28 @@ def _depth_order(z):
     return va
 
 
+@numba.njit(cache=True, inline="always")
+def _tile_box(data, k, px0, py0, pw, ph):
+    """Row k's pixel box in the tile at (px0, py0) of pw x ph pixels, tile-local and packed in a
+    uint32 as x0 | x1 << 8 | y0 << 16 | y1 << 24 (pixels x0 <= x < x1, y0 <= y < y1 whose centre
+    lies in the footprint: alpha < 1/255 outside it); 0 when empty."""
+    u, v, rx, ry = data[k, U], data[k, V], data[k, RX], data[k, RY]
+    x0 = max(0, int(math.floor(u - rx - 0.5)) - px0)
+    x1 = min(pw, int(math.ceil(u + rx + 0.5)) - px0)
+    y0 = max(0, int(math.floor(v - ry - 0.5)) - py0)
+    y1 = min(ph, int(math.ceil(v + ry + 0.5)) - py0)
+    if x1 <= x0 or y1 <= y0:
+        return np.uint32(0)
+    return np.uint32(x0) | np.uint32(x1) << np.uint32(8) | np.uint32(y0) << np.uint32(16) | np.uint32(y1) << np.uint32(24)
+
+
 @numba.njit(cache=True, parallel=True)
-def _bin(box, tw, th):
-    """Counting sort of the (depth-ordered) rows into tiles: (rows [M], offsets [tw * th + 1]);
-    each tile's rows stay in ascending order."""
+def _bin(box, data, width, height):
+    """Counting sort of the (depth-ordered) rows into tiles: (rows [M], their pixel boxes in the
+    tile [M] (`_tile_box`), offsets [tw * th + 1]); each tile's rows stay in ascending order, and
+    a row is listed only in the tiles where its pixel box is not empty."""
+    tw = (width + TILE - 1) // TILE
+    th = (height + TILE - 1) // TILE
     n = box.shape[0]
     nt = tw * th
     counts = np.zeros((CHUNKS, nt), np.int64)
@@ -259,7 +277,9 @@ def _bin(box, tw, th):
         for k in range(c * n // CHUNKS, (c + 1) * n // CHUNKS):
             for ty in range(box[k, 2], box[k, 3]):
                 for tx in range(box[k, 0], box[k, 1]):
-                    counts[c, ty * tw + tx] += 1
+                    if _tile_box(data, k, tx * TILE, ty * TILE, min(TILE, width - tx * TILE),
+                                 min(TILE, height - ty * TILE)):
+                        counts[c, ty * tw + tx] += 1
     offsets = np.empty(nt + 1, np.int64)
     total = 0
     for tt in range(nt):
@@ -270,18 +290,22 @@ def _bin(box, tw, th):
             total += h
     offsets[nt] = total
     rows = np.empty(total, np.int32)
+    pbox = np.empty(total, np.uint32)
     for c in numba.prange(CHUNKS):
         for k in range(c * n // CHUNKS, (c + 1) * n // CHUNKS):
             for ty in range(box[k, 2], box[k, 3]):
                 for tx in range(box[k, 0], box[k, 1]):
-                    tt = ty * tw + tx
-                    rows[counts[c, tt]] = k
-                    counts[c, tt] += 1
-    return rows, offsets
+                    pb = _tile_box(data, k, tx * TILE, ty * TILE, min(TILE, width - tx * TILE), min(TILE, height - ty * TILE))
+                    if pb:
+                        tt = ty * tw + tx
+                        rows[counts[c, tt]] = k
+                        pbox[counts[c, tt]] = pb
+                        counts[c, tt] += 1
+    return rows, pbox, offsets
 
 
 @numba.njit(cache=True, parallel=True)
-def _rasterize(rows, offsets, data, gid, means, sh, deg, feats_in, campos, nf, width, height, out):
+def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos, nf, width, height, out):
     """out[H, W, nf + 2] = (sum w f, sum w z, sum w) per pixel, front to back per tile; a
     Gaussian's features (`_features`) are evaluated when it first contributes to a tile."""
     tw = (width + TILE - 1) // TILE
@@ -299,16 +323,13 @@ def _rasterize(rows, offsets, data, gid, means, sh, deg, feats_in, campos, nf, w
         done = np.zeros(TILE, np.uint32)  # per tile row, bit x set once pixel x is finished
         left = pw * ph
         for k in range(offsets[tt], offsets[tt + 1]):
-            j = rows[k]
-            u, v, rx, ry = data[j, U], data[j, V], data[j, RX], data[j, RY]
-            # pixels whose centre lies in the box (alpha < 1/255 outside it)
-            qx0 = max(px0, int(math.floor(u - rx - 0.5)))
-            qx1 = min(px0 + pw, int(math.ceil(u + rx + 0.5)))
-            qy0 = max(py0, int(math.floor(v - ry - 0.5)))
-            qy1 = min(py0 + ph, int(math.ceil(v + ry + 0.5)))
-            if qx1 <= qx0 or qy1 <= qy0:
-                continue
-            # skip the Gaussian when every pixel of its box in this tile is finished (bit tests only)
+            # the pixels of its box (alpha < 1/255 outside it); the Gaussian is skipped when all of
+            # them are finished (bit tests only: its render data is not read)
+            pb = pbox[k]
+            qx0 = px0 + int(pb & np.uint32(255))
+            qx1 = px0 + int(pb >> np.uint32(8) & np.uint32(255))
+            qy0 = py0 + int(pb >> np.uint32(16) & np.uint32(255))
+            qy1 = py0 + int(pb >> np.uint32(24))
             bm = ((np.uint32(1) << np.uint32(qx1 - qx0)) - np.uint32(1)) << np.uint32(qx0 - px0)
             hidden = True
             for py in range(qy0, qy1):
@@ -317,6 +338,8 @@ def _rasterize(rows, offsets, data, gid, means, sh, deg, feats_in, campos, nf, w
                     break
             if hidden:
                 continue
+            j = rows[k]
+            u, v = data[j, U], data[j, V]
             ca, cb, cc = data[j, CA], data[j, CB], data[j, CC]
             o, z = data[j, OP], data[j, Z]
             lm = data[j, LM]
@@ -421,10 +444,10 @@ def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: 
     _project(idx, g["means"], g["cov"], g["opacities"], g["ext"], g["lmax"], R, t, fx, fy, cx, cy, width, height, eps2d,
              lo_x, hi_x, lo_y, hi_y, pos, data, box, gid)
     campos = (-R.T.astype(np.float64) @ t.astype(np.float64)).astype(np.float32)
-    rows, offsets = _bin(box, -(-width // TILE), -(-height // TILE))
+    rows, pbox, offsets = _bin(box, data, width, height)
     out = np.zeros((height, width, nf + 2), np.float32)
     with numba.parallel_chunksize(1):  # tiles one at a time: a static split left one thread the costly half
-        _rasterize(rows, offsets, data, gid, g["means"], g["sh"], d, feats_in, campos, nf, width, height, out)
+        _rasterize(rows, pbox, offsets, data, gid, g["means"], g["sh"], d, feats_in, campos, nf, width, height, out)
     alpha = out[..., nf + 1]
     dep = out[..., nf] / np.maximum(alpha, np.float32(1e-10))
     return out[..., :nf], dep, alpha
