@@ -95,6 +95,59 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
     assert latest["counts"]["align"] == {"done": 1}
 
 
+@pytest.mark.parametrize("cross_device", [False, True])
+def test_asset_refers_to_a_compressed_original_without_copying_it(tmp_path, real_indoor_dir, monkeypatch,
+                                                                  cross_device):
+    # a streamed SOG scene is a folder of files: the asset links every one of them under source/
+    # (their bytes are the original's, no PLY conversion of ~10x the size); where a hard link cannot
+    # be made (another filesystem) a symbolic link refers to it, never a copy
+    from navcore.io.datasets import FolderWriter
+    from stages.asset.stage import asset_source
+
+    lod = real_indoor_dir / "fungi_room_sog_lod"
+    if cross_device:
+        def no_hard_links(src, dst):
+            raise OSError(18, "Invalid cross-device link")
+        monkeypatch.setattr(os, "link", no_hard_links)
+    out = FolderWriter(tmp_path)
+    ply, files = asset_source(out, "reference", {"source": str(lod / "lod-meta.json"), "format": "sog"}, None, None)
+    originals = sorted(p for p in lod.rglob("*") if p.is_file())
+    assert ply is None and files == [f"source/{p.relative_to(lod)}" for p in originals]
+    for f, p in zip(files, originals):
+        assert (tmp_path / f).samefile(p) and (tmp_path / f).is_symlink() == cross_device
+    # a single-file source keeps its name; an INRIA PLY is the V1 source.ply itself
+    spz = real_indoor_dir / "wangsha_hall_lod3.spz"
+    assert asset_source(out, "reference", {"source": str(spz)}, None, None) == (None, ["source/wangsha_hall_lod3.spz"])
+    assert (tmp_path / "source" / "wangsha_hall_lod3.spz").samefile(spz)
+    assert asset_source(out, "none", {"source": str(spz)}, None, None) == (None, [])
+    with pytest.raises(ValueError, match="asset.source='copy'"):
+        asset_source(out, "copy", {"source": str(spz)}, None, None)
+
+
+def test_asset_aligned_model_as_spz(tmp_path, make_cfg):
+    # asset.aligned_format=spz: the aligned model as a Niantic SPZ (8-bit attributes, 24-bit fixed
+    # point positions at 1/4096 m) in place of the V1 PLY, named by the manifest
+    from navcore.gaussians.formats import read_gaussians
+    from navcore.io.datasets import AlignedGaussianDataset, GaussianDataset
+
+    s = execute(make_cfg(tmp_path, "stages=[asset]", "asset.aligned_format=spz"))
+    sid = next(r["scene_id"] for r in s["results"] if r["stage"] == "asset" and r["status"] == "done")
+    asset = next((tmp_path / "09_assets").glob(f"*/{sid}"))
+    man = json.loads((asset / "manifest.json").read_text())
+    assert man["files"]["aligned"] == "aligned.spz" and man["files"]["aligned_ply"] is None
+    assert not (asset / "aligned.ply").exists()
+    aligned, _ = AlignedGaussianDataset(tmp_path / "01_scenes" / sid / "alignment.json",
+                                        GaussianDataset(tmp_path / "01_scenes" / sid / "gaussians.zarr")).load()
+    spz = read_gaussians(asset / "aligned.spz")
+    assert len(spz) == len(aligned) and np.abs(spz.means - aligned.means).max() <= 0.5 / 4096 + 1e-6
+    assert np.abs(spz.alphas - aligned.alphas).max() <= 0.5 / 255 + 1e-6
+    ply_bytes = len(aligned) * 4 * (11 + 3 * aligned.sh.shape[1])  # INRIA: xyz, normals, SH, opacity, scale, rot
+    assert (asset / "aligned.spz").stat().st_size < 0.4 * ply_bytes
+    with pytest.raises(ValueError, match="asset.aligned_format='las'"):
+        from navcore.io.asset_files import aligned_file
+        aligned_file("las")
+
+
 def test_damaged_outputs_behind_a_marker_are_recomputed(tmp_path, make_cfg):
     """Markers record their outputs' sizes and sha256: a deleted or truncated output recomputes its
     stage (verify=size, a stat per file); a same-size change needs verify=checksum."""

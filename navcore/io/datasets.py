@@ -260,6 +260,19 @@ class FolderWriter:
             shutil.copyfile(source, dst)
         return name
 
+    def reference(self, name: str, source: str | Path) -> str:
+        """A file that refers to a local file without a second copy of its bytes: a hard link where
+        the filesystem allows, else a symbolic link to its absolute path."""
+        import os
+
+        dst = self / name
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.link(source, dst)
+        except OSError:  # another filesystem, or hard links not supported
+            os.symlink(Path(source).resolve(), dst)
+        return name
+
     def bytes(self, name: str, data: bytes) -> str:
         (self / name).write_bytes(data)
         return name

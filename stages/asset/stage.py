@@ -1,5 +1,6 @@
 """Stage `asset`: the NavArena V1 scene asset directory (NAVARENA_FORMATS.md section 1) of the
-main embodiment: manifest.json, source.ply, aligned.ply, nav_map.pgm + nav_map.yaml (ROS
+main embodiment: manifest.json, the original (source.ply, or its own files under source/:
+asset.source), aligned.ply (or aligned.spz: asset.aligned_format), nav_map.pgm + nav_map.yaml (ROS
 map_server), nav_mask.png, labels.json (the semantics stage's predicted instances, or the ground
 truth of synthetic scenes: asset.labels; aligned frame), compressed.splat, costmap_topdown.png and
 floor_side_view.png (the chosen floor over the Gaussian density); manifest.json also holds the
@@ -11,9 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from navcore.gaussians.formats import write_inria_ply, write_splat
+from navcore.gaussians.formats import write_inria_ply, write_splat, write_spz
 from navcore.gaussians.formats.ply import is_inria_ply
 from navcore.instances import ground_truth_labels, load_instances, table_to_labels
+from navcore.io.asset_files import aligned_file
 from navcore.io.stamps import build_time
 
 NORMALIZER_VERSION = "navarena-0.1"
@@ -59,9 +61,35 @@ def asset_labels(scene, cfg, catalog) -> list[dict] | None:
     raise ValueError(f"asset.labels={src!r}; choose model_predicted | ground_truth | none")
 
 
+def source_files(report: dict) -> tuple[Path, list[Path]]:
+    """(the folder, the files) that make up a scene's original: the file itself, or every file
+    under a folder layout's folder (a SOG folder or streamed LOD scene, an npy folder)."""
+    path = Path(report["source"])
+    folder = path.parent if path.name in ("lod-meta.json", "meta.json") else path
+    if folder.is_dir():
+        return folder, sorted(p for p in folder.rglob("*") if p.is_file())
+    return path.parent, [path]
+
+
+def asset_source(tmp, mode: str, report: dict, catalog, scene) -> tuple[str | None, list[str]]:
+    """The asset's copy of the original (asset.source; report: the ingest report): (files.source_ply,
+    the files that hold the original, relative to the asset)."""
+    original = Path(report["source"])
+    if mode == "none":
+        return None, []
+    if mode == "reference" and is_inria_ply(original):
+        return tmp.reference("source.ply", original), ["source.ply"]
+    if mode == "reference":
+        folder, paths = source_files(report)
+        return None, [tmp.reference(str(Path("source") / p.relative_to(folder)), p) for p in paths]
+    if mode == "convert":
+        write_inria_ply(tmp / "source.ply", catalog.dataset("scene", scene).load()[0])
+        return "source.ply", ["source.ply"]
+    raise ValueError(f"asset.source={mode!r}; choose reference | convert | none")
+
+
 def run(scene, cfg, catalog) -> dict:
     out = catalog.dataset("asset", scene)
-    src, _ = catalog.dataset("scene", scene).load()
     aligned, aattrs = catalog.dataset("aligned", scene).load()
     t = np.asarray(aattrs["source_to_aligned"])
     emb = cfg.embodiment.name
@@ -74,18 +102,18 @@ def run(scene, cfg, catalog) -> dict:
         if m is not None:
             steps.append({"name": stage, "status": "done", "duration_s": m.get("duration_s")})
     labels_file = None
+    report = catalog.dataset("ingest_report", scene).load()
     with out.writing() as tmp:
-        files = {"source_ply": None, "aligned_ply": "aligned.ply", "nav_map": "nav_map.pgm",
+        aligned_name = aligned_file(cfg.asset.aligned_format)
+        files = {"source_ply": None, "aligned_ply": aligned_name if aligned_name.endswith(".ply") else None,
+                 "aligned": aligned_name, "nav_map": "nav_map.pgm",
                  "nav_map_config": "nav_map.yaml", "nav_mask": "nav_mask.png", "labels": None, "structure": None,
                  "compressed_ply": None}
-        if cfg.asset.write_source_ply:  # the original when it already is an INRIA PLY (linked, not copied)
-            original = catalog.dataset("ingest_report", scene).load()["source"]
-            if is_inria_ply(original):
-                tmp.link("source.ply", original)
-            else:
-                write_inria_ply(tmp / "source.ply", src)
-            files["source_ply"] = "source.ply"
-        write_inria_ply(tmp / "aligned.ply", aligned)
+        files["source_ply"], source_files = asset_source(tmp, cfg.asset.source, report, catalog, scene)
+        if aligned_name.endswith(".spz"):
+            write_spz(tmp / aligned_name, aligned, version=3)
+        else:
+            write_inria_ply(tmp / aligned_name, aligned)
         write_pgm(tmp / "nav_map.pgm", occ)
         tmp.text("nav_map.yaml",
             "image: nav_map.pgm\n" f"resolution: {res}\n" f"origin: [{origin[0]}, {origin[1]}, 0.0]\n"
@@ -106,7 +134,8 @@ def run(scene, cfg, catalog) -> dict:
         manifest = {
             "schema_version": "1.0", "scene_id": scene.scene_id,
             "source": {"dataset": scene.group, "subset": None, "original_id": scene.name,
-                       "original_name": scene.name, "url": None, "license": None},
+                       "original_name": scene.name, "url": None, "license": None,
+                       "format": report["format"], "files": source_files},
             "files": files,
             "map_info": {"resolution": res, "origin": [origin[0], origin[1], 0.0],
                          "size": [int(occ.shape[1]), int(occ.shape[0])]},

@@ -20,6 +20,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from navcore.io.asset_files import aligned_file
 from navcore.io.episode_schema import TRAJECTORY_WRITE
 
 FORMAT_VERSION = "1.0"
@@ -179,8 +180,9 @@ def _habitat_episode(row: dict, scene_key: str) -> dict:
     return ep
 
 
-def export_habitat(scene, catalog) -> list[str]:
-    scene_key = f"{scene.group}/{scene.scene_id}/aligned.ply"
+def export_habitat(scene, catalog, aligned_name: str = "aligned.ply") -> list[str]:
+    """Habitat-lab episodes of the scene; their scene_id is the asset's aligned model (aligned_name)."""
+    scene_key = f"{scene.group}/{scene.scene_id}/{aligned_name}"
     for old in catalog.find("habitat_content", scene).values():  # tasks or splits since dropped
         old.delete()
     written = []
@@ -225,7 +227,7 @@ def run(scene, cfg, catalog) -> dict:
     if "navarena" in ecfg.formats:
         out += export_navarena(scene, catalog, ecfg, created)
     if "habitat" in ecfg.formats:
-        out += export_habitat(scene, catalog)
+        out += export_habitat(scene, catalog, aligned_file(cfg.asset.aligned_format))
     return {"outputs": out}
 
 
