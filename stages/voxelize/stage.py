@@ -21,7 +21,8 @@ def run(scene, cfg, catalog) -> dict:
     with out.writing() as g:
         chunks = (32, 64, 64)
         # opacity in 1/255 steps (as the 8-bit alpha of images): half the bytes of float16 and fine
-        # enough to re-threshold; V is thresholded on the exact values
+        # enough to re-threshold; V is thresholded on the exact values. No stage reads A, so stores
+        # written before (float16, no A_scale attribute) stay valid: the stage version is unchanged
         a_arr = g.create_array("A", shape=grid.shape, dtype="uint8", chunks=chunks, fill_value=0)
         v_arr = g.create_array("V", shape=grid.shape, dtype="bool", chunks=chunks, fill_value=False)
         for x0, blk in log_transmittance_blocks(gs, grid, vcfg):
