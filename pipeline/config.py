@@ -138,9 +138,9 @@ class AssetConfig:
     strict V1 readers: a compressed source's PLY is ~10x its bytes) or none."""
     aligned_format: str = "ply"
     """File of the aligned model: ply (aligned.ply, INRIA binary: what the V1 asset requires; 248
-    bytes a Gaussian at SH degree 3) or spz (aligned.spz, Niantic SPZ v3: 8-bit quantised attributes,
-    gzip; 7.7x smaller than the PLY for the real fungi room at 43.6 dB against its renders). The
-    manifest's files.aligned names it either way; files.aligned_ply is null for spz."""
+    bytes a Gaussian at SH degree 3) or spz (aligned.spz, Niantic SPZ v4: 8-bit quantised attributes,
+    24-bit positions at 1/4096 m, ZSTD streams; 10.8x smaller than the PLY for the real fungi room).
+    The manifest's files.aligned names it either way; files.aligned_ply is null for spz."""
     labels: str = "model_predicted"
     """labels.json from: model_predicted (the semantics stage's instances) | ground_truth (synthetic
     scenes) | none."""

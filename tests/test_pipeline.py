@@ -125,7 +125,7 @@ def test_asset_refers_to_a_compressed_original_without_copying_it(tmp_path, real
 
 
 def test_asset_aligned_model_as_spz(tmp_path, make_cfg):
-    # asset.aligned_format=spz: the aligned model as a Niantic SPZ (8-bit attributes, 24-bit fixed
+    # asset.aligned_format=spz: the aligned model as a Niantic SPZ v4 (8-bit attributes, 24-bit fixed
     # point positions at 1/4096 m) in place of the V1 PLY, named by the manifest
     from navcore.gaussians.formats import read_gaussians
     from navcore.io.datasets import AlignedGaussianDataset, GaussianDataset

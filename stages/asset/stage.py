@@ -111,7 +111,7 @@ def run(scene, cfg, catalog) -> dict:
                  "compressed_ply": None}
         files["source_ply"], source_files = asset_source(tmp, cfg.asset.source, report, catalog, scene)
         if aligned_name.endswith(".spz"):
-            write_spz(tmp / aligned_name, aligned, version=3)
+            write_spz(tmp / aligned_name, aligned, version=4)
         else:
             write_inria_ply(tmp / aligned_name, aligned)
         write_pgm(tmp / "nav_map.pgm", occ)
