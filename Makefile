@@ -83,13 +83,16 @@ ONE_CORE = NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 SOURCE_DATE_E
 bench-scale: $(STAMP)
 	test -f data/_runs/latest.json || $(BIN)/python -m pipeline
 	$(BIN)/python -m pipeline scenes=real_indoor data_root=data/real_indoor
+	$(BIN)/python -m pipeline scenes=real_indoor data_root=data/real_indoor_compact ingest.store=reference \
+	    asset.aligned_format=spz
 	$(ONE_CORE) $(BIN)/python -m pipeline data_root=data/cost_real scenes=real_indoor scenes.limit=1 $(COST)
 	$(ONE_CORE) $(BIN)/python -m pipeline data_root=data/cost_synthetic scenes.count=1 scenes.num_gaussians=1500000 $(COST)
 	$(BIN)/python -m benchmarks.bench_scale cost data/cost_real data/cost_synthetic
 	$(BIN)/python -m benchmarks.render_cpu --real-root data/real_indoor
 	$(BIN)/python -m benchmarks.bench_scale sim --root data/sim
 	$(BIN)/python -m benchmarks.bench_scale slurm
-	$(BIN)/python -m benchmarks.bench_scale report --data data --real-root data/real_indoor
+	$(BIN)/python -m benchmarks.bench_scale report --data data --real-root data/real_indoor \
+	    --compact-root data/real_indoor_compact
 
 bench-spatial-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.voxelize_gpu $(ARGS)

@@ -4,7 +4,8 @@ CPU renderer, as data/08_reports/bench_scale.{json,md}.
     python -m benchmarks.bench_scale sim [--scenes 2000] [--root /tmp/navarena_sim]   -> sim.json
     python -m benchmarks.bench_scale cost [--root /tmp/navarena_cost] [--fraction 0.1]   -> cost.json
     python -m benchmarks.bench_scale slurm                                             -> slurm.json
-    python -m benchmarks.bench_scale report [--data data] [--real-root /tmp/real2]
+    python -m benchmarks.bench_scale report [--data data] [--real-root /tmp/real2] [--compact-root DIR]
+        (--compact-root: the real scenes run with COMPACT, the options for compressed sources)
         (storage of the two roots, then everything above plus render_cpu.json and, from a CUDA
         run of benchmarks.release_gpu, release_gpu.json -> bench_scale.json / .md)
 
@@ -212,6 +213,11 @@ BEFORE = {"bytes_per_scene_ratio_default": 3.98, "bytes_per_episode_default": 17
           "make_test_minutes": "12-15"}
 
 
+COMPACT = "ingest.store=reference asset.aligned_format=spz"
+"""The options for compressed sources (SOG, SPZ): no Zarr copy of a SOG source, the aligned model as
+SPZ v4 in place of the V1 asset's INRIA PLY (Makefile: bench-scale)."""
+
+
 def load(out: Path, name: str) -> dict | None:
     p = out / name
     return json.loads(p.read_text()) if p.exists() else None
@@ -224,6 +230,8 @@ def report(args) -> dict:
     st = {"default": measure(Path(args.data))}
     if args.real_root and Path(args.real_root).exists():
         st["real_indoor"] = measure(Path(args.real_root))
+    if args.compact_root and Path(args.compact_root).exists():
+        st["real_indoor, " + COMPACT] = measure(Path(args.compact_root))
     rc, gpu, sm, sl, cs, ab = (load(out, n) for n in ("render_cpu.json", "release_gpu.json", "sim.json", "slurm.json",
                                                       "cost.json", "render_cpu_ab.json"))
     d = st["default"]
@@ -352,6 +360,7 @@ def main(argv=None) -> int:
     rp = sub.add_parser("report")
     rp.add_argument("--data", default="data")
     rp.add_argument("--real-root")
+    rp.add_argument("--compact-root")
     for p in sub.choices.values():
         p.add_argument("--out", default="data/08_reports")
     args = ap.parse_args(argv)

@@ -86,7 +86,10 @@ class _Video:
         self.c = av.open(str(path), mode="w", format="mp4")
         self.s = self.c.add_stream("libx264", rate=fps, options={"crf": str(crf), "preset": "medium"})
         self.s.width, self.s.height, self.s.pix_fmt = w, h, "yuv420p"
-        self.s.codec_context.options = {"crf": str(crf), "bf": "0"}
+        # one encoder thread: x264's frame threading makes the bitstream depend on the thread count
+        # (the machine's cores), and the export must be the same bytes wherever it runs (a byte
+        # difference was seen under load on the 2-core VM)
+        self.s.codec_context.options = {"crf": str(crf), "bf": "0", "threads": "1"}
 
     def add(self, rgb: np.ndarray) -> None:
         import av
