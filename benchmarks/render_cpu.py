@@ -8,7 +8,8 @@ view per call, medians over the views.
     python -m benchmarks.render_cpu --against REV [--real-root ...]   -> render_cpu_ab.json
         the working tree's compiled renderer against git revision REV's, the two interleaved view
         by view in one process (the fair comparison on a shared machine), with how many frames
-        came out identical to the byte
+        came out identical to the byte, the lowest PSNR between the two and the largest median
+        depth difference
 """
 from __future__ import annotations
 
@@ -78,7 +79,7 @@ def scene_ab(gs, poses, emb, old) -> dict:
         vm, K, _, _ = embodiment_camera(emb, poses, w, h)
         old.render_one(g_old, vm[0], K[0], w, h, deg)
         new.render_one(g_new, vm[0], K[0], w, h, deg)
-        t_old, t_new, same = [], [], 0
+        t_old, t_new, same, psnrs, ddep = [], [], 0, [], []
         for i in range(len(vm)):
             t0 = time.perf_counter()
             a = old.render_one(g_old, vm[i], K[i], w, h, deg)
@@ -87,8 +88,13 @@ def scene_ab(gs, poses, emb, old) -> dict:
             t_old.append(t1 - t0)
             t_new.append(time.perf_counter() - t1)
             same += all(np.array_equal(x, y) for x, y in zip(a, b))
+            mse = float(np.mean((np.clip(a[0], 0, 1) - np.clip(b[0], 0, 1)) ** 2))
+            psnrs.append(10 * np.log10(1 / max(mse, 1e-20)))
+            both = (a[2] > 0.5) & (b[2] > 0.5)
+            ddep.append(float(np.median(np.abs(a[1] - b[1])[both])) if both.any() else 0.0)
         out[f"{w}x{h}"] = {"rev_ms": 1000 * float(np.median(t_old)), "ours_ms": 1000 * float(np.median(t_new)),
-                           "speedup": float(np.median(t_old) / np.median(t_new)), "identical_frames": same}
+                           "speedup": float(np.median(t_old) / np.median(t_new)), "identical_frames": same,
+                           "psnr_min_db": float(min(psnrs)), "depth_median_diff_max_m": float(max(ddep))}
         print(w, h, out[f"{w}x{h}"], flush=True)
     return out
 
