@@ -252,3 +252,39 @@ def test_compiled_renderer_matches_the_torch_reference_with_degree_3_colour():
     assert 10 * math.log10(1 / max(mse, 1e-20)) >= 80
     both = (a.alpha > 0.5) & (b.alpha > 0.5)
     assert torch.median((a.depth - b.depth).abs()[both]).item() <= 1e-4
+
+
+@pytest.mark.parametrize("spatial_order", [True, False])
+def test_block_culling_keeps_exactly_what_the_per_gaussian_test_keeps(spatial_order):
+    # the compiled renderer passes over blocks of consecutive Gaussians whose bounding sphere lies
+    # outside the (widened) view: conservative, so the candidates are exactly those of the
+    # per-Gaussian test alone (blocks made never to cull), for views inside, at the edge and away
+    from navcore.render import cpu_fast
+
+    r = np.random.default_rng(11)
+    n = 20_000
+    means = r.uniform(-8, 8, (n, 3))
+    if spatial_order:  # as SOG / SPZ files: neighbours next to each other, blocks small
+        cell = np.floor(means / 4)  # 4 m cells, one after the other
+        means = means[np.lexsort((means[:, 0], cell[:, 2], cell[:, 1], cell[:, 0]))]
+    gs = GaussianScene(means, r.normal(size=(n, 4)), np.log(r.uniform(0.005, 0.4, (n, 3))), r.uniform(-6, 4, n),
+                       r.normal(0, 0.3, (n, 1, 3)))
+    g = cpu_fast.prepare(gs)
+    everything = g["blocks"].copy()
+    everything[:, 3] = 1e30  # a sphere that contains the world: never culled
+    poses = np.array([[0, 0, 0], [7.5, 7.5, 2.3], [-9, 0, 0.5], [20, 20, 3.9], [0, 0, -1.2]])
+    vm = viewmats(poses, 0.0)
+    k = intrinsics(160, 120, 90.0)
+    fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
+    args = lambda v: (np.ascontiguousarray(v[:3, :3], np.float32), np.ascontiguousarray(v[:3, 3], np.float32),  # noqa: E731
+                      fx, fy, cx, cy, 160, 120, 0.01, 1e10, 1.3, 1.3)
+    culled = 0
+    for v in vm:
+        fast = cpu_fast._cull(g["means"], g["smax"], g["opacities"], g["blocks"], *args(v))
+        ref = cpu_fast._cull(g["means"], g["smax"], g["opacities"], everything, *args(v))
+        assert np.array_equal(fast, ref) and np.all(np.diff(fast) > 0)
+        culled += sum(cpu_fast._block_out(g["blocks"], b, *args(v)[:2], fx, fy, cx, cy, 160, 120, 0.01, 1e10,
+                                          math.sqrt(1 + 1.3 ** 2), math.sqrt(1 + 1.3 ** 2))
+                      for b in range(len(g["blocks"])))
+    if spatial_order:
+        assert culled > len(g["blocks"])  # the blocks do pass over much of the scene
