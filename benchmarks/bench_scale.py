@@ -324,13 +324,14 @@ def markdown(r: dict) -> str:
         if ab:
             L += ["", f"Against revision {ab['against']}'s renderer, interleaved view by view in one run (`python -m "
                   f"benchmarks.render_cpu --against {ab['against']}`):", "",
-                  "| scene | size | that revision ms | ours ms | speed-up | frames identical to the byte |",
-                  "|---|---|---|---|---|---|"]
+                  "| scene | size | that revision ms | ours ms | speed-up | frames identical to the byte | "
+                  "PSNR min between them | depth median diff max |", "|---|---|---|---|---|---|---|---|"]
             for name, s in ab["scenes"].items():
                 for size in ("160x120", "640x480"):
                     v = s[size]
                     L.append(f"| {name} | {size} | {v['rev_ms']:.1f} | {v['ours_ms']:.1f} | {v['speedup']:.2f}x | "
-                             f"{v['identical_frames']} of {s['views']} |")
+                             f"{v['identical_frames']} of {s['views']} | {_f(v.get('psnr_min_db'), 1)} dB | "
+                             f"{_f(v.get('depth_median_diff_max_m'), 7)} m |")
         if r["render_gpu"]:
             L += ["", "Agreement with gsplat (H100, 1 M Gaussians, 10 views):", ""]
             for size, v in r["render_gpu"]["agreement"].items():
