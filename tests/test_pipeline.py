@@ -105,6 +105,8 @@ def test_asset_refers_to_a_compressed_original_without_copying_it(tmp_path, real
     from stages.asset.stage import asset_source
 
     lod = real_indoor_dir / "fungi_room_sog_lod"
+    if not (lod / "lod-meta.json").exists():
+        pytest.skip(f"real indoor scenes not present at {real_indoor_dir}")
     if cross_device:
         def no_hard_links(src, dst):
             raise OSError(18, "Invalid cross-device link")
