@@ -437,11 +437,12 @@ def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos,
     """out[H, W, nf + 2] = (sum w f, sum w z, sum w) per pixel, front to back per tile; a
     Gaussian's features (`_features`) are evaluated when it first contributes to a tile.
 
-    The tile's pixel state is laid out by half tile (8 columns), row after row, so that the rows of
-    a Gaussian's box in one half are one contiguous run: one branch-free pass over it (selects and
-    integer sums only, which LLVM vectorises), the pixels outside the box's columns, finished ones
-    and those with alpha < 1/255 masked rather than skipped. exp is `_exp_neg` (a few ulp from
-    the library's)."""
+    A box of at most SMALL_BOX pixels is composited pixel by pixel. For a larger one the tile's
+    pixel state is laid out by half tile (8 columns), row after row, so that the rows of the box in
+    one half are one contiguous run: one branch-free pass over it (selects and integer sums only,
+    which LLVM vectorises), the pixels outside the box's columns, finished ones and those with
+    alpha < 1/255 masked rather than skipped; exp there is `_exp_neg` (a few ulp from the
+    library's)."""
     tw = (width + TILE - 1) // TILE
     nt = offsets.shape[0] - 1
     one, zero = np.float32(1.0), np.float32(0.0)
