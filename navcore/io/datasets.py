@@ -247,19 +247,6 @@ class FolderWriter:
         (self / name).write_text(text)
         return name
 
-    def link(self, name: str, source: str | Path) -> str:
-        """A file that is a local file's bytes exactly: a hard link (no second copy) where the
-        filesystem allows, else a copy."""
-        import os
-        import shutil
-
-        dst = self / name
-        try:
-            os.link(source, dst)
-        except OSError:  # another filesystem, or links not supported
-            shutil.copyfile(source, dst)
-        return name
-
     def reference(self, name: str, source: str | Path) -> str:
         """A file that refers to a local file without a second copy of its bytes: a hard link where
         the filesystem allows, else a symbolic link to its absolute path."""

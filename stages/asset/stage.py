@@ -109,7 +109,7 @@ def run(scene, cfg, catalog) -> dict:
                  "aligned": aligned_name, "nav_map": "nav_map.pgm",
                  "nav_map_config": "nav_map.yaml", "nav_mask": "nav_mask.png", "labels": None, "structure": None,
                  "compressed_ply": None}
-        files["source_ply"], source_files = asset_source(tmp, cfg.asset.source, report, catalog, scene)
+        files["source_ply"], original_files = asset_source(tmp, cfg.asset.source, report, catalog, scene)
         if aligned_name.endswith(".spz"):
             write_spz(tmp / aligned_name, aligned, version=4)
         else:
@@ -135,7 +135,7 @@ def run(scene, cfg, catalog) -> dict:
             "schema_version": "1.0", "scene_id": scene.scene_id,
             "source": {"dataset": scene.group, "subset": None, "original_id": scene.name,
                        "original_name": scene.name, "url": None, "license": None,
-                       "format": report["format"], "files": source_files},
+                       "format": report["format"], "files": original_files},
             "files": files,
             "map_info": {"resolution": res, "origin": [origin[0], origin[1], 0.0],
                          "size": [int(occ.shape[1]), int(occ.shape[0])]},
