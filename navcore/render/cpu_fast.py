@@ -84,8 +84,8 @@ def _blocks(means: np.ndarray, smax: np.ndarray) -> np.ndarray:
     n = len(means)
     nb = (n + BLOCK - 1) // BLOCK
     pad = nb * BLOCK - n
-    m = np.concatenate([means, np.repeat(means[-1:], pad, 0)]).reshape(nb, BLOCK, 3) if n else np.zeros((0, BLOCK, 3))
-    sm = np.concatenate([smax, np.repeat(smax[-1:], pad)]).reshape(nb, BLOCK) if n else np.zeros((0, BLOCK))
+    m = np.concatenate([means, np.repeat(means[-1:], pad, 0)]).reshape(nb, BLOCK, 3)  # padded with the last
+    sm = np.concatenate([smax, np.repeat(smax[-1:], pad)]).reshape(nb, BLOCK)
     c = 0.5 * (m.min(1) + m.max(1))
     r = np.sqrt(((m - c[:, None]) ** 2).sum(-1)).max(1)
     r = r * (1 + 1e-5) + 1e-5 * np.abs(c).max(1) + 1e-6
