@@ -84,7 +84,7 @@ bench-scale: $(STAMP)
 	test -f data/_runs/latest.json || $(BIN)/python -m pipeline
 	$(BIN)/python -m pipeline scenes=real_indoor data_root=data/real_indoor
 	$(BIN)/python -m pipeline scenes=real_indoor data_root=data/real_indoor_compact ingest.store=reference \
-	    asset.aligned_format=spz
+	    asset.aligned_format=spz voxelize.store_opacity=false
 	$(ONE_CORE) $(BIN)/python -m pipeline data_root=data/cost_real scenes=real_indoor scenes.limit=1 $(COST)
 	$(ONE_CORE) $(BIN)/python -m pipeline data_root=data/cost_synthetic scenes.count=1 scenes.num_gaussians=1500000 $(COST)
 	$(BIN)/python -m benchmarks.bench_scale cost data/cost_real data/cost_synthetic

@@ -43,6 +43,8 @@ class Stage:
             with GPU workers in the cluster it runs on them only, one task per GPU at a time.
         memory_gb: the stage's peak memory per scene at the default sizes (a Dask resource: a
             worker runs at most as many tasks at once as its memory holds).
+        storage: (section, key, default) of config keys that decide only what this stage keeps
+            on disk beside its outputs, never what a later stage reads (`config_hashes`).
     """
 
     name: str
@@ -56,12 +58,14 @@ class Stage:
     default: bool = True
     gpu: bool = False
     memory_gb: float = 1.0
+    storage: tuple[tuple[str, str, object], ...] = ()
 
 
 STAGES: tuple[Stage, ...] = (
     Stage("synthesize", synthesize.run, (), ("synthetic",), only_synthetic=True),
     Stage("ingest", ingest.run, ("synthesize",), ("ingest",), version="3"),
-    Stage("voxelize", voxelize.run, ("ingest",), ("voxelize",), version="3", gpu=True, memory_gb=3.0),
+    Stage("voxelize", voxelize.run, ("ingest",), ("voxelize",), version="3", gpu=True, memory_gb=3.0,
+          storage=(("voxelize", "store_opacity", True),)),
     Stage("align", align.run, ("voxelize",), ("align",), version="4"),
     Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="3",
           inputs=costmap.hashed_inputs),
@@ -95,13 +99,30 @@ def closure(selected: list[str]) -> list[Stage]:
 
 def config_hashes(cfg) -> dict[str, str]:
     """Hash per stage of its config sections, its version and its upstream hashes: a changed
-    config recomputes that stage and everything downstream of it."""
+    config recomputes that stage and everything downstream of it.
+
+    A stage's storage keys (`Stage.storage`) are left out of every section before hashing, so
+    that changing one recomputes no later stage (what they read is the same); the stage itself
+    is recomputed, its hash mixing in the key's value, but only when the value is not the default:
+    a data root written before the key existed stays valid."""
+    storage = [st for s in STAGES for st in s.storage]
+    chain: dict[str, str] = {}
     out: dict[str, str] = {}
     for s in STAGES:
-        part = {k: OmegaConf.to_container(cfg[k], resolve=True) for k in s.config}
+        part = {}
+        for k in s.config:
+            part[k] = OmegaConf.to_container(cfg[k], resolve=True)
+            for sec, key, _ in storage:
+                if sec == k:
+                    part[k].pop(key, None)
         if s.inputs:
             part["_inputs"] = s.inputs(cfg)
         blob = json.dumps({"stage": s.name, "version": s.version, "config": part,
-                           "needs": [out[n] for n in s.needs]}, sort_keys=True, default=str)
-        out[s.name] = hashlib.sha256(blob.encode()).hexdigest()[:16]
+                           "needs": [chain[n] for n in s.needs]}, sort_keys=True, default=str)
+        chain[s.name] = out[s.name] = hashlib.sha256(blob.encode()).hexdigest()[:16]
+        kept = {f"{sec}.{key}": v for sec, key, default in s.storage
+                if (v := OmegaConf.select(cfg, f"{sec}.{key}", default=default)) != default}
+        if kept:
+            blob = json.dumps({"content": chain[s.name], "storage": kept}, sort_keys=True, default=str)
+            out[s.name] = hashlib.sha256(blob.encode()).hexdigest()[:16]
     return out

@@ -95,6 +95,39 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
     assert latest["counts"]["align"] == {"done": 1}
 
 
+def test_voxel_opacity_field_is_a_storage_key(tmp_path, make_cfg):
+    # voxelize.store_opacity=false drops 02_voxels/A; V (all any later stage reads) is the same, so
+    # voxelize alone re-runs and no later stage's hash changes; the default leaves every hash as
+    # it was before the key existed
+    from omegaconf import OmegaConf
+
+    from pipeline.graph import config_hashes
+
+    cfg = make_cfg(tmp_path, "stages=[costmap]")
+    old = cfg.copy()  # the config as before the key existed
+    vox = OmegaConf.to_container(old.voxelize)
+    del vox["store_opacity"]
+    OmegaConf.set_struct(old, False)
+    old._set_value({**{k: old[k] for k in old}, "voxelize": OmegaConf.create(vox)})
+    assert "store_opacity" not in old.voxelize
+    h, h_old = config_hashes(cfg), config_hashes(old)
+    h_off = config_hashes(make_cfg(tmp_path, "voxelize.store_opacity=false"))
+    assert h == h_old
+    assert {k for k in h if h[k] != h_off[k]} == {"voxelize"}
+    s1 = execute(cfg)
+    sid = s1["results"][0]["scene_id"]
+    vox = tmp_path / "02_voxels" / f"{sid}.zarr"
+    g = zarr.open_group(str(vox), mode="r")
+    v_before, a = np.asarray(g["V"][...]), np.asarray(g["A"][...])
+    a, tau = a * g.attrs["A_scale"], g.attrs["tau_occ"]  # V thresholds the exact A, stored rounded
+    assert v_before.any() and not (v_before & (a < tau - 0.5 / 255)).any() and v_before[a > tau + 0.5 / 255].all()
+    s2 = execute(make_cfg(tmp_path, "stages=[costmap]", "voxelize.store_opacity=false"))
+    assert statuses(s2) == {"synthesize": "cached", "ingest": "cached", "voxelize": "done", "align": "cached",
+                            "costmap": "cached"}
+    g = zarr.open_group(str(vox), mode="r")
+    assert "A" not in g and "A_scale" not in g.attrs and np.array_equal(np.asarray(g["V"][...]), v_before)
+
+
 @pytest.mark.parametrize("cross_device", [False, True])
 def test_asset_refers_to_a_compressed_original_without_copying_it(tmp_path, real_indoor_dir, monkeypatch,
                                                                   cross_device):

@@ -42,6 +42,10 @@ class VoxelizeConfig:
     """Voxels per x-block (bounds memory: 4 bytes each for the accumulator)."""
     device: str = "auto"
     """'cpu', 'cuda' or 'auto' (CUDA through torch when available)."""
+    store_opacity: bool = True
+    """Keep the opacity field A in 02_voxels beside V (uint8, for re-thresholding and inspection;
+    no stage reads it). False halves a sparse hall's voxel store; a storage key: changing it
+    re-runs voxelize alone."""
 
 
 @dataclass

@@ -1,5 +1,6 @@
 """Stage `voxelize`: opacity field of the ingested (source-frame) scene -> 02_voxels Zarr
-(A uint8: opacity in 1/255 steps, V bool, grid origin and voxel size) over the content's box (floaters are left out).
+(A uint8: opacity in 1/255 steps, unless voxelize.store_opacity=false; V bool, grid origin and voxel
+size) over the content's box (floaters are left out).
 Written x-block by x-block: memory stays bounded."""
 from __future__ import annotations
 
@@ -23,15 +24,19 @@ def run(scene, cfg, catalog) -> dict:
         # opacity in 1/255 steps (as the 8-bit alpha of images): half the bytes of float16 and fine
         # enough to re-threshold; V is thresholded on the exact values. No stage reads A, so stores
         # written before (float16, no A_scale attribute) stay valid: the stage version is unchanged
-        a_arr = g.create_array("A", shape=grid.shape, dtype="uint8", chunks=chunks, fill_value=0)
+        a_arr = (g.create_array("A", shape=grid.shape, dtype="uint8", chunks=chunks, fill_value=0)
+                 if vcfg.store_opacity else None)
         v_arr = g.create_array("V", shape=grid.shape, dtype="bool", chunks=chunks, fill_value=False)
         for x0, blk in log_transmittance_blocks(gs, grid, vcfg):
             a = -np.expm1(blk)
-            a_arr[x0:x0 + len(blk)] = np.rint(a * 255.0).astype(np.uint8)
+            if a_arr is not None:
+                a_arr[x0:x0 + len(blk)] = np.rint(a * 255.0).astype(np.uint8)
             occ = a >= vcfg.tau_occ
             v_arr[x0:x0 + len(blk)] = occ
             n_occ += int(occ.sum())
-        g.attrs.update({**grid.as_dict(), "A_scale": 1.0 / 255.0, "tau_occ": vcfg.tau_occ, "sample": vcfg.sample, "frame": "source"})
+        g.attrs.update({**grid.as_dict(), "tau_occ": vcfg.tau_occ, "sample": vcfg.sample, "frame": "source"})
+        if a_arr is not None:
+            g.attrs["A_scale"] = 1.0 / 255.0
     content_voxels = int(np.prod(np.ceil((gs.means.max(0) - gs.means.min(0)) / vcfg.resolution)))
     return {"outputs": [str(out.path)], "grid_shape": list(grid.shape), "grid_voxels": grid.n_voxels,
             "content_voxels": content_voxels, "occupied_voxels": n_occ}
