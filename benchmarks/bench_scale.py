@@ -215,7 +215,7 @@ BEFORE = {"bytes_per_scene_ratio_default": 3.98, "bytes_per_episode_default": 17
 
 COMPACT = "ingest.store=reference asset.aligned_format=spz voxelize.store_opacity=false"
 """The options for compressed sources (SOG, SPZ): no Zarr copy of a SOG source, the aligned model as
-SPZ v4 in place of the V1 asset's INRIA PLY (Makefile: bench-scale)."""
+SPZ v4 in place of the V1 asset's INRIA PLY, no voxel opacity field beside V (Makefile: bench-scale)."""
 
 
 def load(out: Path, name: str) -> dict | None:
