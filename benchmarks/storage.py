@@ -2,7 +2,8 @@
 
     python -m benchmarks.storage data
 
-Counts unique inodes (a hard link to the source costs nothing). Per scene: the scene folder
+Counts unique inodes (a hard link to the source costs nothing; an asset's link whose original was
+replaced since is a copy, and is named). Per scene: the scene folder
 (canonical Gaussian store, alignment, reports) plus the asset, then with voxels and costmaps; per
 episode: the episodes and trajectories tables over the number of episodes. Prints a table and
 JSON.
@@ -28,6 +29,15 @@ def tree_bytes(paths, seen: set) -> int:
     return tot
 
 
+def unlinked_source_files(asset: Path, source_inodes: set) -> list[str]:
+    """The asset's links to its original (source.ply, source/...) that are no longer the original's
+    files: it was replaced since (re-downloaded, re-provisioned), so the link keeps the old copy and
+    costs its bytes; `stages=[asset] force=true` links the current files."""
+    files = [asset / "source.ply"] + sorted(q for q in (asset / "source").rglob("*") if q.is_file())
+    return [str(f.relative_to(asset)) for f in files
+            if f.is_file() and not f.is_symlink() and (f.stat().st_dev, f.stat().st_ino) not in source_inodes]
+
+
 def measure(root: Path) -> dict:
     import pyarrow.parquet as pq
 
@@ -39,10 +49,13 @@ def measure(root: Path) -> dict:
         if source.name in ("lod-meta.json", "meta.json"):  # a SOG folder: the whole folder is the source
             source = source.parent
         src = tree_bytes([source], seen)  # counted first: links to it are free
-        store = tree_bytes([root / "01_scenes" / sid, root / "09_assets" / ing["group"] / sid], seen)
+        asset = root / "09_assets" / ing["group"] / sid
+        stale = unlinked_source_files(asset, seen)
+        store = tree_bytes([root / "01_scenes" / sid, asset], seen)
         maps = tree_bytes([root / "02_voxels" / f"{sid}.zarr", root / "03_costmaps" / f"{sid}.zarr"], seen)
         scenes.append({"scene_id": sid, "source_bytes": src, "store_and_asset_bytes": store, "maps_bytes": maps,
-                       "ratio": store / src if src else None, "ratio_with_maps": (store + maps) / src if src else None})
+                       "ratio": store / src if src else None, "ratio_with_maps": (store + maps) / src if src else None,
+                       "unlinked_source_files": stale})
     eps = sorted((root / "05_episodes").glob("task=*/scene_id=*/part-0.parquet"))
     n = sum(pq.read_metadata(f).num_rows for f in eps)
     tables = tree_bytes([root / "05_episodes", root / "06_trajectories"], set())
@@ -57,6 +70,9 @@ def main(argv=None) -> int:
         print(f"{s['scene_id']}: source {s['source_bytes'] / 1e6:.1f} MB, scene store + asset "
               f"{s['store_and_asset_bytes'] / 1e6:.1f} MB ({s['ratio']:.2f}x), with voxels and costmaps "
               f"{s['ratio_with_maps']:.2f}x")
+        if s["unlinked_source_files"]:
+            print(f"  warning: {len(s['unlinked_source_files'])} of the asset's links to its original are copies now "
+                  f"(the original was replaced since): `stages=[asset] force=true` links the current files")
     print(f"{rep['episodes']} episodes: {rep['bytes_per_episode'] / 1e3:.2f} KB an episode with its trajectory")
     print(json.dumps(rep, indent=1))
     return 0

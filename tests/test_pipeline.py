@@ -548,7 +548,7 @@ def test_compare_data_normalises_roots_and_reports_every_difference(tmp_path):
     assert rep["differing"] == ["01_scenes/s/ingest.json"] and rep["only_second"] == ["extra.bin"]
 
 
-def test_storage_measure_counts_a_hard_link_to_the_source_once(tmp_path):
+def test_storage_measure_counts_a_hard_link_to_the_source_once_and_names_stale_ones(tmp_path):
     import os
 
     from benchmarks.storage import measure
@@ -563,8 +563,14 @@ def test_storage_measure_counts_a_hard_link_to_the_source_once(tmp_path):
     os.link(src, asset / "source.ply")  # the original, linked
     (asset / "aligned.ply").write_bytes(b"y" * 500)
     s = measure(tmp_path / "d")["scenes"][0]
-    assert s["source_bytes"] == 1000
+    assert s["source_bytes"] == 1000 and s["unlinked_source_files"] == []
     assert s["store_and_asset_bytes"] == 500 + (scene / "ingest.json").stat().st_size
+    # the original replaced by a new file (re-downloaded): the link now holds the old copy
+    src.unlink()
+    src.write_bytes(b"x" * 1000)
+    s = measure(tmp_path / "d")["scenes"][0]
+    assert s["unlinked_source_files"] == ["source.ply"]
+    assert s["store_and_asset_bytes"] == 1500 + (scene / "ingest.json").stat().st_size
 
 
 def test_gpu_job_workers_are_pinned_to_their_own_gpu(monkeypatch):
