@@ -34,9 +34,8 @@ def run(scene, cfg, catalog) -> dict:
             occ = a >= vcfg.tau_occ
             v_arr[x0:x0 + len(blk)] = occ
             n_occ += int(occ.sum())
-        g.attrs.update({**grid.as_dict(), "tau_occ": vcfg.tau_occ, "sample": vcfg.sample, "frame": "source"})
-        if a_arr is not None:
-            g.attrs["A_scale"] = 1.0 / 255.0
+        scale = {"A_scale": 1.0 / 255.0} if a_arr is not None else {}  # in the order of stores written before
+        g.attrs.update({**grid.as_dict(), **scale, "tau_occ": vcfg.tau_occ, "sample": vcfg.sample, "frame": "source"})
     content_voxels = int(np.prod(np.ceil((gs.means.max(0) - gs.means.min(0)) / vcfg.resolution)))
     return {"outputs": [str(out.path)], "grid_shape": list(grid.shape), "grid_voxels": grid.n_voxels,
             "content_voxels": content_voxels, "occupied_voxels": n_occ}
