@@ -41,14 +41,13 @@ def unlinked_source_files(asset: Path, source_inodes: set) -> list[str]:
 def measure(root: Path) -> dict:
     import pyarrow.parquet as pq
 
+    from navcore.gaussians.formats import source_files
+
     scenes = []
     for rep in sorted((root / "01_scenes").glob("*/ingest.json")):
         ing = json.loads(rep.read_text())
         sid, seen = ing["scene_id"], set()
-        source = Path(ing["source"])
-        if source.name in ("lod-meta.json", "meta.json"):  # a SOG folder: the whole folder is the source
-            source = source.parent
-        src = tree_bytes([source], seen)  # counted first: links to it are free
+        src = tree_bytes(source_files(ing["source"])[1], seen)  # counted first: links to it are free
         asset = root / "09_assets" / ing["group"] / sid
         stale = unlinked_source_files(asset, seen)
         store = tree_bytes([root / "01_scenes" / sid, asset], seen)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from navcore.gaussians.formats import write_inria_ply, write_splat, write_spz
+from navcore.gaussians.formats import source_files, write_inria_ply, write_splat, write_spz
 from navcore.gaussians.formats.ply import is_inria_ply
 from navcore.instances import ground_truth_labels, load_instances, table_to_labels
 from navcore.io.asset_files import aligned_file
@@ -61,16 +61,6 @@ def asset_labels(scene, cfg, catalog) -> list[dict] | None:
     raise ValueError(f"asset.labels={src!r}; choose model_predicted | ground_truth | none")
 
 
-def source_files(report: dict) -> tuple[Path, list[Path]]:
-    """(the folder, the files) that make up a scene's original: the file itself, or every file
-    under a folder layout's folder (a SOG folder or streamed LOD scene, an npy folder)."""
-    path = Path(report["source"])
-    folder = path.parent if path.name in ("lod-meta.json", "meta.json") else path
-    if folder.is_dir():
-        return folder, sorted(p for p in folder.rglob("*") if p.is_file())
-    return path.parent, [path]
-
-
 def asset_source(tmp, mode: str, report: dict, catalog, scene) -> tuple[str | None, list[str]]:
     """The asset's copy of the original (asset.source; report: the ingest report): (files.source_ply,
     the files that hold the original, relative to the asset)."""
@@ -80,7 +70,7 @@ def asset_source(tmp, mode: str, report: dict, catalog, scene) -> tuple[str | No
     if mode == "reference" and is_inria_ply(original):
         return tmp.reference("source.ply", original), ["source.ply"]
     if mode == "reference":
-        folder, paths = source_files(report)
+        folder, paths = source_files(original)
         return None, [tmp.reference(str(Path("source") / p.relative_to(folder)), p) for p in paths]
     if mode == "convert":
         write_inria_ply(tmp / "source.ply", catalog.dataset("scene", scene).load()[0])

@@ -57,6 +57,17 @@ def detect_format(path: str | Path) -> str:
                                 "lod-meta.json / meta.json (SOG) or an .npy folder")
 
 
+def source_files(path: str | Path) -> tuple[Path, list[Path]]:
+    """(the folder, the files) that make up the scene at path: the file itself, or every file under
+    a folder layout's folder (a SOG folder or streamed LOD scene, given by its meta.json /
+    lod-meta.json or the folder; an npy folder)."""
+    path = Path(path)
+    folder = path.parent if path.name in (LOD_META, META) else path
+    if folder.is_dir():
+        return folder, sorted(p for p in folder.rglob("*") if p.is_file())
+    return path.parent, [path]
+
+
 def read_gaussians(path: str | Path, fmt: str | None = None, level: int | None = None):
     """Read a 3DGS file into a GaussianScene (unvalidated: see navcore.gaussians.validate).
 
