@@ -288,3 +288,6 @@ def test_block_culling_keeps_exactly_what_the_per_gaussian_test_keeps(spatial_or
                       for b in range(len(g["blocks"])))
     if spatial_order:
         assert culled > len(g["blocks"])  # the blocks do pass over much of the scene
+    # the cull's footprint bound assumes eps2d <= SQRT_EPS2D^2: a larger one is refused, not culled wrongly
+    with pytest.raises(ValueError, match="eps2d=0.5 exceeds the cull's bound"):
+        cpu_fast.render_one(g, vm[0], k, 160, 120, 0, eps2d=0.5)

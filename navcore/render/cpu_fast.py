@@ -42,6 +42,7 @@ TILE = 16
 ALPHA_MIN = np.float32(1.0 / 255.0)
 T_MIN = np.float32(1e-4)
 EXTENT_MAX = 3.33  # gsplat's cap on the footprint extent (sigmas)
+SQRT_EPS2D = 0.5478  # the cull's bound on sqrt(eps2d) (px): it holds for eps2d <= 0.3, gsplat's default
 FAST = {"nnan", "ninf", "nsz", "contract"}
 """The fast-math flags of the rasteriser: no NaN or infinity (validated scenes) and signed zeros
 alike, which let LLVM use vector min / max, and multiply-adds fused (10-20% of the frame time);
@@ -103,7 +104,7 @@ def _block_out(blocks, b, R, t, fx, fy, cx, cy, width, height, near, far, kx, ky
     z = R[2, 0] * bx + R[2, 1] * by + R[2, 2] * bz + t[2]
     if z + r <= near or z - r >= far:
         return True
-    pad = EXTENT_MAX * 0.5478 + 1.0
+    pad = EXTENT_MAX * SQRT_EPS2D + 1.0
     ex = EXTENT_MAX * fx * kx * s
     ey = EXTENT_MAX * fy * ky * s
     c = cx + pad  # left: u + rx <= 0  <=>  fx x + (cx + pad) z + ex <= 0
@@ -165,8 +166,8 @@ def _visible(means, smax, opac, i, R, t, fx, fy, cx, cy, width, height, near, fa
     x = R[0, 0] * mx + R[0, 1] * my + R[0, 2] * mz + t[0]
     y = R[1, 0] * mx + R[1, 1] * my + R[1, 2] * mz + t[1]
     # footprint bound: e sqrt(J Sigma J^T + eps) <= e (sqrt(eps) + |J_row| smax), + 1 for the ceil
-    rx = EXTENT_MAX * (0.5478 + fx * kx * smax[i] / z) + 1.0
-    ry = EXTENT_MAX * (0.5478 + fy * ky * smax[i] / z) + 1.0
+    rx = EXTENT_MAX * (SQRT_EPS2D + fx * kx * smax[i] / z) + 1.0
+    ry = EXTENT_MAX * (SQRT_EPS2D + fy * ky * smax[i] / z) + 1.0
     u = fx * x / z + cx
     v = fy * y / z + cy
     return not (u + rx <= 0 or u - rx >= width or v + ry <= 0 or v - ry >= height)
@@ -429,6 +430,17 @@ def _update_done(fs, done, y0, y1):
         done[py] = dm
 
 
+@numba.njit(cache=True, inline="always")
+def _unfinished_rows(done, mask, y0, y1):
+    """Rows y0..y1 less those at the top and bottom whose pixels in mask are all finished (per the
+    bitmask done); empty (y0 == y1) when all are."""
+    while y0 < y1 and done[y0] & mask == mask:
+        y0 = y0 + 1
+    while y1 > y0 and done[y1 - 1] & mask == mask:
+        y1 = y1 - 1
+    return y0, y1
+
+
 SMALL_BOX = 16  # boxes of at most this many pixels are composited pixel by pixel
 
 
@@ -486,14 +498,9 @@ def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos,
             qy1 = np.int64(pb >> np.uint32(24))
             bm = ((np.uint32(1) << np.uint32(qx1 - qx0)) - np.uint32(1)) << np.uint32(qx0)
             # rows of the box whose pixels are all finished are left out at its top and bottom
-            while qy0 < qy1:
-                if done[qy0] & bm != bm:
-                    break
-                qy0 = qy0 + 1
+            qy0, qy1 = _unfinished_rows(done, bm, qy0, qy1)
             if qy0 == qy1:  # all finished: the Gaussian is hidden
                 continue
-            while done[qy1 - 1] & bm == bm:  # stops at the unfinished row qy0 at the latest
-                qy1 = qy1 - 1
             j = rows[k]
             u = data[j, U] - np.float32(px0)
             v = data[j, V] - np.float32(py0)
@@ -554,15 +561,7 @@ def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos,
             for h in range(qx0 // HALF, (qx1 - 1) // HALF + 1):
                 # this half's rows of the box, less those all finished at its top and bottom
                 hm = bm & (np.uint32(255) << np.uint32(h * HALF))
-                a0, a1 = qy0, qy1
-                while a0 < a1:
-                    if done[a0] & hm != hm:
-                        break
-                    a0 = a0 + 1
-                while a1 > a0:
-                    if done[a1 - 1] & hm != hm:
-                        break
-                    a1 = a1 - 1
+                a0, a1 = _unfinished_rows(done, hm, qy0, qy1)
                 hy0[h], hy1[h] = a0, a1
                 lo = h * (TILE * HALF) + a0 * HALF
                 n = (a1 - a0) * HALF
@@ -614,6 +613,8 @@ def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos,
 def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: int, deg: int,
                near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, features=None, extra=None):
     """One camera -> (feats [H, W, C], depth [H, W], alpha [H, W]) float32 numpy arrays."""
+    if eps2d > SQRT_EPS2D ** 2:
+        raise ValueError(f"eps2d={eps2d} exceeds the cull's bound ({SQRT_EPS2D ** 2:.4f}: SQRT_EPS2D)")
     R = np.ascontiguousarray(viewmat[:3, :3], np.float32)
     t = np.ascontiguousarray(viewmat[:3, 3], np.float32)
     fx, fy, cx, cy = (float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]))
