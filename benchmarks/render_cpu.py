@@ -69,6 +69,7 @@ def revision_renderer(rev: str):
 
 def scene_ab(gs, poses, emb, old) -> dict:
     """Median ms a frame of rev's renderer and ours on the same views, interleaved."""
+    from benchmarks.render_gpu import psnr
     from navcore.render import cpu_fast as new
     from navcore.render.camera import embodiment_camera
 
@@ -88,8 +89,7 @@ def scene_ab(gs, poses, emb, old) -> dict:
             t_old.append(t1 - t0)
             t_new.append(time.perf_counter() - t1)
             same += all(np.array_equal(x, y) for x, y in zip(a, b))
-            mse = float(np.mean((np.clip(a[0], 0, 1) - np.clip(b[0], 0, 1)) ** 2))
-            psnrs.append(10 * np.log10(1 / max(mse, 1e-20)))
+            psnrs.append(psnr(np.clip(a[0], 0, 1), np.clip(b[0], 0, 1)))
             both = (a[2] > 0.5) & (b[2] > 0.5)
             ddep.append(float(np.median(np.abs(a[1] - b[1])[both])) if both.any() else 0.0)
         out[f"{w}x{h}"] = {"rev_ms": 1000 * float(np.median(t_old)), "ours_ms": 1000 * float(np.median(t_new)),
