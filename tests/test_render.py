@@ -280,8 +280,8 @@ def test_block_culling_keeps_exactly_what_the_per_gaussian_test_keeps(spatial_or
                       fx, fy, cx, cy, 160, 120, 0.01, 1e10, 1.3, 1.3)
     culled = 0
     for v in vm:
-        fast = cpu_fast._cull(g["means"], g["smax"], g["opacities"], g["blocks"], *args(v))
-        ref = cpu_fast._cull(g["means"], g["smax"], g["opacities"], everything, *args(v))
+        fast = cpu_fast._cull(g["means"], g["smax"], g["opacities"], g["blocks"], *args(v), 2)
+        ref = cpu_fast._cull(g["means"], g["smax"], g["opacities"], everything, *args(v), 1)  # and one worker
         assert np.array_equal(fast, ref) and np.all(np.diff(fast) > 0)
         culled += sum(cpu_fast._block_out(g["blocks"], b, *args(v)[:2], fx, fy, cx, cy, 160, 120, 0.01, 1e10,
                                           math.sqrt(1 + 1.3 ** 2), math.sqrt(1 + 1.3 ** 2))

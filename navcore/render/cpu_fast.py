@@ -35,6 +35,8 @@ import math
 
 import numba
 import numpy as np
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from navcore.gaussians.sh import C0, C1, C2, C3
 
@@ -48,6 +50,24 @@ FAST = {"nnan", "ninf", "nsz", "contract"}
 alike, which let LLVM use vector min / max, and multiply-adds fused (10-20% of the frame time);
 no reassociation, so that a pixel gets the same operations whether the vector loop or its scalar
 remainder computes it, whatever the vector width."""
+
+
+@intrinsic
+def _take(typingctx, counter):
+    """The next unit of work: counter[0] (an int64 array) incremented atomically, its value before.
+
+    The parallel passes whose units cost unevenly (tiles, culling blocks, binning chunks) run one
+    worker per thread, each taking units until none is left: numba's prange hands each thread a
+    fixed contiguous half whatever the chunk size (OpenMP's static schedule), which left one
+    thread the costly tiles (real room, 160x120: rasterisation 42 -> 32 ms). Which thread takes a
+    unit changes nothing in the output."""
+    def codegen(context, builder, sig, args):
+        aryty = sig.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [context.get_constant(numba.types.intp, 0)])
+        return builder.atomic_rmw("add", ptr, context.get_constant(numba.types.int64, 1), "monotonic")
+
+    return numba.types.int64(counter), codegen
 
 
 def prepare(gs) -> dict:
@@ -75,6 +95,7 @@ def prepare(gs) -> dict:
 
 
 BLOCK = 256  # Gaussians of a culling block: consecutive in the scene's order
+CULL_CHUNK = 32  # blocks a cull worker takes at a time
 
 
 def _blocks(means: np.ndarray, smax: np.ndarray) -> np.ndarray:
@@ -121,7 +142,7 @@ def _block_out(blocks, b, R, t, fx, fy, cx, cy, width, height, near, far, kx, ky
 
 
 @numba.njit(cache=True, parallel=True)
-def _cull(means, smax, opac, blocks, R, t, fx, fy, cx, cy, width, height, near, far, lim_x, lim_y):
+def _cull(means, smax, opac, blocks, R, t, fx, fy, cx, cy, width, height, near, far, lim_x, lim_y, nth):
     """The indices (ascending) of the Gaussians that may be visible (a superset of gsplat's
     survivors); blocks wholly outside the view are passed over without reading their Gaussians."""
     n = means.shape[0]
@@ -130,15 +151,21 @@ def _cull(means, smax, opac, blocks, R, t, fx, fy, cx, cy, width, height, near, 
     ky = math.sqrt(1.0 + lim_y * lim_y)
     keep = np.zeros(n, np.uint8)
     counts = np.zeros(nb + 1, np.int64)
-    for b in numba.prange(nb):
-        if _block_out(blocks, b, R, t, fx, fy, cx, cy, width, height, near, far, kx, ky):
-            continue
-        c = 0
-        for i in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
-            if _visible(means, smax, opac, i, R, t, fx, fy, cx, cy, width, height, near, far, kx, ky):
-                keep[i] = 1
-                c += 1
-        counts[b + 1] = c
+    nch = (nb + CULL_CHUNK - 1) // CULL_CHUNK
+    counter = np.zeros(1, np.int64)
+    for _ in numba.prange(nth):  # one worker per thread (`_take`)
+        ch = _take(counter)
+        while ch < nch:
+            for b in range(ch * CULL_CHUNK, min(nb, (ch + 1) * CULL_CHUNK)):
+                if _block_out(blocks, b, R, t, fx, fy, cx, cy, width, height, near, far, kx, ky):
+                    continue
+                c = 0
+                for i in range(b * BLOCK, min(n, (b + 1) * BLOCK)):
+                    if _visible(means, smax, opac, i, R, t, fx, fy, cx, cy, width, height, near, far, kx, ky):
+                        keep[i] = 1
+                        c += 1
+                counts[b + 1] = c
+            ch = _take(counter)
     for b in range(nb):
         counts[b + 1] += counts[b]
     idx = np.empty(counts[nb], np.int64)
@@ -349,7 +376,7 @@ def _tile_box(data, k, px0, py0, pw, ph):
 
 
 @numba.njit(cache=True, parallel=True)
-def _bin(box, data, width, height):
+def _bin(box, data, width, height, nth):
     """Counting sort of the (depth-ordered) rows into tiles: (rows [M], their pixel boxes in the
     tile [M] (`_tile_box`), offsets [tw * th + 1]); each tile's rows stay in ascending order, and
     a row is listed only in the tiles where its pixel box is not empty."""
@@ -358,13 +385,17 @@ def _bin(box, data, width, height):
     n = box.shape[0]
     nt = tw * th
     counts = np.zeros((CHUNKS, nt), np.int64)
-    for c in numba.prange(CHUNKS):
-        for k in range(c * n // CHUNKS, (c + 1) * n // CHUNKS):
-            for ty in range(box[k, 2], box[k, 3]):
-                for tx in range(box[k, 0], box[k, 1]):
-                    if _tile_box(data, k, tx * TILE, ty * TILE, min(TILE, width - tx * TILE),
-                                 min(TILE, height - ty * TILE)):
-                        counts[c, ty * tw + tx] += 1
+    counter = np.zeros(1, np.int64)
+    for _ in numba.prange(nth):  # one worker per thread (`_take`): near chunks cross more tiles
+        c = _take(counter)
+        while c < CHUNKS:
+            for k in range(c * n // CHUNKS, (c + 1) * n // CHUNKS):
+                for ty in range(box[k, 2], box[k, 3]):
+                    for tx in range(box[k, 0], box[k, 1]):
+                        if _tile_box(data, k, tx * TILE, ty * TILE, min(TILE, width - tx * TILE),
+                                     min(TILE, height - ty * TILE)):
+                            counts[c, ty * tw + tx] += 1
+            c = _take(counter)
     offsets = np.empty(nt + 1, np.int64)
     total = 0
     for tt in range(nt):
@@ -376,16 +407,20 @@ def _bin(box, data, width, height):
     offsets[nt] = total
     rows = np.empty(total, np.int32)
     pbox = np.empty(total, np.uint32)
-    for c in numba.prange(CHUNKS):
-        for k in range(c * n // CHUNKS, (c + 1) * n // CHUNKS):
-            for ty in range(box[k, 2], box[k, 3]):
-                for tx in range(box[k, 0], box[k, 1]):
-                    pb = _tile_box(data, k, tx * TILE, ty * TILE, min(TILE, width - tx * TILE), min(TILE, height - ty * TILE))
-                    if pb:
-                        tt = ty * tw + tx
-                        rows[counts[c, tt]] = k
-                        pbox[counts[c, tt]] = pb
-                        counts[c, tt] += 1
+    counter[0] = 0
+    for _ in numba.prange(nth):
+        c = _take(counter)
+        while c < CHUNKS:
+            for k in range(c * n // CHUNKS, (c + 1) * n // CHUNKS):
+                for ty in range(box[k, 2], box[k, 3]):
+                    for tx in range(box[k, 0], box[k, 1]):
+                        pb = _tile_box(data, k, tx * TILE, ty * TILE, min(TILE, width - tx * TILE), min(TILE, height - ty * TILE))
+                        if pb:
+                            tt = ty * tw + tx
+                            rows[counts[c, tt]] = k
+                            pbox[counts[c, tt]] = pb
+                            counts[c, tt] += 1
+            c = _take(counter)
     return rows, pbox, offsets
 
 
@@ -445,7 +480,7 @@ SMALL_BOX = 16  # boxes of at most this many pixels are composited pixel by pixe
 
 
 @numba.njit(cache=True, parallel=True, fastmath=FAST)
-def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos, nf, width, height, out):
+def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos, nf, width, height, out, nth):
     """out[H, W, nf + 2] = (sum w f, sum w z, sum w) per pixel, front to back per tile; a
     Gaussian's features (`_features`) are evaluated when it first contributes to a tile.
 
@@ -459,155 +494,159 @@ def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos,
     nt = offsets.shape[0] - 1
     one, zero = np.float32(1.0), np.float32(0.0)
     npx = TILE * TILE
-    for tt in numba.prange(nt):
-        ty, tx = tt // tw, tt % tw
-        px0, py0 = tx * TILE, ty * TILE
-        pw = min(TILE, width - px0)
-        ph = min(TILE, height - py0)
-        # per-pixel state, in separate arrays (rows of one 2D array defeat LLVM's overlap checks and
-        # the loops run scalar): transmittance, 1 once finished (T would drop <= T_MIN), the current
-        # Gaussian's weights alpha T, the pixel centres (tile-local), the accumulated channels
-        ts = np.ones(npx, np.float32)
-        fs = np.zeros(npx, np.float32)
-        ws = np.zeros(npx, np.float32)
-        xs = np.empty(npx, np.float32)
-        ys = np.empty(npx, np.float32)
-        acc = np.zeros((nf + 2) * npx, np.float32)
-        col = np.empty(nf, np.float32)
-        hit_q = np.empty(SMALL_BOX, np.int64)  # a small box's composited pixels and weights
-        hit_w = np.empty(SMALL_BOX, np.float32)
-        done = np.zeros(TILE, np.uint32)  # per tile row, bit x set once pixel x is finished
-        hy0 = np.zeros(2, np.int64)  # per half tile, the box rows of the current Gaussian's pass
-        hy1 = np.zeros(2, np.int64)
-        for py in range(TILE):
-            for px in range(TILE):
-                q = _slot(px, py)
-                xs[q] = np.float32(px + 0.5)
-                ys[q] = np.float32(py + 0.5)
-                if px >= pw or py >= ph:  # outside the image: finished from the start
-                    fs[q] = one
-                    done[py] |= np.uint32(1) << np.uint32(px)
-        left = pw * ph
-        for k in range(offsets[tt], offsets[tt + 1]):
-            # the pixels of its box (alpha < 1/255 outside it); the Gaussian is skipped when all of
-            # them are finished (bit tests only: its render data is not read)
-            pb = pbox[k]
-            qx0 = np.int64(pb & np.uint32(255))
-            qx1 = np.int64(pb >> np.uint32(8) & np.uint32(255))
-            qy0 = np.int64(pb >> np.uint32(16) & np.uint32(255))
-            qy1 = np.int64(pb >> np.uint32(24))
-            bm = ((np.uint32(1) << np.uint32(qx1 - qx0)) - np.uint32(1)) << np.uint32(qx0)
-            # rows of the box whose pixels are all finished are left out at its top and bottom
-            qy0, qy1 = _unfinished_rows(done, bm, qy0, qy1)
-            if qy0 == qy1:  # all finished: the Gaussian is hidden
-                continue
-            j = rows[k]
-            u = data[j, U] - np.float32(px0)
-            v = data[j, V] - np.float32(py0)
-            ca, cb, cc = data[j, CA], data[j, CB], data[j, CC]
-            o, z = data[j, OP], data[j, Z]
-            lm = data[j, LM]
-            ha = np.float32(0.5) * ca
-            hc = np.float32(0.5) * cc
-            fx0, fx1 = np.float32(qx0), np.float32(qx1)
-            nfin = np.int32(0)  # pixels finished by this Gaussian
-            nhit = np.int32(0)  # pixels it contributes to
-            if (qx1 - qx0) * (qy1 - qy0) <= SMALL_BOX:
-                # a few pixels (most Gaussians at low resolution): one at a time, skipping rather than
-                # masking, cheaper than a vector pass over whole 8-pixel rows
-                m = 0
-                for py in range(qy0, qy1):
-                    dy = np.float32(py + 0.5) - v
-                    sy = hc * dy * dy
-                    for px in range(qx0, qx1):
-                        q = _slot(px, py)
-                        if fs[q] != zero:
-                            continue
-                        dx = np.float32(px + 0.5) - u
-                        sigma = ha * dx * dx + sy + cb * dx * dy
-                        if sigma < zero or sigma > lm:
-                            continue
-                        alpha = min(np.float32(0.999), o * math.exp(-sigma))
-                        if alpha < ALPHA_MIN:
-                            continue
-                        tp = ts[q]
-                        tn = tp * (one - alpha)
-                        if tn <= T_MIN:
-                            fs[q] = one
-                            nfin += 1
-                            continue
-                        hit_q[m] = q
-                        hit_w[m] = alpha * tp
-                        m += 1
-                        ts[q] = tn
+    counter = np.zeros(1, np.int64)
+    for _ in numba.prange(nth):  # one worker per thread (`_take`): tile costs differ 100-fold
+        tt = _take(counter)
+        while tt < nt:
+            ty, tx = tt // tw, tt % tw
+            px0, py0 = tx * TILE, ty * TILE
+            pw = min(TILE, width - px0)
+            ph = min(TILE, height - py0)
+            # per-pixel state, in separate arrays (rows of one 2D array defeat LLVM's overlap checks and
+            # the loops run scalar): transmittance, 1 once finished (T would drop <= T_MIN), the current
+            # Gaussian's weights alpha T, the pixel centres (tile-local), the accumulated channels
+            ts = np.ones(npx, np.float32)
+            fs = np.zeros(npx, np.float32)
+            ws = np.zeros(npx, np.float32)
+            xs = np.empty(npx, np.float32)
+            ys = np.empty(npx, np.float32)
+            acc = np.zeros((nf + 2) * npx, np.float32)
+            col = np.empty(nf, np.float32)
+            hit_q = np.empty(SMALL_BOX, np.int64)  # a small box's composited pixels and weights
+            hit_w = np.empty(SMALL_BOX, np.float32)
+            done = np.zeros(TILE, np.uint32)  # per tile row, bit x set once pixel x is finished
+            hy0 = np.zeros(2, np.int64)  # per half tile, the box rows of the current Gaussian's pass
+            hy1 = np.zeros(2, np.int64)
+            for py in range(TILE):
+                for px in range(TILE):
+                    q = _slot(px, py)
+                    xs[q] = np.float32(px + 0.5)
+                    ys[q] = np.float32(py + 0.5)
+                    if px >= pw or py >= ph:  # outside the image: finished from the start
+                        fs[q] = one
+                        done[py] |= np.uint32(1) << np.uint32(px)
+            left = pw * ph
+            for k in range(offsets[tt], offsets[tt + 1]):
+                # the pixels of its box (alpha < 1/255 outside it); the Gaussian is skipped when all of
+                # them are finished (bit tests only: its render data is not read)
+                pb = pbox[k]
+                qx0 = np.int64(pb & np.uint32(255))
+                qx1 = np.int64(pb >> np.uint32(8) & np.uint32(255))
+                qy0 = np.int64(pb >> np.uint32(16) & np.uint32(255))
+                qy1 = np.int64(pb >> np.uint32(24))
+                bm = ((np.uint32(1) << np.uint32(qx1 - qx0)) - np.uint32(1)) << np.uint32(qx0)
+                # rows of the box whose pixels are all finished are left out at its top and bottom
+                qy0, qy1 = _unfinished_rows(done, bm, qy0, qy1)
+                if qy0 == qy1:  # all finished: the Gaussian is hidden
+                    continue
+                j = rows[k]
+                u = data[j, U] - np.float32(px0)
+                v = data[j, V] - np.float32(py0)
+                ca, cb, cc = data[j, CA], data[j, CB], data[j, CC]
+                o, z = data[j, OP], data[j, Z]
+                lm = data[j, LM]
+                ha = np.float32(0.5) * ca
+                hc = np.float32(0.5) * cc
+                fx0, fx1 = np.float32(qx0), np.float32(qx1)
+                nfin = np.int32(0)  # pixels finished by this Gaussian
+                nhit = np.int32(0)  # pixels it contributes to
+                if (qx1 - qx0) * (qy1 - qy0) <= SMALL_BOX:
+                    # a few pixels (most Gaussians at low resolution): one at a time, skipping rather than
+                    # masking, cheaper than a vector pass over whole 8-pixel rows
+                    m = 0
+                    for py in range(qy0, qy1):
+                        dy = np.float32(py + 0.5) - v
+                        sy = hc * dy * dy
+                        for px in range(qx0, qx1):
+                            q = _slot(px, py)
+                            if fs[q] != zero:
+                                continue
+                            dx = np.float32(px + 0.5) - u
+                            sigma = ha * dx * dx + sy + cb * dx * dy
+                            if sigma < zero or sigma > lm:
+                                continue
+                            alpha = min(np.float32(0.999), o * math.exp(-sigma))
+                            if alpha < ALPHA_MIN:
+                                continue
+                            tp = ts[q]
+                            tn = tp * (one - alpha)
+                            if tn <= T_MIN:
+                                fs[q] = one
+                                nfin += 1
+                                continue
+                            hit_q[m] = q
+                            hit_w[m] = alpha * tp
+                            m += 1
+                            ts[q] = tn
+                    if nfin > 0:
+                        _update_done(fs, done, qy0, qy1)
+                        left -= nfin
+                    if m > 0:
+                        _features(gid[j], means, sh, deg, feats_in, campos, col)
+                        for r in range(m):
+                            q = hit_q[r]
+                            wq = hit_w[r]
+                            for c in range(nf):
+                                acc[c * npx + q] += wq * col[c]
+                            acc[nf * npx + q] += wq * z
+                            acc[(nf + 1) * npx + q] += wq
+                    if left == 0:
+                        break
+                    continue
+                for h in range(2):
+                    hy0[h] = 0
+                    hy1[h] = 0
+                for h in range(qx0 // HALF, (qx1 - 1) // HALF + 1):
+                    # this half's rows of the box, less those all finished at its top and bottom
+                    hm = bm & (np.uint32(255) << np.uint32(h * HALF))
+                    a0, a1 = _unfinished_rows(done, hm, qy0, qy1)
+                    hy0[h], hy1[h] = a0, a1
+                    lo = h * (TILE * HALF) + a0 * HALF
+                    n = (a1 - a0) * HALF
+                    tr, fr, wr, xr, yr = ts[lo:lo + n], fs[lo:lo + n], ws[lo:lo + n], xs[lo:lo + n], ys[lo:lo + n]
+                    for q in range(n):
+                        xx = xr[q]
+                        dx = xx - u
+                        dy = yr[q] - v
+                        sigma = ha * dx * dx + hc * dy * dy + cb * dx * dy
+                        alpha = min(np.float32(0.999), o * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
+                        a = alpha if xx > fx0 else zero
+                        a = a if xx < fx1 else zero
+                        a = a if fr[q] == zero else zero
+                        a = a if sigma >= zero else zero
+                        a = a if sigma <= lm else zero
+                        a = a if alpha >= ALPHA_MIN else zero
+                        tp = tr[q]
+                        tn = tp * (one - a)
+                        last = tn <= T_MIN  # only where a > 0: T stays above T_MIN otherwise
+                        wq = zero if last else a * tp
+                        wr[q] = wq
+                        tr[q] = tp if last else tn
+                        fr[q] = one if last else fr[q]
+                        nfin += np.int32(1) if last else np.int32(0)
+                        nhit += np.int32(1) if wq > zero else np.int32(0)
                 if nfin > 0:
                     _update_done(fs, done, qy0, qy1)
                     left -= nfin
-                if m > 0:
+                if nhit > 0:
                     _features(gid[j], means, sh, deg, feats_in, campos, col)
-                    for r in range(m):
-                        q = hit_q[r]
-                        wq = hit_w[r]
-                        for c in range(nf):
-                            acc[c * npx + q] += wq * col[c]
-                        acc[nf * npx + q] += wq * z
-                        acc[(nf + 1) * npx + q] += wq
+                    for h in range(qx0 // HALF, (qx1 - 1) // HALF + 1):
+                        lo = h * (TILE * HALF) + hy0[h] * HALF
+                        n = (hy1[h] - hy0[h]) * HALF
+                        wr = ws[lo:lo + n]
+                        for c in range(nf + 2):
+                            cv = col[c] if c < nf else (z if c == nf else one)
+                            ac = acc[c * npx + lo:c * npx + lo + n]
+                            for q in range(n):
+                                ac[q] += wr[q] * cv
                 if left == 0:
                     break
-                continue
-            for h in range(2):
-                hy0[h] = 0
-                hy1[h] = 0
-            for h in range(qx0 // HALF, (qx1 - 1) // HALF + 1):
-                # this half's rows of the box, less those all finished at its top and bottom
-                hm = bm & (np.uint32(255) << np.uint32(h * HALF))
-                a0, a1 = _unfinished_rows(done, hm, qy0, qy1)
-                hy0[h], hy1[h] = a0, a1
-                lo = h * (TILE * HALF) + a0 * HALF
-                n = (a1 - a0) * HALF
-                tr, fr, wr, xr, yr = ts[lo:lo + n], fs[lo:lo + n], ws[lo:lo + n], xs[lo:lo + n], ys[lo:lo + n]
-                for q in range(n):
-                    xx = xr[q]
-                    dx = xx - u
-                    dy = yr[q] - v
-                    sigma = ha * dx * dx + hc * dy * dy + cb * dx * dy
-                    alpha = min(np.float32(0.999), o * _exp_neg(min(max(sigma, zero), np.float32(8.0))))
-                    a = alpha if xx > fx0 else zero
-                    a = a if xx < fx1 else zero
-                    a = a if fr[q] == zero else zero
-                    a = a if sigma >= zero else zero
-                    a = a if sigma <= lm else zero
-                    a = a if alpha >= ALPHA_MIN else zero
-                    tp = tr[q]
-                    tn = tp * (one - a)
-                    last = tn <= T_MIN  # only where a > 0: T stays above T_MIN otherwise
-                    wq = zero if last else a * tp
-                    wr[q] = wq
-                    tr[q] = tp if last else tn
-                    fr[q] = one if last else fr[q]
-                    nfin += np.int32(1) if last else np.int32(0)
-                    nhit += np.int32(1) if wq > zero else np.int32(0)
-            if nfin > 0:
-                _update_done(fs, done, qy0, qy1)
-                left -= nfin
-            if nhit > 0:
-                _features(gid[j], means, sh, deg, feats_in, campos, col)
-                for h in range(qx0 // HALF, (qx1 - 1) // HALF + 1):
-                    lo = h * (TILE * HALF) + hy0[h] * HALF
-                    n = (hy1[h] - hy0[h]) * HALF
-                    wr = ws[lo:lo + n]
+            for py in range(ph):
+                for px in range(pw):
+                    q = _slot(px, py)
                     for c in range(nf + 2):
-                        cv = col[c] if c < nf else (z if c == nf else one)
-                        ac = acc[c * npx + lo:c * npx + lo + n]
-                        for q in range(n):
-                            ac[q] += wr[q] * cv
-            if left == 0:
-                break
-        for py in range(ph):
-            for px in range(pw):
-                q = _slot(px, py)
-                for c in range(nf + 2):
-                    out[py0 + py, px0 + px, c] = acc[c * npx + q]
+                        out[py0 + py, px0 + px, c] = acc[c * npx + q]
+            tt = _take(counter)
 
 
 def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: int, deg: int,
@@ -622,8 +661,9 @@ def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: 
     lo_x, hi_x = -(cx / fx + 0.3 * tan_x), (width - cx) / fx + 0.3 * tan_x
     lo_y, hi_y = -(cy / fy + 0.3 * tan_y), (height - cy) / fy + 0.3 * tan_y
     n = len(g["means"])
+    nth = numba.get_num_threads()
     idx = _cull(g["means"], g["smax"], g["opacities"], g["blocks"], R, t, fx, fy, cx, cy, width, height, near, far,
-                max(-lo_x, hi_x), max(-lo_y, hi_y))
+                max(-lo_x, hi_x), max(-lo_y, hi_y), nth)
     if features is not None:
         feats_in, d = np.ascontiguousarray(features, np.float32), -1
     elif extra is not None:
@@ -643,10 +683,9 @@ def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: 
     _project(idx, g["means"], g["cov"], g["opacities"], g["ext"], g["lmax"], R, t, fx, fy, cx, cy, width, height, eps2d,
              lo_x, hi_x, lo_y, hi_y, pos, data, box, gid)
     campos = (-R.T.astype(np.float64) @ t.astype(np.float64)).astype(np.float32)
-    rows, pbox, offsets = _bin(box, data, width, height)
+    rows, pbox, offsets = _bin(box, data, width, height, nth)
     out = np.zeros((height, width, nf + 2), np.float32)
-    with numba.parallel_chunksize(1):  # tiles one at a time: a static split left one thread the costly half
-        _rasterize(rows, pbox, offsets, data, gid, g["means"], g["sh"], d, feats_in, campos, nf, width, height, out)
+    _rasterize(rows, pbox, offsets, data, gid, g["means"], g["sh"], d, feats_in, campos, nf, width, height, out, nth)
     alpha = out[..., nf + 1]
     dep = out[..., nf] / np.maximum(alpha, np.float32(1e-10))
     return out[..., :nf], dep, alpha
