@@ -323,16 +323,19 @@ def _depths(idx, means, R, t, z):
 
 
 @numba.njit(cache=True, parallel=True)
-def _depth_order(z):
-    """Positions of z in increasing order; stable (ties keep their order, i.e. the Gaussian index
-    order, as gsplat): a parallel LSD radix sort of the float bits (positive floats order as their
-    bits), 3 x 11 bits, with a fixed work split so that the result does not depend on the thread
-    count."""
+def _depth_ranks(z):
+    """Each z's position in increasing order (int32); stable (ties keep their order, i.e. the
+    Gaussian index order, as gsplat): a parallel LSD radix sort of the float bits (positive floats
+    order as their bits), 3 x 11 bits, with a fixed work split so that the result does not depend
+    on the thread count; the last pass writes the ranks rather than the permutation."""
     n = z.shape[0]
     ka = z.view(np.uint32).copy()
-    va = np.arange(n).astype(np.int32)
+    va = np.empty(n, np.int32)
+    for k in numba.prange(n):
+        va[k] = k
     kb = np.empty_like(ka)
     vb = np.empty_like(va)
+    rank = np.empty(n, np.int32)
     hist = np.zeros((CHUNKS, 2048), np.int64)
     for shift in (0, 11, 22):
         for c in numba.prange(CHUNKS):
@@ -347,17 +350,21 @@ def _depth_order(z):
                 h = hist[c, d]
                 hist[c, d] = total
                 total += h
+        last = shift == 22
         for c in numba.prange(CHUNKS):
             lo, hi = c * n // CHUNKS, (c + 1) * n // CHUNKS
             for k in range(lo, hi):
                 d = (ka[k] >> shift) & 2047
                 q = hist[c, d]
                 hist[c, d] = q + 1
-                kb[q] = ka[k]
-                vb[q] = va[k]
+                if last:
+                    rank[va[k]] = q
+                else:
+                    kb[q] = ka[k]
+                    vb[q] = va[k]
         ka, kb = kb, ka
         va, vb = vb, va
-    return va
+    return rank
 
 
 @numba.njit(cache=True, inline="always")
@@ -675,8 +682,7 @@ def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: 
     # writes each row at its place front to back
     z = np.empty(len(idx), np.float32)
     _depths(idx, g["means"], R, t, z)
-    pos = np.empty(len(idx), np.int32)
-    pos[_depth_order(z)] = np.arange(len(idx), dtype=np.int32)
+    pos = _depth_ranks(z)
     data = np.empty((len(idx), NDATA), np.float32)
     box = np.empty((len(idx), 4), np.int32)
     gid = np.empty(len(idx), np.int64)
