@@ -132,6 +132,29 @@ def test_compiled_renderer_matches_the_torch_reference(small_scene, size):
     assert torch.median((a.depth - b.depth).abs()[both]).item() <= 1e-4
 
 
+def test_wide_vector_attribute_reaches_the_compiled_function():
+    """`_wide_vectors` writes "prefer-vector-width"="512" into the calling function's definition
+    (through llvmlite's attribute set, which only accepts attributes it knows: a llvmlite upgrade
+    that changes the set would silently drop the attribute or fail to compile)."""
+    import numba
+
+    from navcore.render import cpu_fast
+
+    wide = cpu_fast._wide_vectors
+
+    def body(x):
+        wide()
+        s = 0.0
+        for k in range(x.shape[0]):
+            s += x[k]
+        return s
+
+    f = numba.njit(cache=False)(body)
+    assert f(np.arange(10.0)) == 45.0
+    ir = "\n".join(f.inspect_llvm().values())
+    assert '"prefer-vector-width"="512"' in ir
+
+
 def test_compiled_renderer_is_deterministic_across_thread_counts(small_scene):
     import numba
 
