@@ -70,11 +70,12 @@ def revision_renderer(rev: str):
 def scene_ab(gs, poses, emb, old) -> dict:
     """Median ms a frame of rev's renderer and ours on the same views, interleaved."""
     from benchmarks.render_gpu import psnr
+    from navcore.gaussians.model import render_sh_degree
     from navcore.render import cpu_fast as new
     from navcore.render.camera import embodiment_camera
 
     g_old, g_new = old.prepare(gs), new.prepare(gs)
-    deg = int(round(np.sqrt(g_new["sh"].shape[1]))) - 1
+    deg = render_sh_degree(None, g_new["sh"].shape[1])
     out = {"n_gaussians": len(gs.means), "views": len(poses)}
     for w, h in SIZES:
         vm, K, _, _ = embodiment_camera(emb, poses, w, h)

@@ -209,6 +209,30 @@ def test_feature_rendering_gives_label_weights():
     assert np.allclose(lab.sum(-1), out.alpha[0].numpy(), atol=1e-5)  # weights add up to the coverage
 
 
+def test_what_the_compiled_passes_would_read_out_of_bounds_is_refused():
+    # an SH-0 scene (the real hall's SPZ) rendered at degree 3 once read the next Gaussians'
+    # coefficients, and past the array's end for the last ones: garbage, NaN in some frames
+    from navcore.render import cpu_fast
+
+    gs = scene([(2.0, 0.3, 0), (2.0, -0.3, 0)], [0.15, 0.15], [0.95, 0.95], [(0.5, 0.5, 0.5)] * 2)
+    for backend in ("cpu", "torch"):
+        with pytest.raises(ValueError, match="sh_degree=3 asked for a scene with SH degree 0"):
+            Renderer(gs, backend, sh_degree=3)
+        with pytest.raises(ValueError, match="sh_degree=-1"):
+            Renderer(gs, backend, sh_degree=-1)
+        assert Renderer(gs, backend).sh_degree == 0 == Renderer(gs, backend, sh_degree=0).sh_degree
+    g = cpu_fast.prepare(gs)
+    vm, k = viewmats(np.array([[0, 0, 0]]), 0.0)[0], intrinsics(W, H, HFOV)
+    with pytest.raises(ValueError, match="SH degree 0"):
+        cpu_fast.render_one(g, vm, k, W, H, 3)
+    with pytest.raises(ValueError, match=r"features must be \[2, C\]"):
+        cpu_fast.render_one(g, vm, k, W, H, 0, features=np.ones((1, 2), np.float32))
+    with pytest.raises(ValueError, match=r"extra must be \[2, C\]"):
+        cpu_fast.render_one(g, vm, k, W, H, 0, extra=np.ones(2, np.float32))
+    rgb, _, alpha = cpu_fast.render_one(g, vm, k, W, H, 0, extra=np.ones((2, 1), np.float32))
+    assert np.allclose(rgb[..., 3], alpha)  # a constant extra channel composites to the coverage
+
+
 def backends():
     out = ["cpu"]
     if torch.cuda.is_available():

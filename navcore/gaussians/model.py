@@ -80,6 +80,19 @@ def sh_degree_for_coeffs(k: int) -> int:
     return d
 
 
+def render_sh_degree(requested: int | None, k: int) -> int:
+    """The SH degree a renderer evaluates for a scene with k coefficients per channel: all it has
+    when requested is None, else requested, which must lie in 0..the scene's degree (a higher one
+    would read coefficients the scene does not have)."""
+    have = sh_degree_for_coeffs(k)
+    if requested is None:
+        return have
+    if not 0 <= int(requested) <= have:
+        raise ValueError(f"sh_degree={requested} asked for a scene with SH degree {have} ({k} coefficient(s) per "
+                         f"channel): use 0..{have} or None")
+    return int(requested)
+
+
 @dataclass
 class GaussianScene:
     """A set of 3D Gaussians in one frame.

@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from navcore.gaussians.model import render_sh_degree
+
 if TYPE_CHECKING:  # torch is imported when a renderer is built, not when cameras are
     import torch
 
@@ -61,7 +63,7 @@ class Renderer:
         if backend == "gsplat" and not gsplat_available():
             raise RuntimeError("renderer backend 'gsplat' needs CUDA and the gsplat package; use backend='cpu'")
         self.backend = backend
-        self.sh_degree = sh_degree
+        self.sh_degree = render_sh_degree(sh_degree, gs.sh.shape[1])  # ValueError before any work
         self.num_gaussians = len(gs.means)
         if backend == "cpu":
             from navcore.render.cpu_fast import prepare

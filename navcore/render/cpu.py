@@ -23,6 +23,7 @@ import math
 import numpy as np
 import torch
 
+from navcore.gaussians.model import render_sh_degree
 from navcore.gaussians.sh import sh_basis
 
 TILE = 16
@@ -175,8 +176,7 @@ def render(gs_tensors: dict, viewmats: np.ndarray, Ks: np.ndarray, width: int, h
         empty), alpha [B, H, W].
     """
     g = gs_tensors
-    K_sh = g["sh"].shape[1]
-    deg = int(round(math.sqrt(K_sh))) - 1 if sh_degree is None else int(sh_degree)
+    deg = render_sh_degree(sh_degree, g["sh"].shape[1])
     rgbs, deps, alps = [], [], []
     with torch.no_grad():
         for vm, K in zip(np.asarray(viewmats, np.float32), np.asarray(Ks, np.float32)):

@@ -37,6 +37,7 @@ import numba
 import numpy as np
 from numba.extending import intrinsic
 
+from navcore.gaussians.model import render_sh_degree
 from navcore.gaussians.sh import C0, C1, C2, C3
 
 TILE = 16
@@ -647,7 +648,15 @@ def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos,
 
 def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: int, deg: int,
                near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, features=None, extra=None):
-    """One camera -> (feats [H, W, C], depth [H, W], alpha [H, W]) float32 numpy arrays."""
+    """One camera -> (feats [H, W, C], depth [H, W], alpha [H, W]) float32 numpy arrays.
+
+    The compiled passes do not check their indices, so what they would read out of bounds is
+    refused here: deg above the scene's SH degree, features / extra without one row per Gaussian."""
+    n = len(g["means"])
+    render_sh_degree(deg, g["sh"].shape[1])  # ValueError above the scene's degree
+    for name, f in (("features", features), ("extra", extra)):
+        if f is not None and (np.ndim(f) != 2 or len(f) != n):
+            raise ValueError(f"{name} must be [{n}, C] (one row per Gaussian), got shape {np.shape(f)}")
     if eps2d > SQRT_EPS2D ** 2:
         raise ValueError(f"eps2d={eps2d} exceeds the cull's bound ({SQRT_EPS2D ** 2:.4f}: SQRT_EPS2D)")
     R = np.ascontiguousarray(viewmat[:3, :3], np.float32)
@@ -656,7 +665,6 @@ def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: 
     tan_x, tan_y = 0.5 * width / fx, 0.5 * height / fy
     lo_x, hi_x = -(cx / fx + 0.3 * tan_x), (width - cx) / fx + 0.3 * tan_x
     lo_y, hi_y = -(cy / fy + 0.3 * tan_y), (height - cy) / fy + 0.3 * tan_y
-    n = len(g["means"])
     nth = numba.get_num_threads()
     idx = _cull(g["means"], g["smax"], g["opacities"], g["blocks"], R, t, fx, fy, cx, cy, width, height, near, far,
                 max(-lo_x, hi_x), max(-lo_y, hi_y), nth)
@@ -691,7 +699,7 @@ def render(g: dict, viewmats, Ks, width: int, height: int, sh_degree: int | None
     """A batch of cameras, the same contract as `navcore.render.cpu.render` (torch tensors out)."""
     import torch
 
-    deg = int(round(math.sqrt(g["sh"].shape[1]))) - 1 if sh_degree is None else int(sh_degree)
+    deg = render_sh_degree(sh_degree, g["sh"].shape[1])
     outs = [render_one(g, vm, K, width, height, deg, near, far, features=features, extra=extra)
             for vm, K in zip(np.asarray(viewmats, np.float32), np.asarray(Ks, np.float32))]
     rgb, dep, alp = (torch.from_numpy(np.stack([o[k] for o in outs])) for k in range(3))

@@ -1,10 +1,10 @@
 """gsplat backend (CUDA): `gsplat.rasterization` in classic mode with expected depth ("RGB+ED")."""
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
+
+from navcore.gaussians.model import render_sh_degree
 
 
 def gaussian_tensors(gs, device: str = "cuda") -> dict:
@@ -24,7 +24,7 @@ def render(g: dict, viewmats, Ks, width: int, height: int, sh_degree: int | None
     dev = g["means"].device
     vm = torch.as_tensor(np.asarray(viewmats, np.float32), device=dev)
     K = torch.as_tensor(np.asarray(Ks, np.float32), device=dev)
-    deg = int(round(math.sqrt(g["sh"].shape[1]))) - 1 if sh_degree is None else int(sh_degree)
+    deg = render_sh_degree(sh_degree, g["sh"].shape[1])
     colors, deg_arg = g["sh"], deg
     if features is not None:
         colors, deg_arg = torch.as_tensor(features, dtype=torch.float32, device=dev), None
