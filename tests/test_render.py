@@ -132,27 +132,32 @@ def test_compiled_renderer_matches_the_torch_reference(small_scene, size):
     assert torch.median((a.depth - b.depth).abs()[both]).item() <= 1e-4
 
 
-def test_wide_vector_attribute_reaches_the_compiled_function():
+def test_the_renderers_llvm_intrinsics_reach_the_compiled_function():
     """`_wide_vectors` writes "prefer-vector-width"="512" into the calling function's definition
     (through llvmlite's attribute set, which only accepts attributes it knows: a llvmlite upgrade
-    that changes the set would silently drop the attribute or fail to compile)."""
+    that changes the set would silently drop the attribute or fail to compile); `_prefetch` emits
+    llvm.prefetch on the element's address and changes no value."""
     import numba
 
     from navcore.render import cpu_fast
 
-    wide = cpu_fast._wide_vectors
+    wide, prefetch = cpu_fast._wide_vectors, cpu_fast._prefetch
 
-    def body(x):
+    def body(x, rows):
         wide()
         s = 0.0
-        for k in range(x.shape[0]):
-            s += x[k]
+        for k in range(rows.shape[0]):
+            if k + 2 < rows.shape[0]:
+                prefetch(x, rows[k + 2] * 3)
+            s += x[rows[k], 1]
         return s
 
     f = numba.njit(cache=False)(body)
-    assert f(np.arange(10.0)) == 45.0
+    x = np.arange(30.0).reshape(10, 3)
+    assert f(x, np.array([9, 0, 4, 4], np.int32)) == 28 + 1 + 13 + 13
     ir = "\n".join(f.inspect_llvm().values())
     assert '"prefer-vector-width"="512"' in ir
+    assert "call void @llvm.prefetch" in ir
 
 
 def test_compiled_renderer_is_deterministic_across_thread_counts(small_scene):

@@ -35,6 +35,8 @@ import math
 
 import numba
 import numpy as np
+from llvmlite import ir
+from numba.core import cgutils
 from numba.extending import intrinsic
 
 from navcore.gaussians.model import render_sh_degree
@@ -69,6 +71,30 @@ def _wide_vectors(typingctx):
         return context.get_dummy_value()
 
     return numba.types.none(), codegen
+
+
+@intrinsic
+def _prefetch(typingctx, arr, i):
+    """Asks the CPU to bring element i of the C-contiguous array arr (flat index) into the cache
+    (llvm.prefetch: read, keep in all levels); no effect on the results. The rasteriser reads
+    each tile's render rows at scattered places (a tile's Gaussians are a sparse subset of the
+    depth order): fetching the row of the Gaussian PREFETCH_AHEAD places later in the list
+    overlaps those misses with the compositing (real room 160x120: rasterisation 31 -> 29 ms,
+    640x480 135 -> 130 ms a frame)."""
+    def codegen(context, builder, sig, args):
+        ary = context.make_array(sig.args[0])(context, builder, args[0])
+        i8p = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]),
+                                            "llvm.prefetch.p0")
+        ptr = builder.bitcast(builder.gep(ary.data, [args[1]]), i8p)
+        builder.call(fn, [ptr, ir.Constant(i32, 0), ir.Constant(i32, 3), ir.Constant(i32, 1)])
+        return context.get_dummy_value()
+
+    return numba.types.none(arr, i), codegen
+
+
+PREFETCH_AHEAD = 8  # list entries between a Gaussian's prefetch and its compositing (16: the same)
 
 
 def prepare(gs) -> dict:
@@ -524,7 +550,12 @@ def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos,
                         fs[q] = one
                         done[py] |= np.uint32(1) << np.uint32(px)
             left = pw * ph
-            for k in range(offsets[tt], offsets[tt + 1]):
+            k_end = offsets[tt + 1]
+            for k in range(offsets[tt], k_end):
+                if k + PREFETCH_AHEAD < k_end:
+                    j_ahead = rows[k + PREFETCH_AHEAD]
+                    _prefetch(data, j_ahead * NDATA)
+                    _prefetch(gid, j_ahead)
                 # the pixels of its box (alpha < 1/255 outside it); the Gaussian is skipped when all of
                 # them are finished (bit tests only: its render data is not read)
                 pb = pbox[k]
