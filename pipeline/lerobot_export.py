@@ -22,8 +22,9 @@ Features per frame:
   3 right), and timestamp, frame_index, episode_index, index, task_index.
 Tasks are natural-language strings ("Navigate to the chair.", "Navigate to the point goal.",
 "Navigate to where the goal image was taken."); episode metadata keeps our scene, task, episode
-id, split and difficulty. Deterministic: same data and arguments, same bytes (except MP4 muxer
-metadata, which carries no time stamp either).
+id, split and difficulty. Deterministic: same data and arguments, the same bytes in every file but
+the MP4s, whose frames are the same but whose H.264 bitstream was seen to differ between two
+exports in one process (open problem; the tests compare the videos decoded).
 """
 from __future__ import annotations
 
