@@ -104,7 +104,7 @@ def test_lerobot_export_is_deterministic(exported, tmp_path):
     # are, to the bit), but x264's bitstream was seen to differ between two exports of one process
     # on a fresh clone (an open problem, 2026-11-24: not the thread count, not the frames), so the
     # videos are compared decoded: the same frames within the codec's noise (two such encodes of
-    # one episode decode 39.8-40.2 dB apart; different views are 15-25 dB apart).
+    # one episode decoded 39.8-40.2 dB apart).
     import av
 
     def decoded(p):
