@@ -1,12 +1,13 @@
 """LeRobot export: a split of a stored run, loaded back with the lerobot package's own
 LeRobotDataset (CPU renderer, a few tiny episodes)."""
 import hashlib
-import math
 
 import numpy as np
 import pandas as pd
 import pytest
 import torch
+
+from benchmarks.render_gpu import psnr
 
 
 def _lerobot():
@@ -81,8 +82,7 @@ def test_lerobot_dataset_class_loads_the_export(exported):
     vm, k, w, h = embodiment_camera(Embodiment(), it["observation.state"].numpy()[None].astype(np.float64), 48, 36)
     ref = Renderer(gs, "cpu").render(vm, k, w, h)
     rgb = it["observation.images.rgb"].permute(1, 2, 0).numpy()  # float [0, 1], CHW from the decoder
-    mse = float(np.mean((rgb - ref.rgb[0].numpy()) ** 2))
-    assert 10 * math.log10(1 / max(mse, 1e-12)) > 30
+    assert psnr(rgb, ref.rgb[0].numpy()) > 30
     assert torch.equal(it["observation.depth"][..., 0], ref.depth[0])
     # action chunks through lerobot's own delta_timestamps
     chunked = LeRobotDataset("navarena/test_train", root=out, delta_timestamps={"action": [0.0, 0.2, 0.4]})
@@ -116,7 +116,7 @@ def test_lerobot_export_is_deterministic(exported, tmp_path):
     for v in videos:
         a, b = decoded(out / v), decoded(again / v)
         assert a.shape == b.shape
-        assert 10 * math.log10(255.0 ** 2 / max(float(np.mean((a - b) ** 2)), 1e-12)) > 32  # seen: 39.8 dB
+        assert psnr(a / 255.0, b / 255.0) > 32  # seen: 39.8 dB
     with pytest.raises(ValueError, match="divide"):
         export_lerobot(root, tmp_path / "x", fps=3)
     with pytest.raises(ValueError, match="no episodes"):
