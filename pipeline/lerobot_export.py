@@ -23,7 +23,7 @@ Features per frame:
 Tasks are natural-language strings ("Navigate to the chair.", "Navigate to the point goal.",
 "Navigate to where the goal image was taken."); episode metadata keeps our scene, task, episode
 id, split and difficulty. Deterministic: same data and arguments, the same bytes in every file, the
-MP4s included (x264 runs with one thread and `cpu-independent`: see `_Video`).
+MP4s included (`navcore.io.video.H264Writer`).
 """
 from __future__ import annotations
 
@@ -37,6 +37,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from navcore.io.atomic import atomic_path
+from navcore.io.video import H264Writer
 from navcore.nav.embodiment import Embodiment
 from navcore.nav.poses import wrap_angle
 from pipeline.catalog import Catalog
@@ -73,42 +74,6 @@ def _frames_of(tr: pd.DataFrame, stride: int) -> pd.DataFrame:
 def _stats(a: np.ndarray, axis) -> dict:
     return {"min": a.min(axis=axis).tolist(), "max": a.max(axis=axis).tolist(), "mean": a.mean(axis=axis).tolist(),
             "std": a.std(axis=axis).tolist(), "count": [int(a.shape[0])]}
-
-
-class _Video:
-    """One episode's RGB frames -> an H.264 MP4 with frame i at pts i / fps."""
-
-    def __init__(self, path: Path, fps: int, w: int, h: int, crf: int):
-        import av
-
-        self.path = path
-        path.parent.mkdir(parents=True, exist_ok=True)
-        self.c = av.open(str(path), mode="w", format="mp4")
-        self.s = self.c.add_stream("libx264", rate=fps, options={"crf": str(crf), "preset": "medium"})
-        self.s.width, self.s.height, self.s.pix_fmt = w, h, "yuv420p"
-        # The export must be the same bytes wherever and whenever it runs. One encoder thread:
-        # x264's frame threading makes the bitstream depend on the thread count (the machine's
-        # cores). cpu-independent: x264's assembly for the macroblock-tree rate control reads a
-        # value from the stack it never wrote (valgrind: "use of uninitialised value ... created by
-        # a stack allocation" in libx264, gone with mbtree off), so the bitstream depended on what
-        # earlier code left on the C stack: at 48x36, a cold numba compilation before the first
-        # video gave different MP4s in each of 3 processes for the same frames; with the option,
-        # 3 of 3 are the bytes of a process that compiled nothing. It also keeps CPUs with other
-        # SIMD sets on the same bytes. Its cost at 160x120 (16 episodes of the default dataset):
-        # the same PSNR (37.70 dB median), 0.2% fewer bytes, about 4% more encoding time.
-        self.s.codec_context.options = {"crf": str(crf), "bf": "0", "threads": "1",
-                                        "x264-params": "cpu-independent=1"}
-
-    def add(self, rgb: np.ndarray) -> None:
-        import av
-
-        for p in self.s.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")):
-            self.c.mux(p)
-
-    def close(self) -> None:
-        for p in self.s.encode():
-            self.c.mux(p)
-        self.c.close()
 
 
 def export_lerobot(root, out, split: str | None = "train", tasks=("pointnav", "imagenav", "objectnav"),
@@ -161,7 +126,8 @@ def export_lerobot(root, out, split: str | None = "train", tasks=("pointnav", "i
                     ti = task_index.setdefault(text, len(task_index))
                     chunk, file = divmod(ep_index, CHUNKS_SIZE)
                     vpath = tmp / f"videos/{RGB_KEY}/chunk-{chunk:03d}/file-{file:03d}.mp4"
-                    video = _Video(vpath, fps, width, height, crf)
+                    vpath.parent.mkdir(parents=True, exist_ok=True)
+                    video = H264Writer(vpath, fps, crf=crf, b_frames=0)
                     depths = []
                     for a in range(0, n, batch_size):
                         poses = f.iloc[a:a + batch_size][["position_x", "position_y", "yaw"]].to_numpy()

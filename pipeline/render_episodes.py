@@ -95,23 +95,13 @@ class MapInset:
 
 
 def write_mp4(path: Path, frames, fps: int) -> None:
-    """RGB uint8 frames (even sizes) -> H.264 MP4 (yuv420p, browsers play it), atomically."""
-    import av
-
+    """RGB uint8 frames -> H.264 MP4 (yuv420p, browsers play it; odd sizes cut to even), atomically."""
     from navcore.io.atomic import atomic_path
+    from navcore.io.video import H264Writer
 
-    with atomic_path(path) as tmp:
-        with av.open(str(tmp), mode="w", format="mp4") as c:
-            s = c.add_stream("libx264", rate=fps, options={"crf": "20"})
-            first = True
-            for f in frames:
-                if first:
-                    s.height, s.width = f.shape[:2]
-                    s.pix_fmt, first = "yuv420p", False
-                for p in s.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(f), format="rgb24")):
-                    c.mux(p)
-            for p in s.encode():
-                c.mux(p)
+    with atomic_path(path) as tmp, H264Writer(tmp, fps, crf=20) as video:
+        for f in frames:
+            video.add(f)
 
 
 def episode_video(src, cm, sid: str, poses: np.ndarray, goals: np.ndarray, radius: float, path: Path,

@@ -114,7 +114,7 @@ _ENCODE_AFTER_COLD_COMPILE = """
 import sys
 from pathlib import Path
 import numpy as np
-import pipeline.lerobot_export as le
+from navcore.io.video import H264Writer
 from navcore.gaussians.model import GaussianScene
 from navcore.render import Renderer
 from navcore.render.camera import intrinsics, viewmats
@@ -125,25 +125,24 @@ gs = GaussianScene(np.column_stack([r.uniform(1.5, 6, n), r.uniform(-3, 3, n), r
                    r.normal(0, 0.4, (n, 1, 3)))
 Renderer(gs, "cpu").render(viewmats(np.array([[0.0, 0.0, 0.0]]), 0.5), intrinsics(48, 36, 90)[None], 48, 36)
 frames = np.load(sys.argv[1])
-v = le._Video(Path(sys.argv[2]), 5, frames.shape[2], frames.shape[1], 18)
-for f in frames:
-    v.add(f)
-v.close()
+with H264Writer(Path(sys.argv[2]), 5, crf=18, b_frames=0) as v:
+    for f in frames:
+        v.add(f)
 """
 
 
 def test_the_videos_bytes_do_not_depend_on_what_the_process_ran_before(exported, tmp_path):
     """x264's macroblock-tree assembly read a stack value it never wrote, so an episode's MP4
     depended on what ran before it in the process: after a cold compilation of the renderer, the
-    same 48x36 frames gave different bytes in each of 3 processes. The exporter's encoder must
-    give the bytes of a process that ran nothing else."""
+    same 48x36 frames gave different bytes in each of 3 processes. The encoder (the exporter's
+    settings) must give the bytes of a process that ran nothing else."""
     import os
     import subprocess
     import sys
 
     import av
 
-    import pipeline.lerobot_export as le
+    from navcore.io.video import H264Writer
 
     _, out, _ = exported
     first = sorted(out.rglob("*.mp4"))[0]
@@ -151,12 +150,11 @@ def test_the_videos_bytes_do_not_depend_on_what_the_process_ran_before(exported,
         frames = np.stack([f.to_ndarray(format="rgb24") for f in c.decode(video=0)])
     assert frames.shape[1:] == (36, 48, 3) and len(frames) > 20
     np.save(tmp_path / "frames.npy", frames)
-    here = le._Video(tmp_path / "here.mp4", 5, 48, 36, 18)
-    for f in frames:
-        here.add(f)
-    here.close()
+    with H264Writer(tmp_path / "here.mp4", 5, crf=18, b_frames=0) as here:  # as the exporter's
+        for f in frames:
+            here.add(f)
     # an empty numba cache: a cold compilation (without the fix, 3 of 3 such processes differed)
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
     subprocess.run([sys.executable, "-c", _ENCODE_AFTER_COLD_COMPILE, str(tmp_path / "frames.npy"),
-                    str(tmp_path / "cold.mp4")], check=True, env=env, cwd=str(Path(le.__file__).parents[1]))
+                    str(tmp_path / "cold.mp4")], check=True, env=env, cwd=str(Path(__file__).parents[1]))
     assert (tmp_path / "cold.mp4").read_bytes() == (tmp_path / "here.mp4").read_bytes()

@@ -129,23 +129,12 @@ def write_results(rows: list[dict], dataset) -> None:
 
 
 def write_video(frames: list[np.ndarray], dataset, fps: int = 10) -> str:
-    """Egocentric RGB frames -> mp4 (H.264 where the bundled FFmpeg has it, else MPEG-4)."""
-    import av
+    """Egocentric RGB frames -> H.264 MP4 (odd sizes cut to even)."""
+    from navcore.io.video import H264Writer
 
-    h, w = frames[0].shape[:2]
-    with dataset.writing() as tmp:
-        with av.open(str(tmp), mode="w", format="mp4") as container:
-            try:
-                stream = container.add_stream("libx264", rate=fps)
-            except Exception:  # noqa: BLE001
-                stream = container.add_stream("mpeg4", rate=fps)
-            stream.width, stream.height, stream.pix_fmt = w - w % 2, h - h % 2, "yuv420p"
-            for f in frames:
-                frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(f[: h - h % 2, : w - w % 2]), format="rgb24")
-                for packet in stream.encode(frame):
-                    container.mux(packet)
-            for packet in stream.encode():
-                container.mux(packet)
+    with dataset.writing() as tmp, H264Writer(tmp, fps, crf=23) as video:
+        for f in frames:
+            video.add(f)
     return str(dataset.path)
 
 
