@@ -482,3 +482,17 @@ def test_imagenav_goal_cameras_do_not_face_a_wall_at_arms_length(room_with_door)
         depths[need] = [view(e) for e in res.episodes]
     assert min(depths[1.5]) >= 1.5
     assert sum(d < 1.5 for d in depths[0.0]) >= 5  # the rule has something to do here
+
+
+def test_blind_views_benchmark_finds_none_where_the_costmap_knows_every_gaussian(episode_run, tmp_path):
+    """benchmarks.blind_views on the generated scene (no floaters: its costmap is made of all its
+    Gaussians): every view it counts is rendered, none is blocked by something the costmap lacks,
+    and views facing the walls the costmap knows are not counted as blocked."""
+    import benchmarks.blind_views as bv
+
+    root, _, _ = episode_run
+    rep = bv.main(["--root", str(root), "--per-kind", "12", "--out", str(tmp_path)])
+    kinds = next(iter(rep["scenes"].values()))["kinds"]
+    assert {"pointnav/start", "pointnav/trajectory", "imagenav/goal_view"} <= set(kinds)
+    assert all(k["views"] > 0 and k["blocked"] == 0 for k in kinds.values())
+    assert (tmp_path / "blind_views.json").exists()
