@@ -67,7 +67,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("voxelize", voxelize.run, ("ingest",), ("voxelize",), version="3", gpu=True, memory_gb=3.0,
           storage=(("voxelize", "store_opacity", True),)),
     Stage("align", align.run, ("voxelize",), ("align",), version="4"),
-    Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="3",
+    Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="4",
           inputs=costmap.hashed_inputs),
     Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), gpu=True, memory_gb=3.0),
     Stage("asset", asset.run, ("costmap", "semantics"), ("asset",), version="4"),

@@ -26,6 +26,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from navcore.gaussians.content import camera_scene
 from navcore.nav.embodiment import Embodiment
 from navcore.seeds import stream_seed
 from pipeline.catalog import Catalog
@@ -68,15 +69,15 @@ def expert_steps(catalog: Catalog, scene_id: str, tasks, split: str | None = Non
 class _Renderers:
     """One Renderer per scene, the most recent `keep` kept (the aligned scene loads once)."""
 
-    def __init__(self, catalog: Catalog, backend: str, keep: int = 2):
-        self.catalog, self.backend, self.keep = catalog, backend, keep
+    def __init__(self, catalog: Catalog, backend: str, embodiment: str, keep: int = 2):
+        self.catalog, self.backend, self.embodiment, self.keep = catalog, backend, embodiment, keep
         self.cache: OrderedDict[str, object] = OrderedDict()
 
     def get(self, scene_id: str):
         if scene_id not in self.cache:
             from navcore.render import Renderer
 
-            gs, _ = self.catalog.dataset("aligned", self.catalog.scene(scene_id)).load(view_dependent=True)
+            gs, _ = camera_scene(self.catalog, self.catalog.scene(scene_id), self.embodiment, view_dependent=True)
             self.cache[scene_id] = Renderer(gs, self.backend)
             while len(self.cache) > self.keep:
                 self.cache.popitem(last=False)
@@ -110,7 +111,7 @@ class SceneFrames:
         from navcore.render.camera import embodiment_camera
 
         if self._renderers is None:  # built in the process that iterates (DataLoader workers)
-            self._renderers = _Renderers(self.catalog, self.backend)
+            self._renderers = _Renderers(self.catalog, self.backend, self.emb.name)
         vm, k, w, h = embodiment_camera(self.emb, np.asarray(poses, np.float64), self.width, self.height)
         out = self._renderers.get(scene_id).render(vm, k, w, h)
         rgb = (out.rgb * 255.0 + 0.5).clamp(0, 255).to(torch.uint8)

@@ -383,7 +383,9 @@ def test_goal_images_rendered_at_the_goal_camera_and_exported(episode_run, make_
     cam = json.loads(e["goal_camera_json"])
     store = GaussianDataset(root / "01_scenes" / sid / "gaussians.zarr")
     gs, _ = AlignedGaussianDataset(root / "01_scenes" / sid / "alignment.json", store).load()
-    ref = Renderer(gs, "cpu").render(viewmats(np.array([[*cam["position"][:2], cam["yaw"]]]), cam["position"][2],
+    keep = np.ones(len(gs.means), bool)  # as the robot's camera sees the scene: less the hidden noise
+    keep[CostmapDataset(root / "03_costmaps" / f"{sid}.zarr").hidden("locobot")] = False
+    ref = Renderer(gs.subset(keep), "cpu").render(viewmats(np.array([[*cam["position"][:2], cam["yaw"]]]), cam["position"][2],
                                               cam["pitch_deg"]),
                                      intrinsics(cam["width"], cam["height"], cam["hfov_deg"])[None],
                                      cam["width"], cam["height"]).rgb[0].numpy()
@@ -496,3 +498,18 @@ def test_blind_views_benchmark_finds_none_where_the_costmap_knows_every_gaussian
     assert {"pointnav/start", "pointnav/trajectory", "imagenav/goal_view"} <= set(kinds)
     assert all(k["views"] > 0 and k["blocked"] == 0 for k in kinds.values())
     assert (tmp_path / "blind_views.json").exists()
+
+
+def test_the_splats_hidden_from_the_camera_are_not_the_scenes_structure(episode_run):
+    """The costmap hides from the camera only noise floating clear of every obstacle. The generated
+    scene is sparse (its noise rule calls half its splats isolated, surfaces included), and its
+    ground truth says what each splat is: at most a few of its wall and object splats are hidden."""
+    root, _, _ = episode_run
+    sid = next((root / "03_costmaps").glob("*.zarr")).stem
+    ids = np.load(next((root / "00_sources").glob("synthetic/*/ground_truth/instance_ids.npy")))
+    gs, _ = AlignedGaussianDataset(root / "01_scenes" / sid / "alignment.json",
+                                   GaussianDataset(root / "01_scenes" / sid / "gaussians.zarr")).load()
+    assert len(ids) == len(gs.means)  # nothing dropped at ingest: the same order
+    hidden = CostmapDataset(root / "03_costmaps" / f"{sid}.zarr").hidden("locobot")
+    assert len(hidden) == len(np.unique(hidden)) and (np.diff(hidden) > 0).all()
+    assert (ids[hidden] >= 0).sum() <= 5e-4 * len(ids)  # structure (0) and objects (>= 1)

@@ -260,3 +260,98 @@ def test_margin_keeps_the_query_kernel_from_accepting_poses_closer_than_the_radi
         assert not ((interp >= radius + cm.margin) & (true < radius)).any()
         needed += int(((interp >= radius) & (true < radius)).sum())
     assert needed > 0
+
+
+def _noise_scene():
+    """Gaussians around a 3 x 3 m room walled 0.3 m deep on every side (see _walled_layers)."""
+    rows = [  # centre, sigma (x, y, z), noise?
+        ((1.5, 1.5, 0.88), (0.2, 0.2, 0.2), True),   # 0: a floater at the camera: hidden
+        ((1.5, 1.5, 2.0), (0.1, 0.1, 0.1), True),    # 1: above the body band by more than 2 sigma
+        ((1.5, 1.5, 1.2), (0.2, 0.2, 0.2), True),    # 2: above it, but reaching into it: hidden
+        ((1.5, 1.5, 0.5), (0.1, 0.1, 0.1), False),   # 3: not noise (the map counted it)
+        ((0.05, 0.05, 0.5), (0.01, 0.01, 0.01), True),  # 4: inside the wall
+        ((0.45, 1.5, 0.5), (0.02, 0.02, 0.02), True),  # 5: 0.05 m from free space, clear of the wall: hidden
+        ((0.45, 1.5, 0.5), (0.08, 0.08, 0.08), True),  # 6: the same place, its 2 sigma touch the wall: kept
+        ((-5.0, 1.5, 0.5), (0.5, 0.5, 0.5), True),   # 7: off the map
+        ((1.5, 1.5, 0.0), (0.3, 0.3, 0.01), True),   # 8: flat on the floor, under h_min
+    ]
+    a = np.log(0.9 / 0.1)
+    g = GaussianScene(np.array([r[0] for r in rows]), np.tile([1.0, 0, 0, 0], (len(rows), 1)),
+                      np.log([r[1] for r in rows]), np.full(len(rows), a), np.zeros((len(rows), 1, 3)))
+    return g, np.array([r[2] for r in rows])
+
+
+def _walled_layers():
+    """The layers of a 3 x 3 m map whose cells closer than 0.3 m to its edge are obstacles
+    (clearance and occupancy as build_costmap makes them, at the map resolution)."""
+    from scipy import ndimage
+
+    from stages.costmap.build import CostmapLayers, interpolation_margin
+
+    res, n, emb = 0.05, 60, Embodiment()
+    c = (np.arange(n) + 0.5) * res
+    wall = (np.minimum(c, 3.0 - c)[:, None] < 0.3) | (np.minimum(c, 3.0 - c)[None] < 0.3)
+    clearance = np.clip(ndimage.distance_transform_edt(~wall) * res - 0.5 * res, 0, None).astype(np.float32)
+    margin = interpolation_margin(res, emb.radius)
+    occ = clearance < emb.radius + margin
+    return CostmapLayers((0.0, 0.0), res, wall, np.ones_like(wall), occ, clearance, (~occ).astype(np.int32),
+                         emb.radius, margin)
+
+
+def test_hidden_splats_known_answer():
+    """Noise splats floating clear of obstacles whose 2-sigma extent meets the body space over free
+    cells are hidden: the others (above the band, under it, in or touching the wall, counted by
+    the map, off the map) stay."""
+    from stages.costmap.build import hidden_splats
+
+    g, noise = _noise_scene()
+    assert hidden_splats(g, noise, _walled_layers(), Embodiment(), 2.0).tolist() == [0, 2, 5]
+    assert hidden_splats(g, np.zeros(len(noise), bool), _walled_layers(), Embodiment(), 2.0).tolist() == []
+
+
+def test_hidden_splats_use_the_rotated_extent():
+    """A needle 0.05 m from free space: lying along x its 2-sigma extent (0.6 m) reaches the wall,
+    turned upright it floats clear of it (the extent is per axis, from the covariance)."""
+    from stages.costmap.build import hidden_splats
+
+    a = np.log(0.9 / 0.1)
+    s = np.log([[0.3, 0.01, 0.01]])
+    lying = GaussianScene(np.array([[0.45, 1.5, 0.5]]), np.array([[1.0, 0, 0, 0]]), s, [a], np.zeros((1, 1, 3)))
+    q = [np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4), 0.0]  # 90 degrees about y: the long axis along z
+    upright = GaussianScene(np.array([[0.45, 1.5, 0.5]]), np.array([q]), s, [a], np.zeros((1, 1, 3)))
+    emb = Embodiment()
+    assert hidden_splats(lying, np.array([True]), _walled_layers(), emb, 2.0).tolist() == []
+    assert hidden_splats(upright, np.array([True]), _walled_layers(), emb, 2.0).tolist() == [0]
+
+
+def test_camera_scene_leaves_out_the_stored_hidden_splats(tmp_path):
+    """The costmap store's hidden indices round-trip, and camera_scene renders without them: a
+    floater 0.25 m in front of the camera fills its view (median depth 0.36 m) in the whole scene
+    and is gone from the camera's (the wall behind it at 2 m)."""
+    from navcore.gaussians.content import camera_scene
+    from navcore.io.datasets import CostmapDataset
+    from navcore.render import Renderer
+    from navcore.render.camera import embodiment_camera
+
+    a = np.log(0.99 / 0.01)
+    ys, zs = np.meshgrid(np.linspace(0.0, 3.0, 61), np.linspace(0.0, 2.0, 41))
+    wall = np.c_[np.full(ys.size, 3.5), ys.ravel(), zs.ravel()]
+    means = np.r_[wall, [[1.75, 1.5, 0.88]]]
+    n = len(means)
+    scales = np.r_[np.tile([0.01, 0.06, 0.06], (len(wall), 1)), [[0.3, 0.3, 0.3]]]
+    gs = GaussianScene(means, np.tile([1.0, 0, 0, 0], (n, 1)), np.log(scales), np.full(n, a), np.zeros((n, 1, 3)))
+    emb = Embodiment()
+    store = CostmapDataset(tmp_path / "cm.zarr")
+    with store.writing() as root:
+        store.write_layers(root, emb, _walled_layers(), {}, hidden=np.array([n - 1]))
+
+    class Catalog:  # the two datasets camera_scene reads
+        def dataset(self, name, scene):
+            return store if name == "costmaps" else type("A", (), {"load": lambda self, **kw: (gs, {})})()
+
+    seen, attrs = camera_scene(Catalog(), None, emb.name)
+    assert store.hidden(emb.name).tolist() == [n - 1] and len(seen.means) == n - 1 and attrs["hidden_splats"] == 1
+    vm, k, w, h = embodiment_camera(emb, np.array([[1.5, 1.5, 0.0]]), 40, 30)
+    full = np.median(Renderer(gs, "cpu").render(vm, k, w, h).depth.numpy())
+    cam = np.median(Renderer(seen, "cpu").render(vm, k, w, h).depth.numpy())
+    assert full < 0.5 and abs(cam - 2.0) < 0.05

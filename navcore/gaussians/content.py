@@ -12,7 +12,8 @@ is found from density instead:
    ``min_component_fraction`` of the largest one's Gaussians are content, all other Gaussians are
    floaters.
 The mask is kept beside the Gaussians (extra ``content``): geometry stages (voxelize, align,
-costmap) use the content only, while the renderable model stays as given.
+costmap) use the content only, while the renderable model stays as given, less the floaters and
+isolated splats the costmap hides from the robot's camera (``camera_scene``).
 """
 from __future__ import annotations
 
@@ -123,9 +124,33 @@ def content_mask(means: np.ndarray, cfg: ContentConfig | None = None) -> tuple[n
     return mask, info
 
 
+def content_mask_of(scene: GaussianScene) -> np.ndarray:
+    """[N] bool: the scene's content mask (all True when none is stored)."""
+    mask = scene.extras.get(CONTENT_KEY)
+    return np.ones(len(scene.means), bool) if mask is None else np.asarray(mask).astype(bool)
+
+
 def content_of(scene: GaussianScene) -> GaussianScene:
     """The content Gaussians of a scene (all of them when no mask is stored)."""
-    mask = scene.extras.get(CONTENT_KEY)
-    if mask is None or mask.all():
-        return scene
-    return scene.subset(mask.astype(bool))
+    mask = content_mask_of(scene)
+    return scene if mask.all() else scene.subset(mask)
+
+
+def camera_scene(catalog, scene, embodiment: str, **load_kw) -> tuple[GaussianScene, dict]:
+    """The aligned scene as an embodiment's camera sees it: all Gaussians but the noise splats its
+    costmap hid (floaters and isolated splats in the space its body may occupy, which the robot
+    drives through: `stages.costmap.build.hidden_splats`). Every renderer of the pipeline loads
+    scenes through this.
+
+    Args:
+        catalog: the pipeline's catalog (its "aligned" and "costmaps" datasets).
+        scene: the catalog's scene entry.
+        load_kw: passed to the aligned dataset's load (view_dependent).
+    """
+    gs, attrs = catalog.dataset("aligned", scene).load(**load_kw)
+    hidden = catalog.dataset("costmaps", scene).hidden(embodiment)
+    if not len(hidden):
+        return gs, attrs
+    keep = np.ones(len(gs.means), bool)
+    keep[hidden] = False
+    return gs.subset(keep), {**attrs, "hidden_splats": int(len(hidden))}

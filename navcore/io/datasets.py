@@ -174,6 +174,9 @@ class AlignedGaussianDataset(Dataset):
 COSTMAP_LAYERS = ("raw", "support", "occ", "clearance", "components")
 """Arrays of one embodiment's group in a costmap store, [ny, nx], row = y."""
 COSTMAP_GRID = "[ny, nx], row = y; cell (i, j) centre = origin + ((j+.5) res, (i+.5) res)"
+HIDDEN_SPLATS = "hidden_splats"
+"""[K] int64 of an embodiment's group: indices (into the aligned scene) of the noise splats hidden
+from its camera (navcore.gaussians.content.camera_scene)."""
 
 
 class CostmapDataset(ZarrDataset):
@@ -195,14 +198,23 @@ class CostmapDataset(ZarrDataset):
         g = root[embodiment]
         return {k: np.asarray(g[k][...]) for k in COSTMAP_LAYERS if k in g}, dict(g.attrs), dict(root.attrs)
 
+    def hidden(self, embodiment: str) -> np.ndarray:
+        """Indices of the Gaussians hidden from this embodiment's camera (HIDDEN_SPLATS; empty
+        when the store has none)."""
+        g = super().load()[embodiment]
+        return np.asarray(g[HIDDEN_SPLATS][...], np.int64) if HIDDEN_SPLATS in g else np.zeros(0, np.int64)
+
     @staticmethod
-    def write_layers(root, embodiment, layers, attrs: dict) -> Any:
+    def write_layers(root, embodiment, layers, attrs: dict, hidden: np.ndarray | None = None) -> Any:
         """Add one embodiment's group (layers: an object with the COSTMAP_LAYERS as attributes,
-        e.g. CostmapLayers) to a root group opened by writing(); returns the group."""
+        e.g. CostmapLayers; hidden: sorted Gaussian indices) to a root group opened by writing();
+        returns the group."""
         g = root.create_group(embodiment.name)
         for name in COSTMAP_LAYERS:
             arr = getattr(layers, name)
             g.create_array(name, data=arr, chunks=arr.shape)
+        if hidden is not None:
+            g.create_array(HIDDEN_SPLATS, data=np.asarray(hidden, np.int64), chunks=(max(len(hidden), 1),))
         g.attrs.update({"origin": list(layers.origin), "resolution": layers.resolution, "radius": embodiment.radius,
                         "margin": layers.margin, "h_min": embodiment.h_min, "h_max": embodiment.h_max,
                         "layout": COSTMAP_GRID, **attrs})

@@ -89,6 +89,12 @@ class CostmapConfig:
     """Gaussians with a lower opacity are never obstacles (haze of trained scenes; 0 keeps all).
     At synthetic.realism.level=moderate (1 M Gaussians) haze alone puts about a third of the free
     poses in collision without it (bench-spatial's realism table)."""
+    hide_noise: bool = True
+    """Hide from the robot's camera the floaters and isolated splats (opacity >= min_obstacle_alpha)
+    whose extent meets the space its body may occupy (`hidden_splats`; stored per embodiment and
+    left out by every renderer of the pipeline; the V1 asset keeps all Gaussians)."""
+    hide_noise_sigma: float = 2.0
+    """That extent, in standard deviations along each axis."""
     extra_margin: float = 0.0
     """Added to the interpolation margin, metres (a safety buffer beyond the exact bound)."""
     embodiments: list[str] = field(default_factory=list)
@@ -179,16 +185,66 @@ def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, d
 
 def obstacle_candidates(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, dict]:
     """[N] bool: Gaussians that may be obstacles (not floor, not faint, not isolated noise), and a summary."""
+    cand, _, info = obstacle_classes(scene, cfg)
+    return cand, info
+
+
+def obstacle_classes(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, np.ndarray, dict]:
+    """([N] obstacle candidates, [N] isolated noise: opaque enough, not floor, too few neighbours;
+    a summary)."""
     floor, info = floor_layer(scene, cfg)
     faint = scene.alphas < cfg.min_obstacle_alpha
     cand = ~floor & ~faint
+    isolated = np.zeros(len(cand), bool)
     info["faint_dropped"] = int((faint & ~floor).sum())
     if cfg.outlier_radius > 0 and cand.sum() > cfg.outlier_min_neighbours:
         idx = np.nonzero(cand)[0]
-        kept = ~isolated_points(scene.means[idx], cfg.outlier_radius, cfg.outlier_min_neighbours)
-        cand[idx[~kept]] = False
-        info["isolated_dropped"] = int((~kept).sum())
-    return cand, info
+        isolated[idx] = isolated_points(scene.means[idx], cfg.outlier_radius, cfg.outlier_min_neighbours)
+        cand &= ~isolated
+        info["isolated_dropped"] = int(isolated.sum())
+    return cand, isolated, info
+
+
+def hidden_splats(scene: GaussianScene, noise: np.ndarray, layers: "CostmapLayers", emb: Embodiment,
+                  k_sigma: float) -> np.ndarray:
+    """Indices of the noise Gaussians (floaters, isolated splats: what the map left out) that reach
+    the space the robot's body may occupy: their k_sigma extent (per axis, from the covariance)
+    meets the body band [h_min, h_max] within radius + that extent of a free cell's centre. The
+    robot drives through them, so its camera must not see them: a camera that passes through a
+    0.3 m opaque floater sees nothing else (docs/bench_blind_views.md).
+
+    Args:
+        scene: all Gaussians of the aligned scene (the indices are into it).
+        noise: [N] bool, the Gaussians the map treats as noise.
+    """
+    from navcore.gaussians.model import quat_to_rotmat
+
+    idx = np.nonzero(noise)[0]
+    free = ~layers.occ
+    if not len(idx) or not free.any():
+        return np.zeros(0, np.int64)
+    q = scene.quats[idx].astype(np.float64)
+    rot = quat_to_rotmat(q / np.linalg.norm(q, axis=1, keepdims=True))
+    sd = np.sqrt(np.einsum("nij,nj->ni", rot ** 2, np.exp(2.0 * scene.log_scales[idx].astype(np.float64))))
+    m = scene.means[idx].astype(np.float64)
+    res = layers.resolution
+    dist = ndimage.distance_transform_edt(~free) * res  # cell centre -> the nearest free cell centre
+    j = np.floor((m[:, 0] - layers.origin[0]) / res).astype(np.int64)
+    i = np.floor((m[:, 1] - layers.origin[1]) / res).astype(np.int64)
+    inside = (i >= 0) & (j >= 0) & (i < free.shape[0]) & (j < free.shape[1])
+    d = np.full(len(idx), np.inf)
+    d[inside] = dist[i[inside], j[inside]]
+    c = np.full(len(idx), -1.0)
+    c[inside] = layers.clearance[i[inside], j[inside]]
+    half = res / np.sqrt(2.0)  # a centre lies within this of its cell's centre
+    sxy = k_sigma * np.maximum(sd[:, 0], sd[:, 1])
+    # floating: its extent touches no obstacle (a surface splat the noise rule missed, on a wall
+    # next to free space, stays); reaching: its extent meets the body band within the radius of a
+    # free cell
+    floating = c >= sxy + half
+    reach = d <= emb.radius + sxy + half
+    hit = floating & reach & (m[:, 2] + k_sigma * sd[:, 2] >= emb.h_min) & (m[:, 2] - k_sigma * sd[:, 2] <= emb.h_max)
+    return idx[hit].astype(np.int64)
 
 
 def isolated_points(points: np.ndarray, radius: float, min_neighbours: int) -> np.ndarray:
@@ -279,16 +335,18 @@ def free_components(free: np.ndarray) -> np.ndarray:
 
 
 def build_costmap(scene: GaussianScene, emb: Embodiment, cfg: CostmapConfig, vcfg: VoxelizeConfig,
-                  support: tuple[np.ndarray, dict] | None = None, extent=None) -> tuple[CostmapLayers, dict]:
+                  support: tuple[np.ndarray, dict] | None = None, extent=None,
+                  candidates: tuple[np.ndarray, dict] | None = None) -> tuple[CostmapLayers, dict]:
     """All layers of one embodiment's costmap from aligned Gaussians (z up, floor at z = 0).
 
     Args:
         support: a precomputed (M_sup, info) for this extent (shared between embodiments).
         extent: a precomputed map_extent.
+        candidates: precomputed obstacle_candidates of the scene (shared between embodiments).
     """
     origin, shape = extent or map_extent(scene, cfg)
     s = supersample_factor(cfg.resolution, cfg.raw_resolution)
-    cand, finfo = obstacle_candidates(scene, cfg)
+    cand, finfo = candidates if candidates is not None else obstacle_candidates(scene, cfg)
     fine = raw_obstacles_fine(scene.subset(cand), origin, shape, s, emb, cfg, vcfg)
     res_f = cfg.resolution / s
     if fine.any():

@@ -6,9 +6,18 @@ from __future__ import annotations
 import numpy as np
 from omegaconf import OmegaConf
 
-from navcore.gaussians.content import content_of
+from navcore.gaussians.content import content_mask_of
 from navcore.nav.embodiment import load_embodiment
-from stages.costmap.build import CostmapConfig, build_costmap, doorway_gaps, map_extent, scale_warnings, support_mask
+from stages.costmap.build import (
+    CostmapConfig,
+    build_costmap,
+    doorway_gaps,
+    hidden_splats,
+    map_extent,
+    obstacle_classes,
+    scale_warnings,
+    support_mask,
+)
 
 
 def embodiments(cfg) -> list:
@@ -27,20 +36,29 @@ def hashed_inputs(cfg) -> list[dict]:
 def run(scene, cfg, catalog) -> dict:
     ccfg: CostmapConfig = OmegaConf.to_object(cfg.costmap)
     vcfg = OmegaConf.to_object(cfg.voxelize)
-    gs, _ = catalog.dataset("aligned", scene).load(view_dependent=False)  # geometry and opacity only
-    gs = content_of(gs)  # floaters stay out of the maps
+    full, _ = catalog.dataset("aligned", scene).load(view_dependent=False)  # geometry and opacity only
+    content = content_mask_of(full)
+    gs = full.subset(content) if not content.all() else full  # floaters stay out of the maps
     extent = map_extent(gs, ccfg)
     support = support_mask(gs, *extent, ccfg, vcfg)
+    cand, isolated, finfo = obstacle_classes(gs, ccfg)
+    noise = ~content  # floaters and isolated splats, in the whole scene's order
+    noise[np.nonzero(content)[0][isolated]] = True
+    noise &= full.alphas >= ccfg.min_obstacle_alpha
     out = catalog.dataset("costmaps", scene)
     result = {"outputs": [str(out.path)], "embodiments": {}}
     with out.writing() as root:
         for emb in embodiments(cfg):
-            layers, info = build_costmap(gs, emb, ccfg, vcfg, support=support, extent=extent)
-            g = out.write_layers(root, emb, layers, {"info": info})
+            layers, info = build_costmap(gs, emb, ccfg, vcfg, support=support, extent=extent, candidates=(cand, dict(finfo)))
+            hidden = hidden_splats(full, noise, layers, emb, ccfg.hide_noise_sigma) if ccfg.hide_noise else None
+            if hidden is not None:
+                info["hidden_splats"] = int(len(hidden))
+            g = out.write_layers(root, emb, layers, {"info": info}, hidden=hidden)
             if emb.name == cfg.embodiment.name:
                 gaps = doorway_gaps(layers.clearance, layers.resolution)  # -1 where unsupported
                 g.attrs["doorway_gaps_m"] = gaps
             result["embodiments"][emb.name] = {"free_area_m2": round(info["free_area_m2"], 2),
+                                               "hidden_splats": info.get("hidden_splats"),
                                                "main_component_area_m2": round(info["main_component_area_m2"], 2),
                                                "free_components": info["free_components"]}
         root.attrs["main_embodiment"] = cfg.embodiment.name

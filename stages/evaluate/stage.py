@@ -14,6 +14,7 @@ import numpy as np
 import pyarrow as pa
 from omegaconf import OmegaConf
 
+from navcore.gaussians.content import camera_scene
 from navcore.nav.geodesic import NavGraph, eligible_cells
 from navcore.seeds import stream_seed
 from stages.evaluate.config import EvaluateConfig
@@ -73,7 +74,7 @@ def run(scene, cfg, catalog) -> dict:
     graph = NavGraph(cm, eligible_cells(cm, OmegaConf.to_object(cfg.episodes)), cfg.episodes.geodesic_neighbourhood)
     gs = None
     if ecfg.render:
-        gs, _ = catalog.dataset("aligned", scene).load()
+        gs, _ = camera_scene(catalog, scene, emb.name)  # less the floaters the robot drives through
     ctx = SceneContext(cm, graph, emb, gs, ecfg.renderer)
     env_cfg = EnvConfig.of(ecfg, OmegaConf.to_object(cfg.episodes).actions)
     episodes = load_episodes(catalog, scene, ecfg)

@@ -14,6 +14,8 @@ import numpy as np
 import pyarrow as pa
 from omegaconf import OmegaConf
 
+from navcore.gaussians.content import camera_scene
+
 GOAL_IMAGE_SCHEMA = pa.schema([pa.field("episode_id", pa.string()), pa.field("width", pa.int32()),
                                pa.field("height", pa.int32()), pa.field("jpeg", pa.binary())])
 
@@ -67,7 +69,7 @@ def run(scene, cfg, catalog) -> dict:
         out.delete()
         return {"outputs": [], "images": 0, "enabled": gcfg.enabled}
     eps = src.load(["episode_id", "goal_camera_json"]).to_pylist()
-    gs, _ = catalog.dataset("aligned", scene).load()
+    gs, _ = camera_scene(catalog, scene, cfg.embodiment.name)  # less the floaters the robot drives through
     cams = [json.loads(e["goal_camera_json"]) for e in eps]
     imgs = render_goal_images(gs, cams, gcfg.renderer, gcfg.batch)
     jpegs = []
