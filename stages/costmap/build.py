@@ -91,8 +91,9 @@ class CostmapConfig:
     poses in collision without it (bench-spatial's realism table)."""
     hide_noise: bool = True
     """Hide from the robot's camera the floaters and isolated splats (opacity >= min_obstacle_alpha)
-    whose extent meets the space its body may occupy (`hidden_splats`; stored per embodiment and
-    left out by every renderer of the pipeline; the V1 asset keeps all Gaussians)."""
+    that float clear of obstacles and whose extent meets the space its body may occupy
+    (`hidden_splats`; stored per embodiment and left out by every renderer of the pipeline; the V1
+    asset and the semantics stage keep all Gaussians)."""
     hide_noise_sigma: float = 2.0
     """That extent, in standard deviations along each axis."""
     extra_margin: float = 0.0
@@ -207,11 +208,14 @@ def obstacle_classes(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarr
 
 def hidden_splats(scene: GaussianScene, noise: np.ndarray, layers: "CostmapLayers", emb: Embodiment,
                   k_sigma: float) -> np.ndarray:
-    """Indices of the noise Gaussians (floaters, isolated splats: what the map left out) that reach
-    the space the robot's body may occupy: their k_sigma extent (per axis, from the covariance)
-    meets the body band [h_min, h_max] within radius + that extent of a free cell's centre. The
-    robot drives through them, so its camera must not see them: a camera that passes through a
-    0.3 m opaque floater sees nothing else (docs/bench_blind_views.md).
+    """Indices of the noise Gaussians (floaters, isolated splats: what the map left out) that float
+    clear of every obstacle and reach the space the robot's body may occupy: the map's clearance at
+    their centre's cell is at least their k_sigma extent across (per axis, from the covariance)
+    plus half a cell diagonal, and that extent meets the body band [h_min, h_max] within radius +
+    extent + half a cell diagonal of a free cell's centre. The robot drives through them, so its
+    camera must not see them: a camera that passes through a 0.3 m opaque floater sees nothing
+    else (docs/bench_blind_views.md). The clearance test keeps surface splats that a sparse
+    scene's isolated rule calls noise (stages/costmap/design.md).
 
     Args:
         scene: all Gaussians of the aligned scene (the indices are into it).

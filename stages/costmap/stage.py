@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from omegaconf import OmegaConf
 
-from navcore.gaussians.content import content_mask_of
+from navcore.gaussians.content import content_mask_of, content_of
 from navcore.nav.embodiment import load_embodiment
 from stages.costmap.build import (
     CostmapConfig,
@@ -38,7 +38,7 @@ def run(scene, cfg, catalog) -> dict:
     vcfg = OmegaConf.to_object(cfg.voxelize)
     full, _ = catalog.dataset("aligned", scene).load(view_dependent=False)  # geometry and opacity only
     content = content_mask_of(full)
-    gs = full.subset(content) if not content.all() else full  # floaters stay out of the maps
+    gs = content_of(full)  # floaters stay out of the maps
     extent = map_extent(gs, ccfg)
     support = support_mask(gs, *extent, ccfg, vcfg)
     cand, isolated, finfo = obstacle_classes(gs, ccfg)
