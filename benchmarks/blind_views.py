@@ -45,6 +45,7 @@ def _rows(df: pd.DataFrame, n: int) -> pd.DataFrame:
 
 
 def scene_views(root: Path, sid: str, per_kind: int, near: float) -> dict:
+    from navcore.gaussians.content import without_splats
     from navcore.io.datasets import AlignedGaussianDataset, CostmapDataset, GaussianDataset
     from navcore.nav.embodiment import Embodiment
     from navcore.render import Renderer
@@ -54,9 +55,7 @@ def scene_views(root: Path, sid: str, per_kind: int, near: float) -> dict:
                                    GaussianDataset(root / "01_scenes" / sid / "gaussians.zarr")).load()
     store = CostmapDataset(root / "03_costmaps" / f"{sid}.zarr")
     cm, hidden = store.load(emb.name), store.hidden(emb.name)
-    keep = np.ones(len(gs.means), bool)
-    keep[hidden] = False
-    renderers = {"camera": Renderer(gs.subset(keep), "cpu", sh_degree=0), "all": Renderer(gs, "cpu", sh_degree=0)}
+    renderers = {"camera": Renderer(without_splats(gs, hidden), "cpu", sh_degree=0), "all": Renderer(gs, "cpu", sh_degree=0)}
     res = {"gaussians": int(len(gs.means)), "hidden": int(len(hidden)), "kinds": {}}
     for task in ("pointnav", "imagenav", "objectnav"):
         eps = sorted((root / "05_episodes" / f"task={task}" / f"scene_id={sid}").glob("*.parquet"))

@@ -136,6 +136,15 @@ def content_of(scene: GaussianScene) -> GaussianScene:
     return scene if mask.all() else scene.subset(mask)
 
 
+def without_splats(scene: GaussianScene, indices: np.ndarray) -> GaussianScene:
+    """The scene less the Gaussians at these indices (itself when there are none)."""
+    if not len(indices):
+        return scene
+    keep = np.ones(len(scene.means), bool)
+    keep[indices] = False
+    return scene.subset(keep)
+
+
 def camera_scene(catalog, scene, embodiment: str, **load_kw) -> tuple[GaussianScene, dict]:
     """The aligned scene as an embodiment's camera sees it: all Gaussians but the noise splats its
     costmap hid (floaters and isolated splats in the space its body may occupy, which the robot
@@ -151,6 +160,4 @@ def camera_scene(catalog, scene, embodiment: str, **load_kw) -> tuple[GaussianSc
     hidden = catalog.dataset("costmaps", scene).hidden(embodiment)
     if not len(hidden):
         return gs, attrs
-    keep = np.ones(len(gs.means), bool)
-    keep[hidden] = False
-    return gs.subset(keep), {**attrs, "hidden_splats": int(len(hidden))}
+    return without_splats(gs, hidden), {**attrs, "hidden_splats": int(len(hidden))}
