@@ -89,6 +89,7 @@ bench-scale: $(STAMP)
 	$(ONE_CORE) $(BIN)/python -m pipeline data_root=data/cost_synthetic scenes.count=1 scenes.num_gaussians=1500000 $(COST)
 	$(BIN)/python -m benchmarks.bench_scale cost data/cost_real data/cost_synthetic
 	$(BIN)/python -m benchmarks.render_cpu --real-root data/real_indoor
+	$(BIN)/python -m benchmarks.render_cpu --bound --real-root data/real_indoor
 	$(BIN)/python -m benchmarks.bench_scale sim --root data/sim
 	$(BIN)/python -m benchmarks.bench_scale slurm
 	$(BIN)/python -m benchmarks.bench_scale report --data data --real-root data/real_indoor \

@@ -232,8 +232,8 @@ def report(args) -> dict:
         st["real_indoor"] = measure(Path(args.real_root))
     if args.compact_root and Path(args.compact_root).exists():
         st["real_indoor, " + COMPACT] = measure(Path(args.compact_root))
-    rc, gpu, sm, sl, cs, ab = (load(out, n) for n in ("render_cpu.json", "release_gpu.json", "sim.json", "slurm.json",
-                                                      "cost.json", "render_cpu_ab.json"))
+    rc, gpu, sm, sl, cs, ab, bd = (load(out, n) for n in ("render_cpu.json", "release_gpu.json", "sim.json", "slurm.json",
+                                                          "cost.json", "render_cpu_ab.json", "render_cpu_bound.json"))
     d = st["default"]
     rep = {"host": platform.node(), "cpu_cores": os.cpu_count(), "before": BEFORE, "storage": st,
            "bytes_per_scene_ratio": max(s["ratio_with_maps"] for s in d["scenes"]),
@@ -244,7 +244,8 @@ def report(args) -> dict:
            "release_core_hours": cs and cs["release_core_hours"], "release_gpu_hours": cs and cs["release_gpu_hours"],
            "cost": cs, "cpu_fps_160": rc and rc["cpu_fps_160"], "cpu_fps_640": rc and rc["cpu_fps_640"],
            "cpu_psnr_min": gpu and min(v["psnr_min"] for v in gpu["agreement"].values()),
-           "render_cpu": rc, "render_cpu_ab": ab, "render_gpu": gpu and {k: gpu[k] for k in ("device", "agreement_gaussians", "agreement")}}
+           "render_cpu": rc, "render_cpu_ab": ab, "render_cpu_bound": bd,
+           "render_gpu": gpu and {k: gpu[k] for k in ("device", "agreement_gaussians", "agreement")}}
     write(out, "bench_scale.json", rep)
     md = markdown(rep)
     (out / "bench_scale.md").write_text(md)
@@ -335,6 +336,19 @@ def markdown(r: dict) -> str:
                     L.append(f"| {name} | {size} | {v['rev_ms']:.1f} | {v['ours_ms']:.1f} | {v['speedup']:.2f}x | "
                              f"{v['identical_frames']} of {s['views']} | {_f(v.get('psnr_min_db'), 1)} dB | "
                              f"{_f(v.get('depth_median_diff_max_m'), 7)} m |")
+        bd = r.get("render_cpu_bound")
+        if bd:
+            L += ["", "What a perfect occlusion culling would give (`python -m benchmarks.render_cpu --bound`): each "
+                  "view rendered from the whole scene, then from only the Gaussians its rasteriser read (a box with "
+                  "an unfinished pixel in some tile; the frame must come out identical to the byte), interleaved:", "",
+                  "| scene | size | frames/s, all Gaussians | frames/s, those read only | bound | frames identical | "
+                  "Gaussians read (mean) |", "|---|---|---|---|---|---|---|"]
+            for name, s in bd["scenes"].items():
+                for size in ("160x120", "640x480"):
+                    v = s[size]
+                    L.append(f"| {name} | {size} | {v['fps']:.1f} | {v['fps_read_only']:.1f} | "
+                             f"{v['bound_speedup']:.2f}x | {v['identical_frames']} of {s['views']} | "
+                             f"{v['gaussians_read_mean']:,.0f} of {s['n_gaussians']:,} |")
         if r["render_gpu"]:
             L += ["", "Agreement with gsplat (H100, 1 M Gaussians, 10 views):", ""]
             for size, v in r["render_gpu"]["agreement"].items():

@@ -14,6 +14,11 @@ views by default. `cpu_fps_{160,640}`: the lowest throughput over the scenes of 
         by view in one process (the fair comparison on a shared machine), with how many frames
         came out identical to the byte, the lowest PSNR between the two and the largest median
         depth difference
+    python -m benchmarks.render_cpu --bound [--real-root ...]   -> render_cpu_bound.json
+        what a perfect occlusion culling could give: per view, the frame rendered from the whole
+        scene, then the same frame from only the Gaussians its rasteriser read (a box with an
+        unfinished pixel in some tile), which must come out identical to the byte; throughputs
+        of both, interleaved view by view
 """
 from __future__ import annotations
 
@@ -105,6 +110,39 @@ def scene_ab(gs, poses, emb, old) -> dict:
     return out
 
 
+def scene_bound(gs, poses, emb) -> dict:
+    """Throughput of the whole scene against that of the Gaussians each view's rasteriser read."""
+    from navcore.gaussians.model import render_sh_degree
+    from navcore.render import cpu_fast
+    from navcore.render.camera import embodiment_camera
+
+    g = cpu_fast.prepare(gs)
+    deg = render_sh_degree(None, g["sh"].shape[1])
+    out = {"n_gaussians": len(gs.means), "views": len(poses)}
+    for w, h in SIZES:
+        vm, K, _, _ = embodiment_camera(emb, poses, w, h)
+        cpu_fast.render_one(g, vm[0], K[0], w, h, deg)
+        t_all, t_read, n_read, same = [], [], [], 0
+        for i in range(len(vm)):
+            t0 = time.perf_counter()
+            a = cpu_fast.render_one(g, vm[i], K[i], w, h, deg)
+            t_all.append(time.perf_counter() - t0)
+            visits = np.zeros((len(gs.means), 2), np.uint8)
+            cpu_fast.render_one(g, vm[i], K[i], w, h, deg, visits=visits)
+            read = visits[:, 0] == 1
+            sub = cpu_fast.prepare(gs.subset(read))
+            t0 = time.perf_counter()
+            b = cpu_fast.render_one(sub, vm[i], K[i], w, h, deg)
+            t_read.append(time.perf_counter() - t0)
+            n_read.append(int(read.sum()))
+            same += all(np.array_equal(x, y) for x, y in zip(a, b))
+        out[f"{w}x{h}"] = {"fps": len(vm) / float(np.sum(t_all)), "fps_read_only": len(vm) / float(np.sum(t_read)),
+                           "bound_speedup": float(np.sum(t_all) / np.sum(t_read)), "identical_frames": same,
+                           "gaussians_read_mean": float(np.mean(n_read))}
+        print(w, h, out[f"{w}x{h}"], flush=True)
+    return out
+
+
 def free_poses(costmap, k: int, rng) -> np.ndarray:
     iy, ix = np.nonzero(costmap.clearance >= costmap.radius + costmap.margin)
     pick = rng.choice(len(ix), k, replace=False)
@@ -127,6 +165,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--merge", nargs="+", type=Path,
                     help="instead of measuring: render_cpu.json files of repeated runs -> their medians")
     ap.add_argument("--against", metavar="REV", help="compare with git revision REV's compiled renderer instead")
+    ap.add_argument("--bound", action="store_true",
+                    help="instead: the throughput with a perfect occlusion culling (only the Gaussians read)")
     args = ap.parse_args(argv)
     if args.merge:
         return merge(args.merge, args.out)
@@ -134,6 +174,8 @@ def main(argv=None) -> dict:
     old = revision_renderer(args.against) if args.against else None
 
     def measure(gs, poses):
+        if args.bound:
+            return scene_bound(gs, poses, emb)
         return scene_ab(gs, poses, emb, old) if old else scene_fps(gs, poses, emb, args.ref_views)
 
     gs, rooms = canonical_scene(7, args.gaussians)
@@ -149,8 +191,8 @@ def main(argv=None) -> dict:
             gs, _ = AlignedGaussianDataset(d / "alignment.json", GaussianDataset(d / "gaussians.zarr")).load()
             cm = CostmapDataset(args.real_root / "03_costmaps" / f"{meta['scene_id']}.zarr").load(emb.name)
             rep["scenes"][meta["name"]] = measure(gs, free_poses(cm, args.views, rng))
-    if old:
-        write_report(args.out, "render_cpu_ab.json", rep, omit=("scenes",))
+    if old or args.bound:
+        write_report(args.out, "render_cpu_bound.json" if args.bound else "render_cpu_ab.json", rep, omit=("scenes",))
         return rep
     for w, h in SIZES:
         key = f"{w}x{h}"

@@ -288,6 +288,44 @@ def test_gaussians_behind_a_finished_wall_change_nothing():
     assert torch.allclose(ref.rgb, b.rgb, atol=1e-5) and torch.allclose(ref.depth, b.depth, atol=1e-5)
 
 
+def test_the_gaussians_the_rasteriser_reads_make_the_same_frame(small_scene):
+    # visits (benchmarks.render_cpu --bound): the Gaussians read are the ones a perfect occlusion
+    # culling would keep, so rendering them alone gives the frame to the byte; hidden ones are not read
+    from navcore.render import cpu_fast
+
+    g = np.arange(-1.6, 1.61, 0.2)
+    wall = [(x, y, z) for x in (1.0, 1.05, 1.1) for y in g for z in g]
+    r = np.random.default_rng(3)
+    behind = np.column_stack([r.uniform(2, 5, 400), r.uniform(-2, 2, 400), r.uniform(-1.5, 1.5, 400)])
+    n1 = len(wall)
+    gs = scene(np.vstack([wall, behind]), [0.15] * n1 + [0.1] * 400, [0.995] * n1 + [0.9] * 400,
+               [(0.8, 0.2, 0.1)] * (n1 + 400))
+    vm = viewmats(np.array([[0.0, 0.0, 0.0]]), 0.0)[0]
+    k = intrinsics(W, H, HFOV)
+    visits = np.zeros((len(gs.means), 2), np.uint8)
+    plain = cpu_fast.render_one(cpu_fast.prepare(gs), vm, k, W, H, 0)
+    counted = cpu_fast.render_one(cpu_fast.prepare(gs), vm, k, W, H, 0, visits=visits)
+    assert all(np.array_equal(a, b) for a, b in zip(plain, counted))
+    assert visits[n1:].sum() == 0 and visits[:n1, 1].sum() > 100  # behind the finished wall: never read
+    assert np.all(visits[:, 1] <= visits[:, 0])  # a contributor was read
+    with pytest.raises(ValueError, match="visits"):
+        cpu_fast.render_one(cpu_fast.prepare(gs), vm, k, W, H, 0, visits=np.zeros((3, 2), np.uint8))
+    # a realistic scene, robot views in its rooms: the Gaussians read alone give the same bytes
+    from navcore.nav.embodiment import Embodiment
+    from navcore.render.camera import embodiment_camera
+
+    gen, poses = room_views(small_scene, 2)
+    vms, ks, w, h = embodiment_camera(Embodiment(), poses, 160, 120)
+    gfull = cpu_fast.prepare(gen)
+    for v, kk in zip(vms, ks):
+        visits = np.zeros((len(gen.means), 2), np.uint8)
+        a = cpu_fast.render_one(gfull, v, kk, w, h, 0, visits=visits)
+        read = visits[:, 0] == 1
+        assert 0 < read.sum() < len(gen.means)
+        b = cpu_fast.render_one(cpu_fast.prepare(gen.subset(read)), v, kk, w, h, 0)
+        assert a[2].mean() > 0.5 and all(np.array_equal(x, y) for x, y in zip(a, b))
+
+
 def test_compiled_renderer_matches_the_torch_reference_with_degree_3_colour():
     # the view-dependent colour (SH degree 3, as the real scenes) evaluated by both renderers
     r = np.random.default_rng(5)

@@ -505,9 +505,14 @@ SMALL_BOX = 16  # boxes of at most this many pixels are composited pixel by pixe
 
 
 @numba.njit(cache=True, parallel=True, fastmath=FAST)
-def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos, nf, width, height, out, nth):
+def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos, nf, width, height, out, nth,
+               visits=None):
     """out[H, W, nf + 2] = (sum w f, sum w z, sum w) per pixel, front to back per tile; a
-    Gaussian's features (`_features`) are evaluated when it first contributes to a tile.
+    Gaussian's features (`_features`) are evaluated when it first contributes to a tile. With
+    visits ([N, 2] uint8, zeroed), visits[i, 0] = 1 for every Gaussian i whose box has an
+    unfinished pixel in some tile (its render data read) and visits[i, 1] = 1 for those that
+    contribute to a pixel (stores of a constant: no race between tiles); None (the default)
+    compiles the loop without them.
 
     A box of at most SMALL_BOX pixels is composited pixel by pixel. For a larger one the tile's
     pixel state is laid out by half tile (8 columns), row after row, so that the rows of the box in
@@ -569,6 +574,8 @@ def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos,
                 if qy0 == qy1:  # all finished: the Gaussian is hidden
                     continue
                 j = rows[k]
+                if visits is not None:
+                    visits[gid[j], 0] = 1
                 u = data[j, U] - np.float32(px0)
                 v = data[j, V] - np.float32(py0)
                 ca, cb, cc = data[j, CA], data[j, CB], data[j, CC]
@@ -611,6 +618,8 @@ def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos,
                         _update_done(fs, done, qy0, qy1)
                         left -= nfin
                     if m > 0:
+                        if visits is not None:
+                            visits[gid[j], 1] = 1
                         _features(gid[j], means, sh, deg, feats_in, campos, col)
                         for r in range(m):
                             q = hit_q[r]
@@ -658,6 +667,8 @@ def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos,
                     _update_done(fs, done, qy0, qy1)
                     left -= nfin
                 if nhit > 0:
+                    if visits is not None:
+                        visits[gid[j], 1] = 1
                     _features(gid[j], means, sh, deg, feats_in, campos, col)
                     for h in range(qx0 // HALF, (qx1 - 1) // HALF + 1):
                         lo = h * (TILE * HALF) + hy0[h] * HALF
@@ -678,8 +689,10 @@ def _rasterize(rows, pbox, offsets, data, gid, means, sh, deg, feats_in, campos,
 
 
 def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: int, deg: int,
-               near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, features=None, extra=None):
-    """One camera -> (feats [H, W, C], depth [H, W], alpha [H, W]) float32 numpy arrays.
+               near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, features=None, extra=None, visits=None):
+    """One camera -> (feats [H, W, C], depth [H, W], alpha [H, W]) float32 numpy arrays; visits
+    ([N, 2] uint8, zeroed, optional) gets which Gaussians the rasteriser read and which
+    contributed (`_rasterize`; benchmarks.render_cpu's bound on culling).
 
     The compiled passes do not check their indices, so what they would read out of bounds is
     refused here: deg above the scene's SH degree, features / extra without one row per Gaussian."""
@@ -719,7 +732,10 @@ def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: 
     campos = (-R.T.astype(np.float64) @ t.astype(np.float64)).astype(np.float32)
     rows, pbox, offsets = _bin(box, data, width, height, nth)
     out = np.zeros((height, width, nf + 2), np.float32)
-    _rasterize(rows, pbox, offsets, data, gid, g["means"], g["sh"], d, feats_in, campos, nf, width, height, out, nth)
+    if visits is not None and (visits.shape != (n, 2) or visits.dtype != np.uint8):
+        raise ValueError(f"visits must be a [{n}, 2] uint8 array, got {visits.dtype} {visits.shape}")
+    _rasterize(rows, pbox, offsets, data, gid, g["means"], g["sh"], d, feats_in, campos, nf, width, height, out, nth,
+               visits)
     alpha = out[..., nf + 1]
     dep = out[..., nf] / np.maximum(alpha, np.float32(1e-10))
     return out[..., :nf], dep, alpha
