@@ -93,7 +93,7 @@ bench-scale: $(STAMP)
 	$(BIN)/python -m benchmarks.bench_scale sim --root data/sim
 	$(BIN)/python -m benchmarks.bench_scale slurm
 	$(BIN)/python -m benchmarks.bench_scale report --data data --real-root data/real_indoor \
-	    --compact-root data/real_indoor_compact
+	    --compact-root data/real_indoor_compact --docs docs/bench_scale.md
 
 bench-spatial-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.voxelize_gpu $(ARGS)

@@ -4,7 +4,7 @@ CPU renderer, as data/08_reports/bench_scale.{json,md}.
     python -m benchmarks.bench_scale sim [--scenes 2000] [--root /tmp/navarena_sim]   -> sim.json
     python -m benchmarks.bench_scale cost [--root /tmp/navarena_cost] [--fraction 0.1]   -> cost.json
     python -m benchmarks.bench_scale slurm                                             -> slurm.json
-    python -m benchmarks.bench_scale report [--data data] [--real-root /tmp/real2] [--compact-root DIR]
+    python -m benchmarks.bench_scale report [--data data] [--real-root /tmp/real2] [--compact-root DIR] [--docs FILE]
         (--compact-root: the real scenes run with COMPACT, the options for compressed sources)
         (storage of the two roots, then everything above plus render_cpu.json and, from a CUDA
         run of benchmarks.release_gpu, release_gpu.json -> bench_scale.json / .md)
@@ -249,7 +249,8 @@ def report(args) -> dict:
     write(out, "bench_scale.json", rep)
     md = markdown(rep)
     (out / "bench_scale.md").write_text(md)
-    (PROJECT / "docs" / "bench_scale.md").write_text(md)
+    if args.docs:  # only when asked (make bench-scale): a report into a scratch folder must not replace it
+        Path(args.docs).write_text(md)
     return rep
 
 
@@ -379,6 +380,7 @@ def main(argv=None) -> int:
     rp.add_argument("--data", default="data")
     rp.add_argument("--real-root")
     rp.add_argument("--compact-root")
+    rp.add_argument("--docs", help="also write the markdown report here (make bench-scale: docs/bench_scale.md)")
     for p in sub.choices.values():
         p.add_argument("--out", default="data/08_reports")
     args = ap.parse_args(argv)
