@@ -10,6 +10,7 @@ import pytest
 
 from benchmarks.render_gpu import psnr
 from navcore.gaussians.content import without_splats
+from navcore.gaussians.model import GaussianScene
 from navcore.io.datasets import AlignedGaussianDataset, CostmapDataset, GaussianDataset
 from navcore.nav.actions import MOVE_FORWARD, STOP
 from navcore.nav.embodiment import Embodiment, Limits
@@ -514,3 +515,111 @@ def test_the_splats_hidden_from_the_camera_are_not_the_scenes_structure(episode_
     hidden = CostmapDataset(root / "03_costmaps" / f"{sid}.zarr").hidden("locobot")
     assert len(hidden) == len(np.unique(hidden)) and (np.diff(hidden) > 0).all()
     assert (ids[hidden] >= 0).sum() <= 5e-4 * len(ids)  # structure (0) and objects (>= 1)
+
+
+def _blob_scene(blobs, sigma: float = 0.18):
+    """Walls of small Gaussians along room_with_door's walls (x = 0, 2, 4 m and y = 0, 3 m, up to
+    2 m high) and large opaque floaters (sigma metres) at the given centres [K, 3]."""
+    s = np.linspace(0.0, 1.0, 80)
+    zs = np.linspace(0.0, 2.0, 40)
+    walls = []
+    for x in (0.02, 2.02, 3.98):
+        walls += [np.c_[np.full(s.size * zs.size, x), np.repeat(s * 3.0, zs.size), np.tile(zs, s.size)]]
+    for y in (0.02, 2.98):
+        walls += [np.c_[np.repeat(s * 4.0, zs.size), np.full(s.size * zs.size, y), np.tile(zs, s.size)]]
+    wall = np.concatenate(walls)
+    wall = wall[~((np.abs(wall[:, 0] - 2.02) < 0.01) & (wall[:, 1] > 2.0) & (wall[:, 1] < 2.8))]  # the door
+    blobs = np.asarray(blobs, float).reshape(-1, 3)
+    means = np.r_[wall, blobs]
+    scales = np.r_[np.full((len(wall), 3), 0.04), np.full((len(blobs), 3), sigma)]
+    n = len(means)
+    return GaussianScene(means, np.tile([1.0, 0, 0, 0], (n, 1)), np.log(scales),
+                         np.full(n, np.log(0.98 / 0.02)), np.zeros((n, 1, 3)))
+
+
+def test_blind_view_test_known_answers(room_with_door):
+    """A floater 0.3 m ahead of the camera: blind; the same place facing away: not; a wall the map
+    has at 0.3 m: not blind (a legitimate view), but a floater at the camera in front of a wall at
+    0.45 m is; a pose that is not a valid state is refused."""
+    from stages.episodes.views import NearViews
+
+    cm = room_with_door
+    emb = Embodiment(radius=cm.radius)
+    v = NearViews(_blob_scene([[1.6, 1.0, 0.88]], sigma=0.3), cm, emb, 0.5)
+    assert v.blind((1.3, 1.0), 0.0)                      # facing the floater
+    assert not v.blind((1.3, 1.0), math.pi)              # facing away: the wall at x = 0 is 1.3 m off
+    assert not v.blind((0.35, 1.5), math.pi)             # the wall at x = 0, 0.3 m ahead: the map has it
+    assert not NearViews(_blob_scene([]), cm, emb, 0.5).blind((1.3, 1.0), 0.0)  # without the floater
+    walled = NearViews(_blob_scene([[0.4, 2.5, 0.88]], sigma=0.2), cm, emb, 0.5)
+    assert walled.blind((0.5, 2.5), math.pi)             # the floater 0.1 m ahead, the wall 0.45 m
+    assert not walled.blind((0.5, 1.5), math.pi)         # 1 m further along the same wall: only the wall
+    with pytest.raises(ValueError, match="not a valid state"):
+        v.blind((0.02, 1.5), 0.0)
+
+
+def test_near_field_renders_what_the_whole_scene_renders(room_with_door):
+    """The near-field subset (stages.episodes.views.near_field) is exact: at valid states, off the
+    cell centres too, the near render of the subset equals the whole scene's to the byte."""
+    from navcore.render import cpu_fast
+    from navcore.render.camera import embodiment_camera
+    from stages.episodes.views import SIZE, near_field
+
+    cm = room_with_door
+    emb = Embodiment(radius=cm.radius)
+    r = np.random.default_rng(4)
+    n = 40000  # Gaussians of every size and orientation in and around the rooms, all >= MIN_SIGMA
+    gs = GaussianScene(np.c_[r.uniform(-3, 7, n), r.uniform(-3, 6, n), r.uniform(-2, 4, n)], r.normal(size=(n, 4)),
+                       r.uniform(np.log(0.02), np.log(0.3), (n, 3)), r.uniform(-3, 4, n), np.zeros((n, 1, 3)))
+    keep = near_field(gs, cm, emb, 0.5)
+    assert 0.05 < keep.mean() < 0.9  # it leaves things out, and keeps some
+    full, sub = cpu_fast.prepare(gs), cpu_fast.prepare(gs.subset(keep))
+    xy = np.c_[r.uniform(0, 4, 3000), r.uniform(0, 3, 3000)]
+    xy = xy[cm.are_states_valid(xy)][:300]
+    vm, K, w, h = embodiment_camera(emb, np.c_[xy, r.uniform(-np.pi, np.pi, len(xy))], *SIZE)
+    covered = 0
+    for i in range(len(xy)):
+        a = cpu_fast.render_one(full, vm[i], K[i], w, h, 0, far=0.5)
+        b = cpu_fast.render_one(sub, vm[i], K[i], w, h, 0, far=0.5)
+        assert all(np.array_equal(x, y) for x, y in zip(a, b)), i
+        covered += a[2].max() > 0.1
+    assert covered > 100  # the near field is not empty in those views
+
+
+def test_episodes_do_not_start_blind(room_with_door):
+    """With floaters at camera height in the rooms, no stored start (nor ImageNav goal camera) is
+    blind, checked by an independent near render of the whole scene; without the test some are."""
+    from navcore.render import Renderer
+    from navcore.render.camera import embodiment_camera
+    from stages.episodes.views import NearViews
+
+    cm = room_with_door
+    g = NavGraph(cm, ~cm.occupancy)
+    emb = Embodiment(radius=cm.radius)
+    r = np.random.default_rng(1)
+    gs = _blob_scene(np.c_[r.uniform(0.4, 3.6, 20), r.uniform(0.4, 2.6, 20), r.uniform(0.75, 1.0, 20)], sigma=0.25)
+    ecfg = EpisodesConfig()
+    ecfg.difficulty.balance = False
+    tcfg = TaskConfig(type="imagenav", episodes_per_scene=30, success_radius=0.5, min_geodesic=0.5,
+                      max_geodesic=6.0, trivial_ratio=0.0, starts_per_goal=3)
+    ref = Renderer(gs, "torch")  # the plain reference renderer, not the test's compiled one
+    half = math.radians(emb.hfov_deg) / 2
+
+    def blind(x, y, yaw):  # covered over half the image nearer than 0.5 m and 0.15 m before the map's obstacles
+        far = min(0.5, np.median(cm.view_depths((x, y), yaw + np.linspace(-half, half, 9), max_range=0.65)) - 0.15)
+        vm, K, w, h = embodiment_camera(emb, np.array([[x, y, yaw]]), 16, 12)
+        return far > 0.05 and np.median(ref.render(vm, K, w, h, far=far).alpha.numpy()) > 0.5
+
+    def yaw(e, p):
+        return 2 * math.atan2(e[f"{p}rotation_qz"], e[f"{p}rotation_qw"])
+
+    counts = {}
+    for views in (NearViews(gs, cm, emb, 0.5), None):
+        gen = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), emb, "t/scene", 11, views=views)
+        res = gen.generate()
+        assert len(res.episodes) >= 20
+        counts[views is None] = sum(blind(e["start_position_x"], e["start_position_y"], yaw(e, "start_"))
+                                    for e in res.episodes)
+        if views is not None:
+            assert res.rejections["start_view_blind"] > 0 and views.checks > len(res.episodes)
+            assert not any(blind(e["goal_position_x"], e["goal_position_y"], yaw(e, "goal_")) for e in res.episodes)
+    assert counts[False] == 0 and counts[True] >= 3

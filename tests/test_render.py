@@ -88,6 +88,25 @@ def test_compositing_order_and_expected_depth(backend):
     # input order does not matter: depth decides
     swapped = render(scene([near, far], [0.05, 0.1], [0.5, 0.9], [(1, 0, 0), (0, 0, 1)]), backend=backend)
     assert torch.equal(swapped.rgb, out.rgb)
+    # a far plane between them leaves the far one out (its mean is deeper): the near one alone
+    vm, k = viewmats(np.array([(0, 0, 0)]), 0.0), intrinsics(W, H, HFOV)[None]
+    cut = Renderer(gs, backend).render(vm, k, W, H, far=2.0)
+    alone = render(scene([near], [0.05], [0.5], [(1, 0, 0)]), backend=backend)
+    assert torch.allclose(cut.rgb, alone.rgb, atol=1e-6) and torch.allclose(cut.alpha, alone.alpha, atol=1e-6)
+    assert cut.depth[0, H // 2, W // 2].item() == pytest.approx(1.5, rel=1e-6)
+
+
+def test_depth_ranks_are_the_stable_order_of_the_depths():
+    # the merge sort under SMALL_SORT candidates and the radix sort above give the same ranks:
+    # ascending depth, ties in index order (gsplat's)
+    from navcore.render import cpu_fast
+
+    r = np.random.default_rng(6)
+    for n in (0, 1, 7, cpu_fast.SMALL_SORT - 1, cpu_fast.SMALL_SORT, 30000):
+        z = r.choice(r.uniform(0.01, 50.0, max(n // 3, 1)).astype(np.float32), n)  # many ties
+        ref = np.empty(n, np.int32)
+        ref[np.argsort(z, kind="stable")] = np.arange(n)
+        assert np.array_equal(cpu_fast._depth_ranks(z), ref), n
 
 
 @CPU_BACKENDS

@@ -79,12 +79,14 @@ class Renderer:
             self._g = gaussian_tensors(gs, device or "cuda")
 
     def render(self, viewmats: np.ndarray, Ks: np.ndarray, width: int, height: int, features=None,
-               extra=None) -> RenderOutput:
+               extra=None, far: float = 1e10) -> RenderOutput:
         """viewmats [B, 4, 4] world -> camera, Ks [B, 3, 3]; returns tensors on the backend's device.
         features: optional [N, C] per-Gaussian values composited instead of colour (rgb is then the
         [B, H, W, C] composite, unclamped): e.g. one-hot labels for label masks.
         extra: optional [N, C] per-Gaussian values composited in the same pass as the colour
-        (out.extra [B, H, W, C]): pixel-aligned labels at the cost of a few more channels."""
+        (out.extra [B, H, W, C]): pixel-aligned labels at the cost of a few more channels.
+        far: Gaussians whose mean lies this far or farther along the optical axis are left out
+        (gsplat's far plane; a short one renders only what is near the camera, cheaply)."""
         if self.backend == "cpu":
             from navcore.render.cpu_fast import render
         elif self.backend == "torch":
@@ -92,7 +94,7 @@ class Renderer:
         else:
             from navcore.render.gsplat_backend import render
         rgb, depth, alpha = render(self._g, viewmats, Ks, width, height, self.sh_degree, features=features,
-                                   extra=extra)
+                                   extra=extra, far=far)
         if features is not None:
             return RenderOutput(rgb, depth, alpha)
         return RenderOutput(rgb[..., :3].clamp(0.0, 1.0), depth, alpha, rgb[..., 3:] if extra is not None else None)

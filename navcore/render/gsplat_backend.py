@@ -15,7 +15,7 @@ def gaussian_tensors(gs, device: str = "cuda") -> dict:
 
 
 def render(g: dict, viewmats, Ks, width: int, height: int, sh_degree: int | None = None, features=None,
-           extra=None):
+           extra=None, far: float = 1e10):
     """[B] cameras -> rgb [B, H, W, 3] (or the composited features [B, H, W, C]; with `extra`
     [N, C] the colour and the extra features [B, H, W, 3 + C] in one pass), expected depth
     [B, H, W], alpha [B, H, W] (on the GPU)."""
@@ -37,5 +37,5 @@ def render(g: dict, viewmats, Ks, width: int, height: int, sh_degree: int | None
     with torch.no_grad():
         out, alpha, _ = rasterization(g["means"], g["quats"], g["scales"], g["opacities"], colors, vm, K,
                                       width, height, sh_degree=deg_arg, render_mode="RGB+ED", packed=True,
-                                      rasterize_mode="classic")
+                                      rasterize_mode="classic", far_plane=far)
     return out[..., :-1], out[..., -1], alpha[..., 0]

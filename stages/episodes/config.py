@@ -126,4 +126,14 @@ class EpisodesConfig:
     """Also store the discrete-action expert's action sequence per episode."""
     max_attempts_factor: int = 20
     """A task stops sampling after episodes_per_scene times this many candidates."""
+    view_near_m: float = 0.5
+    """Blind views (stages/episodes/views.py): a start pose, and an ImageNav goal pose, whose
+    camera has more than half its image covered by Gaussians nearer than this (metres) and nearer
+    than the costmap's obstacles in its field of view (a floater or blur in free space) is
+    redrawn; 0 disables."""
+    view_tries: int = 2
+    """Start yaws drawn per start position for `view_near_m`; a position where none passes is
+    dropped (`start_view_blind`). On the real room a fifth of the first yaws are blind; a second
+    yaw rescues a fifth of those, two more another seventh, while 60 % are blind all round (inside
+    a floater): each further try costs one more test there."""
     difficulty: DifficultyConfig = field(default_factory=DifficultyConfig)

@@ -91,11 +91,13 @@ class EpisodeGenerator:
         task: TaskConfig. ecfg: EpisodesConfig. pcfg: PlannerConfig. emb: Embodiment.
         scene_path: "{group}/{scene_id}". seed: the (scene, task) stream seed.
         instances: ObjectNav instance table rows (dicts of INSTANCE_SCHEMA), else None.
+        views: stages.episodes.views.NearViews of the scene, or None (no blind-view test).
     """
 
     def __init__(self, costmap, graph, task: TaskConfig, ecfg: EpisodesConfig, pcfg: PlannerConfig, emb,
-                 scene_path: str, seed: int, instances: list[dict] | None = None):
+                 scene_path: str, seed: int, instances: list[dict] | None = None, views=None):
         self.cm, self.graph, self.task, self.ecfg, self.emb = costmap, graph, task, ecfg, emb
+        self.views = views
         self.scene_path, self.seed = scene_path, seed
         self.rng = np.random.default_rng(seed)
         self.limits = Limits.of(emb)
@@ -152,7 +154,10 @@ class EpisodeGenerator:
         """Plan, roll out and check one start; returns (episode dict, trajectory arrays) or None."""
         t, cm = self.task, self.cm
         start_xy = cm.cell_centers(self.graph.cells[node][None])[0]
-        start_yaw = float(self.rng.uniform(-math.pi, math.pi))
+        start_yaw = self._start_yaw(start_xy)
+        if start_yaw is None:
+            self.rejections["start_view_blind"] += 1
+            return None
         geo = float(fld.node_dist[node])
         path_cells = fld.path_cells(self.graph.cells[node])
         if goal.kind == "object":
@@ -251,7 +256,8 @@ class EpisodeGenerator:
 
     def _goal_yaw(self, xy: np.ndarray) -> float | None:
         """An ImageNav goal yaw whose camera sees at least goal_view_min_depth (median over its
-        field of view; see TaskConfig), from up to goal_view_tries uniform draws; None if none."""
+        field of view; see TaskConfig) and is not blind (`views`), from up to goal_view_tries
+        uniform draws; None if none."""
         t = self.task
         half = math.radians(self.emb.hfov_deg) / 2
         for _ in range(max(1, t.goal_view_tries)):
@@ -259,7 +265,16 @@ class EpisodeGenerator:
             if t.goal_view_min_depth <= 0:
                 return yaw
             depth = self.cm.view_depths(xy, yaw + np.linspace(-half, half, 9), max_range=4 * t.goal_view_min_depth)
-            if np.median(depth) >= t.goal_view_min_depth:
+            if np.median(depth) >= t.goal_view_min_depth and not (self.views and self.views.blind(xy, yaw)):
+                return yaw
+        return None
+
+    def _start_yaw(self, xy: np.ndarray) -> float | None:
+        """A start yaw, uniform; with the blind-view test, the first of up to view_tries draws whose
+        camera is not blind; None if none."""
+        for _ in range(max(1, self.ecfg.view_tries) if self.views else 1):
+            yaw = float(self.rng.uniform(-math.pi, math.pi))
+            if not (self.views and self.views.blind(xy, yaw)):
                 return yaw
         return None
 

@@ -8,12 +8,14 @@ import numpy as np
 import pyarrow as pa
 from omegaconf import OmegaConf
 
+from navcore.gaussians.content import camera_scene
 from navcore.instances import load_instances
 from navcore.io.episode_schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA, TRAJECTORY_WRITE
 from navcore.nav.geodesic import NavGraph, eligible_cells
 from navcore.seeds import stream_seed
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.generate import EpisodeGenerator, scene_split
+from stages.episodes.views import NearViews
 
 
 def write_table(rows_or_cols, schema: pa.Schema, dataset, **options) -> None:
@@ -41,12 +43,17 @@ def run(scene, cfg, catalog) -> dict:
     emb = OmegaConf.to_object(cfg.embodiment)
     cm = catalog.dataset("costmaps", scene).load(emb.name)
     graph = NavGraph(cm, eligible_cells(cm, ecfg), ecfg.geodesic_neighbourhood)
+    views = None
+    if ecfg.view_near_m > 0:
+        cam, _ = camera_scene(catalog, scene, emb.name, view_dependent=False)
+        views = NearViews(cam, cm, emb, ecfg.view_near_m)
+    setup_s = time.process_time() - cpu0  # per scene, whatever the number of episodes
     remove_scene_partitions(catalog, scene)
     held_out = scene_split(scene.scene_id, ecfg.scene_splits)
     if held_out:
         ecfg.splits = {held_out: 1.0}
     result = {"outputs": [], "tasks": {}, "graph_nodes": len(graph.cells), "graph_edges": graph.num_edges,
-              "split": held_out}
+              "split": held_out, "setup_cpu_s": round(setup_s, 3)}
     shortfalls = []
     for name in sorted(cfg.task):
         tcfg: TaskConfig = OmegaConf.to_object(cfg.task[name])
@@ -54,7 +61,8 @@ def run(scene, cfg, catalog) -> dict:
         if tcfg.type == "objectnav":
             instances = load_instances(scene, catalog, tcfg.instance_source).to_pylist()
         seed = stream_seed(ecfg.seed, scene.scene_id, name)
-        gen = EpisodeGenerator(cm, graph, tcfg, ecfg, pcfg, emb, f"{scene.group}/{scene.scene_id}", seed, instances)
+        gen = EpisodeGenerator(cm, graph, tcfg, ecfg, pcfg, emb, f"{scene.group}/{scene.scene_id}", seed, instances,
+                               views)
         res = gen.generate()
         for ds, data, schema, options in (("episodes", res.episodes, EPISODE_SCHEMA, {}),
                                           ("trajectories", res.trajectories, TRAJECTORY_SCHEMA, TRAJECTORY_WRITE)):
@@ -72,5 +80,6 @@ def run(scene, cfg, catalog) -> dict:
                                "rejections": dict(sorted(res.rejections.items()))})
     if shortfalls:
         result["shortfall"] = shortfalls
+    result["view_checks"] = views.checks if views else 0
     result["cpu_s"] = round(time.process_time() - cpu0, 3)  # the whole stage, all threads
     return result
