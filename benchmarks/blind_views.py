@@ -17,7 +17,6 @@ nothing: the same rows every run).
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 import numpy as np
@@ -35,9 +34,7 @@ def rendered_depth(renderer, emb, poses: np.ndarray, batch: int = 64) -> np.ndar
 
 
 def costmap_depth(cm, emb, poses: np.ndarray, max_range: float) -> np.ndarray:
-    half = math.radians(emb.hfov_deg) / 2
-    return np.array([np.median(cm.view_depths(p[:2], p[2] + np.linspace(-half, half, 9), max_range=max_range))
-                     for p in poses])
+    return np.array([cm.fov_depth(p[:2], p[2], emb.hfov_deg, max_range) for p in poses])
 
 
 def _rows(df: pd.DataFrame, n: int) -> pd.DataFrame:

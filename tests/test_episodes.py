@@ -461,6 +461,9 @@ def test_view_depths_reach_the_first_wall(room_with_door):
     assert cm.view_depths((1.0, 2.4), [0.0], max_range=1.5)[0] == pytest.approx(1.5)
     diag = cm.view_depths((1.0, 1.0), [math.atan2(-1.0, 1.0)])[0]  # towards (2, 0): the corner, ~1.41 m
     assert diag == pytest.approx(math.sqrt(2) * 0.95, abs=0.1)
+    # a camera's view: the median of 9 rays over 90 degrees, the pair at +-22.5 degrees
+    assert cm.fov_depth((1.0, 1.0), 0.0, 90.0) == pytest.approx(1.0 / math.cos(math.radians(22.5)), abs=0.06)
+    assert cm.fov_depth((1.0, 1.0), 0.0, 90.0, max_range=0.5) == pytest.approx(0.5)
 
 
 def test_imagenav_goal_cameras_do_not_face_a_wall_at_arms_length(room_with_door):

@@ -7,6 +7,7 @@ in the supported region; the heading does not matter for a disk.
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -85,6 +86,13 @@ class Costmap:
             d = np.where(alive, np.minimum(d + np.maximum(c - res, res), max_range), d)
             alive &= d < max_range
         return d
+
+    def fov_depth(self, xy, yaw: float, hfov_deg: float, max_range: float = 10.0) -> float:
+        """The median free distance (metres, at most max_range) of 9 rays spread across a camera's
+        horizontal field of view (`view_depths`): how far a camera at xy facing yaw sees on the
+        obstacle layer."""
+        half = math.radians(hfov_deg) / 2
+        return float(np.median(self.view_depths(xy, yaw + np.linspace(-half, half, 9), max_range=max_range)))
 
     def is_state_valid(self, x: float, y: float) -> bool:  # replaced per instance by the fast path
         """Single pose (metres); yaw is irrelevant for a disk footprint."""

@@ -259,13 +259,12 @@ class EpisodeGenerator:
         field of view; see TaskConfig) and is not blind (`views`), from up to goal_view_tries
         uniform draws; None if none."""
         t = self.task
-        half = math.radians(self.emb.hfov_deg) / 2
         for _ in range(max(1, t.goal_view_tries)):
             yaw = float(self.rng.uniform(-math.pi, math.pi))
-            if t.goal_view_min_depth <= 0:
-                return yaw
-            depth = self.cm.view_depths(xy, yaw + np.linspace(-half, half, 9), max_range=4 * t.goal_view_min_depth)
-            if np.median(depth) >= t.goal_view_min_depth and not (self.views and self.views.blind(xy, yaw)):
+            if t.goal_view_min_depth > 0 and \
+                    self.cm.fov_depth(xy, yaw, self.emb.hfov_deg, 4 * t.goal_view_min_depth) < t.goal_view_min_depth:
+                continue
+            if not (self.views and self.views.blind(xy, yaw)):
                 return yaw
         return None
 

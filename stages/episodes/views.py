@@ -101,10 +101,8 @@ class NearViews:
         if not self.cm.is_state_valid(float(xy[0]), float(xy[1])):
             raise ValueError(f"blind-view test at ({xy[0]:.3f}, {xy[1]:.3f}): not a valid state of the costmap "
                              "(the near field kept only what valid states can see)")
-        half = math.radians(self.emb.hfov_deg) / 2
-        depth = self.cm.view_depths(np.asarray(xy, np.float64), yaw + np.linspace(-half, half, 9),
-                                    max_range=self.near + MAP_MARGIN)
-        far = min(self.near, float(np.median(depth)) - MAP_MARGIN)
+        depth = self.cm.fov_depth(np.asarray(xy, np.float64), yaw, self.emb.hfov_deg, self.near + MAP_MARGIN)
+        far = min(self.near, depth - MAP_MARGIN)
         if far <= 0.05:  # an obstacle the map has at arm's length fills the view: a legitimate one
             return False
         self.checks += 1
