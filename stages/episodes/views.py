@@ -65,10 +65,9 @@ def near_field(scene, costmap, emb, near_m: float) -> np.ndarray:
     if not valid.any():
         return np.zeros(len(m), bool)
     dist = ndimage.distance_transform_edt(~valid) * res  # cell centre -> the nearest valid cell centre
-    j = np.clip(np.floor((m[:, 0] - costmap.origin[0]) / res).astype(np.int64), 0, nx - 1)
-    i = np.clip(np.floor((m[:, 1] - costmap.origin[1]) / res).astype(np.int64), 0, ny - 1)
-    cx, cy = costmap.origin[0] + (j + 0.5) * res, costmap.origin[1] + (i + 0.5) * res
-    dh = np.maximum(dist[i, j] - np.hypot(m[:, 0] - cx, m[:, 1] - cy), 0.0)  # triangle inequality
+    cells = np.clip(costmap.cells_of(m), 0, [ny - 1, nx - 1])  # a mean off the map: the nearest edge cell
+    c = costmap.cell_centers(cells)
+    dh = np.maximum(dist[cells[:, 0], cells[:, 1]] - np.hypot(m[:, 0] - c[:, 0], m[:, 1] - c[:, 1]), 0.0)  # triangle
     dz = m[:, 2] - emb.camera_height
     return (np.hypot(dh, dz) < reach + ext * smax) & (smax >= MIN_SIGMA)
 
