@@ -259,6 +259,11 @@ def report(args) -> dict:
     return rep
 
 
+def _size_rows(scenes: dict, row) -> list[str]:
+    """One table row per scene and image size of a renderer benchmark: row(name, scene, size, figures)."""
+    return [row(name, s, size, s[size]) for name, s in scenes.items() for size in ("160x120", "640x480")]
+
+
 def _f(x, nd=2):
     return "n/a" if x is None else (f"{x:,.{nd}f}" if isinstance(x, float) else f"{x:,}")
 
@@ -324,25 +329,20 @@ def markdown(r: dict) -> str:
               "machine is shared: the runs' throughputs are listed).", "",
               "| scene | Gaussians | size | frames/s | runs | median view | p10 | torch reference | speed-up |",
               "|---|---|---|---|---|---|---|---|---|"]
-        for name, s in r["render_cpu"]["scenes"].items():
-            for size in ("160x120", "640x480"):
-                v = s[size]
-                runs = ", ".join(f"{x:.1f}" for x in v.get("fps_runs", [v["fps"]]))
-                L.append(f"| {name} | {s['n_gaussians']:,} | {size} | {v['fps']:.1f} | {runs} | "
-                         f"{_f(v.get('fps_median'), 1)} | {v['fps_p10']:.1f} | {v['torch_reference_fps']:.2f} | "
-                         f"{v['speedup']:.0f}x |")
+        L += _size_rows(r["render_cpu"]["scenes"], lambda name, s, size, v: (
+            f"| {name} | {s['n_gaussians']:,} | {size} | {v['fps']:.1f} | "
+            f"{', '.join(f'{x:.1f}' for x in v.get('fps_runs', [v['fps']]))} | {_f(v.get('fps_median'), 1)} | "
+            f"{v['fps_p10']:.1f} | {v['torch_reference_fps']:.2f} | {v['speedup']:.0f}x |"))
         ab = r.get("render_cpu_ab")
         if ab:
             L += ["", f"Against revision {ab['against']}'s renderer, interleaved view by view in one run (`python -m "
                   f"benchmarks.render_cpu --against {ab['against']}`):", "",
                   "| scene | size | that revision ms | ours ms | speed-up | frames identical to the byte | "
                   "PSNR min between them | depth median diff max |", "|---|---|---|---|---|---|---|---|"]
-            for name, s in ab["scenes"].items():
-                for size in ("160x120", "640x480"):
-                    v = s[size]
-                    L.append(f"| {name} | {size} | {v['rev_ms']:.1f} | {v['ours_ms']:.1f} | {v['speedup']:.2f}x | "
-                             f"{v['identical_frames']} of {s['views']} | {_f(v.get('psnr_min_db'), 1)} dB | "
-                             f"{_f(v.get('depth_median_diff_max_m'), 7)} m |")
+            L += _size_rows(ab["scenes"], lambda name, s, size, v: (
+                f"| {name} | {size} | {v['rev_ms']:.1f} | {v['ours_ms']:.1f} | {v['speedup']:.2f}x | "
+                f"{v['identical_frames']} of {s['views']} | {_f(v.get('psnr_min_db'), 1)} dB | "
+                f"{_f(v.get('depth_median_diff_max_m'), 7)} m |"))
         bd = r.get("render_cpu_bound")
         if bd:
             L += ["", "What a perfect occlusion culling would give (`python -m benchmarks.render_cpu --bound`): each "
@@ -350,12 +350,9 @@ def markdown(r: dict) -> str:
                   "an unfinished pixel in some tile; the frame must come out identical to the byte), interleaved:", "",
                   "| scene | size | frames/s, all Gaussians | frames/s, those read only | bound | frames identical | "
                   "Gaussians read (mean) |", "|---|---|---|---|---|---|---|"]
-            for name, s in bd["scenes"].items():
-                for size in ("160x120", "640x480"):
-                    v = s[size]
-                    L.append(f"| {name} | {size} | {v['fps']:.1f} | {v['fps_read_only']:.1f} | "
-                             f"{v['bound_speedup']:.2f}x | {v['identical_frames']} of {s['views']} | "
-                             f"{v['gaussians_read_mean']:,.0f} of {s['n_gaussians']:,} |")
+            L += _size_rows(bd["scenes"], lambda name, s, size, v: (
+                f"| {name} | {size} | {v['fps']:.1f} | {v['fps_read_only']:.1f} | {v['bound_speedup']:.2f}x | "
+                f"{v['identical_frames']} of {s['views']} | {v['gaussians_read_mean']:,.0f} of {s['n_gaussians']:,} |"))
         if r["render_gpu"]:
             L += ["", "Agreement with gsplat (H100, 1 M Gaussians, 10 views):", ""]
             for size, v in r["render_gpu"]["agreement"].items():
