@@ -12,6 +12,10 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from navcore.labels import GoalVocabulary, as_category, resolve
+from navcore.labels.mesh import read_labelled_geometry, transfer
+from navcore.labels.shipped import CleaningConfig, LabelReport, class_table, instances_from_gaussians, missing_table_warning
+
 INSTANCE_SCHEMA = pa.schema([
     pa.field("instance_id", pa.int32(), nullable=False),
     pa.field("category", pa.string(), nullable=False),
@@ -22,6 +26,7 @@ INSTANCE_SCHEMA = pa.schema([
     pa.field("support", pa.int32()),  # Gaussians (or voted cells) behind the instance
     pa.field("confidence", pa.float32()),
     pa.field("source", pa.string()),  # ground_truth | model_predicted
+    pa.field("dataset_class", pa.string()),  # the label set's own class name (ground truth), else null
 ])
 
 
@@ -70,6 +75,7 @@ def labels_to_table(labels: list[dict], support: dict[int, int] | None = None) -
         cols["support"].append(int((support or {}).get(int(lab["instance_id"]), 0)))
         cols["confidence"].append(float(lab.get("confidence", 1.0)))
         cols["source"].append(lab.get("source", "ground_truth"))
+        cols["dataset_class"].append(lab.get("dataset_class"))
     return pa.table(cols, schema=INSTANCE_SCHEMA)
 
 
@@ -81,7 +87,7 @@ def table_to_labels(table: pa.Table) -> list[dict]:
         box = None if any(np.isnan(lo + hi)) else {"min": lo, "max": hi}
         out.append({"instance_id": r["instance_id"], "category": r["category"],
                     "position": [r[f"center_{k}"] for k in "xyz"], "bounding_box": box,
-                    "confidence": r["confidence"], "source": r["source"]})
+                    "confidence": r["confidence"], "source": r["source"], "dataset_class": r.get("dataset_class")})
     return out
 
 
@@ -102,27 +108,19 @@ def load_instances(scene, catalog, source: str) -> pa.Table:
         if not ds.exists():
             raise FileNotFoundError(f"scene {scene.scene_id!r}: no predicted instance table at {ds.path}; run the "
                                     "semantics stage or set task.objectnav.instance_source=ground_truth")
-        return ds.load(schema=INSTANCE_SCHEMA)
+        table = ds.load()
+        return table.cast(INSTANCE_SCHEMA) if "dataset_class" in table.column_names else _with_dataset_class(table)
     raise ValueError(f"unknown instance source {source!r} (ground_truth | model_predicted)")
+
+
+def _with_dataset_class(table: pa.Table) -> pa.Table:
+    """A table written before the dataset_class column existed, in today's schema."""
+    return table.append_column("dataset_class", pa.nulls(len(table), pa.string())).cast(INSTANCE_SCHEMA)
 
 
 # ---- ground truth shipped with real datasets ------------------------------------------------------
 
 LABEL_FILE = "labels.json"
-SCENESPLAT_LABELS = ("instance.npy", "segment.npy")
-CLASS_NAME_FILES = ("classes.txt", "class_names.txt")
-CATEGORY_ALIASES = {  # keys: lower case, spaces
-    "couch": "sofa", "sofa chair": "chair", "armchair": "chair", "office chair": "chair", "tv": "tv_monitor",
-    "television": "tv_monitor", "monitor": "tv_monitor", "tv monitor": "tv_monitor", "potted plant": "plant",
-    "potted_plant": "plant", "flowerpot": "plant", "dining table": "table", "desk": "table", "coffee table": "table",
-    "cupboard": "cabinet", "wardrobe": "cabinet", "kitchen cabinet": "cabinet", "toilet seat": "toilet",
-}
-
-
-def canonical_category(name: str) -> str:
-    """A dataset's class name in our vocabulary (lower case, aliases such as couch -> sofa)."""
-    n = " ".join(str(name).strip().lower().replace("-", " ").replace("_", " ").split())
-    return CATEGORY_ALIASES.get(n, n.replace(" ", "_"))
 
 
 def label_file_for(source_path: str | Path) -> Path | None:
@@ -139,10 +137,11 @@ def _corners(box) -> np.ndarray:
     return np.array([[c["x"], c["y"], c["z"]] if isinstance(c, dict) else c for c in box], float)
 
 
-def read_label_file(path: str | Path) -> list[dict]:
+def read_label_file(path: str | Path, vocab: GoalVocabulary | None = None) -> list[dict]:
     """labels.json entries (source frame) from NavArena's layout ({labels: [{instance_id, category,
     position, bounding_box {min, max}}]}) or InteriorGS's (a list of {ins_id, label, bounding_box:
-    eight corners as {x, y, z}}); categories mapped by canonical_category, source ground_truth."""
+    eight corners as {x, y, z}}); categories through the goal vocabulary, source ground_truth."""
+    vocab = vocab or GoalVocabulary()
     path = Path(path)
     try:
         data = json.loads(path.read_text())
@@ -162,64 +161,59 @@ def read_label_file(path: str | Path) -> list[dict]:
             raise ValueError(f"{path}: label entry {k} is not one this reader knows ({e})") from None
         raw_id = it.get("instance_id", it.get("ins_id", it.get("id", k + 1)))
         iid = int(raw_id) if str(raw_id).lstrip("-").isdigit() else k + 1
-        out.append({"instance_id": iid, "category": canonical_category(name), "position": list(map(float, pos)),
+        out.append({"instance_id": iid, "category": vocab.category_of(name), "dataset_class": as_category(name),
+                    "position": list(map(float, pos)),
                     "bounding_box": None if pts is None else {"min": pts.min(0).tolist(), "max": pts.max(0).tolist()},
                     "confidence": 1.0, "source": "ground_truth"})
     return out
 
 
-def class_names(folder: Path) -> list[str] | None:
-    """Class names of a SceneSplat folder's segment.npy (one per line in classes.txt), if shipped."""
-    for name in CLASS_NAME_FILES:
-        if (folder / name).is_file():
-            return [ln.strip() for ln in (folder / name).read_text().splitlines() if ln.strip()]
-    return None
-
-
-def labels_from_gaussians(means: np.ndarray, instance: np.ndarray, segment: np.ndarray,
-                          names: list[str] | None) -> tuple[list[dict], dict[int, int]]:
-    """Instance table entries from per-Gaussian labels (SceneSplat instance.npy / segment.npy).
+def shipped_instances(scene, aligned, source_to_aligned: np.ndarray, vocab: GoalVocabulary | None = None,
+                      cleaning: CleaningConfig | None = None, ceiling: float | None = None
+                      ) -> tuple[pa.Table, str, LabelReport] | None:
+    """The instance table (source ground_truth, aligned frame) from labels a real scene ships, in
+    this order: SceneSplat per-Gaussian instance / segment arrays (extras of the aligned
+    Gaussians), a labelled mesh or point cloud (`labels.mesh` of the catalog entry), a labels.json
+    beside the scene; None when there are none (synthetic scenes use their own truth).
 
     Args:
-        means: [N, 3] centres (aligned frame).
-        instance: [N] instance id per Gaussian (< 0: none).
-        segment: [N] class index per Gaussian (the instance's category is its majority class).
-        names: class index -> name (None: "class_{k}").
+        scene: the catalog entry (its `labels` LabelSpec, if any). aligned: the aligned Gaussians.
+        source_to_aligned: [4, 4]. vocab: goal vocabulary. cleaning: instance cleaning.
+        ceiling: floor-to-ceiling height of the aligned scene, metres (None: no ceiling test).
     Returns:
-        (labels.json entries with the box of the 2nd-98th percentile of the centres, support per id).
-    """
-    labels, support = [], {}
-    ok = instance >= 0
-    for iid in np.unique(instance[ok]):
-        sel = instance == iid
-        cls = int(np.bincount(segment[sel][segment[sel] >= 0]).argmax()) if (segment[sel] >= 0).any() else -1
-        if cls < 0:
-            continue
-        name = names[cls] if names is not None and cls < len(names) else f"class_{cls}"
-        pts = means[sel].astype(np.float64)
-        lo, hi = np.percentile(pts, [2, 98], axis=0)
-        labels.append({"instance_id": int(iid), "category": canonical_category(name),
-                       "position": ((lo + hi) / 2).tolist(), "bounding_box": {"min": lo.tolist(), "max": hi.tolist()},
-                       "confidence": 1.0, "source": "ground_truth"})
-        support[int(iid)] = int(sel.sum())
-    return labels, support
-
-
-def shipped_instances(scene, aligned, source_to_aligned: np.ndarray) -> tuple[pa.Table, str] | None:
-    """The instance table (source ground_truth, aligned frame) from labels a real scene ships:
-    SceneSplat per-Gaussian instance / segment arrays (extras of the aligned Gaussians), else a
-    labels.json beside the scene; None when there are none (synthetic scenes use their own truth).
-
-    Returns:
-        (table, where the labels came from).
+        (table, where the labels came from, LabelReport).
     """
     if scene.synthetic:
         return None
+    vocab, cleaning = vocab or GoalVocabulary(), cleaning or CleaningConfig()
+    spec = getattr(scene, "labels", None)
+    folder = Path(scene.path) if Path(scene.path).is_dir() else Path(scene.path).parent
+    report = LabelReport()
+    opacity = 1.0 / (1.0 + np.exp(-aligned.opacity_logits.astype(np.float64)))
     if "instance" in aligned.extras and "segment" in aligned.extras:
-        labels, support = labels_from_gaussians(aligned.means, aligned.extras["instance"], aligned.extras["segment"],
-                                                class_names(Path(scene.path)))
-        return labels_to_table(labels, support), "scenesplat instance.npy / segment.npy"
+        names = class_table(spec, folder)
+        if names is None:
+            report.warnings.append(missing_table_warning(scene, folder))
+        report.origin = "scenesplat instance.npy / segment.npy"
+        report.label_set = names.name if names is not None else "none (class_<id>)"
+        labels, support = instances_from_gaussians(aligned.means, opacity, aligned.extras["instance"],
+                                                   aligned.extras["segment"], names, vocab, cleaning, ceiling, report)
+        return labels_to_table(labels, support), report.origin, report
+    if spec is not None and spec.mesh:
+        mesh_path = spec.path(spec.mesh)
+        classes = resolve(spec.mesh_classes or spec.classes, Path(spec.base) if spec.base else None) \
+            if (spec.mesh_classes or spec.classes) else None
+        geom = read_labelled_geometry(mesh_path, classes)
+        geom.vertices = geom.vertices @ source_to_aligned[:3, :3].T + source_to_aligned[:3, 3]
+        seg, ins, dist = transfer(geom, aligned.means, spec.max_distance)
+        report.origin, report.label_set = f"{mesh_path} ({geom.kind})", geom.names.name
+        report.transfer = {"max_distance_m": spec.max_distance, "beyond_bound": int((dist > spec.max_distance).sum()),
+                           "median_distance_m": round(float(np.median(dist)), 4) if len(dist) else None}
+        labels, support = instances_from_gaussians(aligned.means, opacity, ins, seg, geom.names, vocab, cleaning,
+                                                   ceiling, report)
+        return labels_to_table(labels, support), report.origin, report
     f = label_file_for(scene.path)
     if f is None:
         return None
-    return labels_to_table(transform_labels(read_label_file(f), source_to_aligned)), str(f)
+    report.origin = str(f)
+    return labels_to_table(transform_labels(read_label_file(f, vocab), source_to_aligned)), str(f), report

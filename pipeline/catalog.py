@@ -21,6 +21,7 @@ import yaml
 
 from navcore.gaussians.formats import detect_format
 from navcore.io.datasets import TYPES, Dataset
+from navcore.labels.shipped import LabelSpec
 
 LAYOUT_FILE = Path(__file__).resolve().parent.parent / "catalogs" / "layout.yaml"
 
@@ -53,6 +54,7 @@ class SceneEntry:
     format: str  # inria_ply, supersplat_ply, ply, splat, spz, sog, npy_folder, synthetic
     seed: int | None = None
     num_gaussians: int | None = None
+    labels: LabelSpec | None = None  # the entry's `labels:` (class table, labelled mesh; navcore.labels.shipped)
 
     @property
     def synthetic(self) -> bool:
@@ -83,7 +85,8 @@ class Catalog:
             if not path.is_absolute():
                 path = (self.file.parent / path).resolve()  # relative to the catalog file's folder
             fmt = e.get("format") or detect_format(path)  # left out: the path tells
-            self.scenes.append(SceneEntry(sid, e["name"], group, str(path), fmt))
+            labels = LabelSpec.from_entry(e.get("labels"), self.file.parent, f"catalog {self.file}, scene {e['name']!r}")
+            self.scenes.append(SceneEntry(sid, e["name"], group, str(path), fmt, labels=labels))
             taken.add(sid)
         syn = spec.get("synthetic")
         if syn:

@@ -15,7 +15,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from navcore.io.atomic import sweep_stale_temporaries
 from pipeline.backends import run_on_dask
 from pipeline.catalog import Catalog, SceneEntry
-from pipeline.graph import closure, config_hashes
+from pipeline.graph import closure, config_hashes, scene_hash
 from pipeline.summary import build_summary, print_summary, write_summary
 from pipeline.tasks import finalize_due, run_finalize, run_task
 
@@ -57,7 +57,7 @@ def execute(cfg, console: Console | None = None) -> dict:
         for scene in scenes:
             prev = {}
             for st in stages:
-                prev[st.name] = submit(st, scene, hashes[st.name], cfg.force and st.name in selected,
+                prev[st.name] = submit(st, scene, scene_hash(hashes[st.name], st.name, scene), cfg.force and st.name in selected,
                                        [prev[n] for n in st.needs if n in prev])
                 handles.append((st.name, scene, prev[st.name]))
         return handles

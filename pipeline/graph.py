@@ -69,7 +69,8 @@ STAGES: tuple[Stage, ...] = (
     Stage("align", align.run, ("voxelize",), ("align",), version="4"),
     Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="4",
           inputs=costmap.hashed_inputs),
-    Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), gpu=True, memory_gb=3.0),
+    Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), version="2", gpu=True,
+          memory_gb=3.0),
     Stage("asset", asset.run, ("costmap", "semantics"), ("asset",), version="4"),
     Stage("episodes", episodes.run, ("costmap", "semantics"), ("episodes", "task", "planner", "embodiment"),
           version="3"),
@@ -95,6 +96,33 @@ def closure(selected: list[str]) -> list[Stage]:
             need.add(n)
             todo.extend(BY_NAME[n].needs)
     return [s for s in STAGES if s.name in need]
+
+
+def downstream(name: str) -> set[str]:
+    """A stage and every stage that (transitively) needs it."""
+    out, grew = {name}, True
+    while grew:
+        grew = False
+        for s in STAGES:
+            if s.name not in out and any(n in out for n in s.needs):
+                out.add(s.name)
+                grew = True
+    return out
+
+
+SCENE_OPTIONS = {"labels": "semantics"}
+"""Catalog entry keys that decide a stage's output for that scene alone -> the stage that reads them."""
+
+
+def scene_hash(stage_hash: str, stage: str, scene) -> str:
+    """A stage's hash for one scene: its config hash, mixed with the scene's own catalog options
+    (`SCENE_OPTIONS`) when the stage is at or downstream of the one that reads them; a scene
+    without options keeps the config hash (data roots written before stay valid)."""
+    opts = {k: getattr(scene, k).as_dict() for k, st in sorted(SCENE_OPTIONS.items())
+            if getattr(scene, k, None) is not None and stage in downstream(st)}
+    if not opts:
+        return stage_hash
+    return hashlib.sha256(json.dumps({"hash": stage_hash, "scene": opts}, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
 def config_hashes(cfg) -> dict[str, str]:

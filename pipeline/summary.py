@@ -22,7 +22,8 @@ def build_summary(results: list[dict], started: dt.datetime, cat_file, shard: li
                "stages": [s.name for s in stages], "config_hashes": {s.name: hashes[s.name] for s in stages},
                "counts": {}, "failures": [r for r in results if r["status"] in FAILED],
                "shortfalls": [r for r in results if r.get("shortfall")],
-               "warnings": [r for r in results if r.get("warnings")], "results": results}
+               "warnings": [r for r in results if r.get("warnings")],
+               "goal_mappings": [r for r in results if r.get("goal_mapping")], "results": results}
     for r in results:
         c = summary["counts"].setdefault(r["stage"], {})
         c[r["status"]] = c.get(r["status"], 0) + 1
@@ -66,6 +67,14 @@ def print_summary(summary: dict, console: Console) -> None:
                 f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], s.get("task", ""),
                           f"{s.get('episodes')} / {s.get('requested')}",
                           ", ".join(f"{k} {v}" for k, v in s.get("rejections", {}).items()) or s.get("reason", ""))
+        console.print(f)
+    if summary.get("goal_mappings"):
+        f = Table(title="ObjectNav goal categories from dataset classes (instances)")
+        for col in ("scene", "goal category", "dataset classes"):
+            f.add_column(col, overflow="fold")
+        for r in summary["goal_mappings"]:
+            for goal, classes in sorted(r["goal_mapping"].items()):
+                f.add_row(f"{r['scene_id']} ({r['scene']})", goal, ", ".join(f"{c} {n}" for c, n in sorted(classes.items())))
         console.print(f)
     if summary["warnings"]:
         f = Table(title="warnings")

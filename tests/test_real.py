@@ -253,7 +253,7 @@ def test_scenesplat_per_gaussian_labels_become_the_ground_truth_table(tmp_path):
     assert np.array_equal(back.extras["instance"], inst) and np.array_equal(back.extras["segment"], seg)
     t = np.eye(4)
     t[:3, 3] = [10, 0, 0]
-    table, origin = shipped_instances(_Scene(tmp_path / "s"), back.transformed(t), t)
+    table, origin, _ = shipped_instances(_Scene(tmp_path / "s"), back.transformed(t), t)
     rows = {r["instance_id"]: r for r in table.to_pylist()}
     assert "scenesplat" in origin and set(rows) == {1, 2, 3}
     assert [rows[i]["category"] for i in (1, 2, 3)] == ["sofa", "tv_monitor", "sofa"]  # couch -> sofa, TV -> tv_monitor
@@ -275,7 +275,7 @@ def test_interiorgs_labels_json_beside_the_scene(tmp_path):
     assert labs[1]["instance_id"] == 2  # ids that are not integers are numbered by position
     t = np.eye(4)
     t[:3, :3] = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]  # 90 degrees about z
-    table, origin = shipped_instances(_Scene(tmp_path / "scene.ply"), GaussianScene.from_colors(
+    table, origin, _ = shipped_instances(_Scene(tmp_path / "scene.ply"), GaussianScene.from_colors(
         np.zeros((1, 3)), [[1.0, 0, 0, 0]], [[0.1] * 3], [0.5], [[0.5] * 3]), t)
     r = table.to_pylist()[0]
     assert origin.endswith("labels.json") and np.allclose([r["center_x"], r["center_y"]], [-3.25, 1.5])

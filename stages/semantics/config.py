@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 from typing import Optional
 
+from navcore.labels.shipped import CleaningConfig
 from navcore.nav.tasks import OBJECTNAV_CATEGORIES
 from stages.semantics.lifting import LiftingConfig
 from stages.semantics.segmenters import CORRUPTION_LEVELS, Corruption
@@ -59,6 +60,11 @@ class SemanticsConfig:
     shipped_labels: bool = True
     """Use the ground-truth labels a real scene ships (SceneSplat instance.npy / segment.npy in its
     .npy folder, or an InteriorGS / NavArena labels.json beside it) instead of a segmenter."""
+    labels: CleaningConfig = field(default_factory=CleaningConfig)
+    """Cleaning of shipped per-Gaussian labels (largest cluster, tiny / unobserved / below-floor drops)."""
+    goal_map: dict[str, str] = field(default_factory=dict)
+    """Extra lines of the goal mapping table for every scene (dataset class -> goal category, e.g.
+    {'ottoman': 'sofa'}); a catalog entry's labels.goal_map adds its own."""
     segmenter: str = "oracle"
     """Registry key (oracle | sam3) or "module:Class"."""
     categories: list[str] = field(default_factory=lambda: list(OBJECTNAV_CATEGORIES))

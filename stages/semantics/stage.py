@@ -14,6 +14,7 @@ import numpy as np
 
 from navcore.gaussians.cameras import CAMERA_FILE, camera_file, read_cameras
 from navcore.instances import labels_to_table, shipped_instances
+from navcore.labels import GoalVocabulary
 from navcore.render.camera import camera_to_world, intrinsics
 from stages.semantics.config import SemanticsConfig
 from stages.semantics.lifting import lift
@@ -126,13 +127,19 @@ def run(scene, cfg, catalog) -> dict:
     emb = OmegaConf.to_object(cfg.embodiment)
     gs, attrs = catalog.dataset("aligned", scene).load()
     cm = catalog.dataset("costmaps", scene).load(emb.name)
-    shipped = shipped_instances(scene, gs, np.asarray(attrs["source_to_aligned"])) if scfg.shipped_labels else None
+    shipped = None
+    if scfg.shipped_labels:
+        align = catalog.dataset("alignment", scene).load()
+        vocab = GoalVocabulary(tuple(scfg.categories), {**scfg.goal_map, **dict(scene.labels.goal_map if scene.labels else ())})
+        shipped = shipped_instances(scene, gs, np.asarray(attrs["source_to_aligned"]), vocab, scfg.labels,
+                                    align.get("floor_to_ceiling_m"))
     if shipped is not None:  # the dataset's own truth beats any model
-        table, origin = shipped
+        table, origin, report = shipped
         out.save(table)
         cats = table.column("category").to_pylist()
         return {"outputs": [str(out.path)], "instances": len(cats), "labels_from": origin, "source": "ground_truth",
-                "by_category": {c: cats.count(c) for c in sorted(set(cats))}}
+                "by_category": {c: cats.count(c) for c in sorted(set(cats))}, "labels": report.as_dict(),
+                "goal_mapping": report.goal_mapping, **({"warnings": report.warnings} if report.warnings else {})}
     c2w, ks, kind = covering_cameras(scene, catalog, scfg, emb, np.asarray(attrs["source_to_aligned"]), cm)
     if not len(c2w):
         raise ValueError(f"scene {scene.scene_id!r} ({scene.name}): no covering poses (no free costmap cells)")
