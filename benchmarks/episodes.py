@@ -34,7 +34,7 @@ from navcore.io.datasets import CostmapDataset
 from navcore.nav.costmap import Costmap
 from navcore.nav.embodiment import Embodiment, Limits
 from navcore.nav.geodesic import eligible_cells
-from navcore.nav.poses import in_region
+from navcore.nav.poses import in_region, object_regions, point_regions
 from stages.episodes.config import EpisodesConfig
 from stages.episodes.validity import check_trajectory
 
@@ -223,15 +223,15 @@ def main(argv=None) -> dict:
             for e in te.itertuples():
                 t = groups[(task, e.episode_id)].sort_values("step")
                 if task == "objectnav":
-                    centres = np.array([g["position"][:2] for g in json.loads(e.goals_json)], np.float64)
+                    regions = object_regions(json.loads(e.goals_json))
                 else:
-                    centres = np.array([[e.goal_position_x, e.goal_position_y]], np.float64)
+                    regions = point_regions([[e.goal_position_x, e.goal_position_y]])
                 r = float(e.success_radius)
                 why = check_trajectory(
                     t["position_x"].to_numpy(), t["position_y"].to_numpy(), t["yaw"].to_numpy(),
                     t["linear_velocity"].to_numpy(np.float64), t["angular_velocity"].to_numpy(np.float64), cm,
                     emb.radius, Limits.of(emb), ecfg.dt,
-                    lambda x, y: bool(in_region(x, y, centres, r)),
+                    lambda x, y: bool(in_region(x, y, regions, r)),
                     e.goal_yaw if task == "imagenav" else None, e.heading_tolerance if task == "imagenav" else None)
                 checked += 1
                 valid_n += why is None

@@ -168,13 +168,46 @@ def read_label_file(path: str | Path, vocab: GoalVocabulary | None = None) -> li
     return out
 
 
+def gaussian_labels(scene, aligned, source_to_aligned: np.ndarray, report: LabelReport | None = None):
+    """Per-Gaussian ground-truth labels of a real scene: SceneSplat instance / segment arrays
+    (extras of the aligned Gaussians) with their class table, else the catalog entry's labelled
+    mesh transferred to the Gaussians; None when the scene ships neither.
+
+    Returns:
+        (instance [N], segment [N], class table or None) and `report` filled in (origin, label
+        set, transfer figures, a warning when the class table is missing).
+    """
+    report = report if report is not None else LabelReport()
+    spec = getattr(scene, "labels", None)
+    folder = Path(scene.path) if Path(scene.path).is_dir() else Path(scene.path).parent
+    if "instance" in aligned.extras and "segment" in aligned.extras:
+        names = class_table(spec, folder)
+        if names is None:
+            report.warnings.append(missing_table_warning(scene, folder))
+        report.origin = "scenesplat instance.npy / segment.npy"
+        report.label_set = names.name if names is not None else "none (class_<id>)"
+        return aligned.extras["instance"], aligned.extras["segment"], names
+    if spec is not None and spec.mesh:
+        mesh_path = spec.path(spec.mesh)
+        classes = resolve(spec.mesh_classes or spec.classes, Path(spec.base) if spec.base else None) \
+            if (spec.mesh_classes or spec.classes) else None
+        geom = read_labelled_geometry(mesh_path, classes)
+        geom.vertices = geom.vertices @ source_to_aligned[:3, :3].T + source_to_aligned[:3, 3]
+        seg, ins, dist = transfer(geom, aligned.means, spec.max_distance)
+        report.origin, report.label_set = f"{mesh_path} ({geom.kind})", geom.names.name
+        report.transfer = {"max_distance_m": spec.max_distance, "beyond_bound": int((dist > spec.max_distance).sum()),
+                           "median_distance_m": round(float(np.median(dist)), 4) if len(dist) else None}
+        return ins, seg, geom.names
+    return None
+
+
 def shipped_instances(scene, aligned, source_to_aligned: np.ndarray, vocab: GoalVocabulary | None = None,
                       cleaning: CleaningConfig | None = None, ceiling: float | None = None
                       ) -> tuple[pa.Table, str, LabelReport] | None:
     """The instance table (source ground_truth, aligned frame) from labels a real scene ships, in
-    this order: SceneSplat per-Gaussian instance / segment arrays (extras of the aligned
-    Gaussians), a labelled mesh or point cloud (`labels.mesh` of the catalog entry), a labels.json
-    beside the scene; None when there are none (synthetic scenes use their own truth).
+    this order: per-Gaussian labels (`gaussian_labels`: SceneSplat arrays, or the catalog entry's
+    labelled mesh or point cloud), a labels.json beside the scene; None when there are none
+    (synthetic scenes use their own truth).
 
     Args:
         scene: the catalog entry (its `labels` LabelSpec, if any). aligned: the aligned Gaussians.
@@ -186,31 +219,12 @@ def shipped_instances(scene, aligned, source_to_aligned: np.ndarray, vocab: Goal
     if scene.synthetic:
         return None
     vocab, cleaning = vocab or GoalVocabulary(), cleaning or CleaningConfig()
-    spec = getattr(scene, "labels", None)
-    folder = Path(scene.path) if Path(scene.path).is_dir() else Path(scene.path).parent
     report = LabelReport()
-    opacity = 1.0 / (1.0 + np.exp(-aligned.opacity_logits.astype(np.float64)))
-    if "instance" in aligned.extras and "segment" in aligned.extras:
-        names = class_table(spec, folder)
-        if names is None:
-            report.warnings.append(missing_table_warning(scene, folder))
-        report.origin = "scenesplat instance.npy / segment.npy"
-        report.label_set = names.name if names is not None else "none (class_<id>)"
-        labels, support = instances_from_gaussians(aligned.means, opacity, aligned.extras["instance"],
-                                                   aligned.extras["segment"], names, vocab, cleaning, ceiling, report)
-        return labels_to_table(labels, support), report.origin, report
-    if spec is not None and spec.mesh:
-        mesh_path = spec.path(spec.mesh)
-        classes = resolve(spec.mesh_classes or spec.classes, Path(spec.base) if spec.base else None) \
-            if (spec.mesh_classes or spec.classes) else None
-        geom = read_labelled_geometry(mesh_path, classes)
-        geom.vertices = geom.vertices @ source_to_aligned[:3, :3].T + source_to_aligned[:3, 3]
-        seg, ins, dist = transfer(geom, aligned.means, spec.max_distance)
-        report.origin, report.label_set = f"{mesh_path} ({geom.kind})", geom.names.name
-        report.transfer = {"max_distance_m": spec.max_distance, "beyond_bound": int((dist > spec.max_distance).sum()),
-                           "median_distance_m": round(float(np.median(dist)), 4) if len(dist) else None}
-        labels, support = instances_from_gaussians(aligned.means, opacity, ins, seg, geom.names, vocab, cleaning,
-                                                   ceiling, report)
+    per_gaussian = gaussian_labels(scene, aligned, source_to_aligned, report)
+    if per_gaussian is not None:
+        ins, seg, names = per_gaussian
+        opacity = 1.0 / (1.0 + np.exp(-aligned.opacity_logits.astype(np.float64)))
+        labels, support = instances_from_gaussians(aligned.means, opacity, ins, seg, names, vocab, cleaning, ceiling, report)
         return labels_to_table(labels, support), report.origin, report
     f = label_file_for(scene.path)
     if f is None:

@@ -73,7 +73,7 @@ STAGES: tuple[Stage, ...] = (
           memory_gb=3.0),
     Stage("asset", asset.run, ("costmap", "semantics"), ("asset",), version="4"),
     Stage("episodes", episodes.run, ("costmap", "semantics"), ("episodes", "task", "planner", "embodiment"),
-          version="3"),
+          version="4"),
     Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",), gpu=True, memory_gb=2.0),
     Stage("export", export.run, ("episodes", "asset", "goal_images"), ("export",), finalize=export.finalize),
     Stage("evaluate", evaluate.run, ("episodes",), ("evaluate", "episodes", "task", "embodiment"),

@@ -12,6 +12,8 @@ _PROJECT = Path(__file__).resolve().parents[1]
 _REAL_DIR = Path(os.environ.get("NAVARENA_REAL_DATA") or _PROJECT.parent / "shared" / "data" / "real")
 # the real trained indoor scenes (SOG, SPZ) beside them; NAVARENA_REAL_INDOOR_DATA points elsewhere
 _REAL_INDOOR_DIR = Path(os.environ.get("NAVARENA_REAL_INDOOR_DATA") or _REAL_DIR.parent / "real_indoor")
+# real labelled indoor scans (SceneSplat-style .npy folders with dataset label ids) beside them
+_REAL_LABELLED_DIR = Path(os.environ.get("NAVARENA_REAL_LABELLED_DATA") or _REAL_DIR.parent / "real_labelled")
 GRID_RES, GRID_RADIUS = 0.05, 0.1
 """Cell size and robot radius of the hand-made grid costmaps."""
 
@@ -29,6 +31,15 @@ def real_dir() -> Path:
 @pytest.fixture(scope="session")
 def real_indoor_dir() -> Path:
     return _REAL_INDOOR_DIR
+
+
+@pytest.fixture(scope="session")
+def scannet_scan() -> Path:
+    """The real ScanNet scene0000_02 scan (NYU40 labels; ../shared/data/real_labelled), or skip."""
+    p = _REAL_LABELLED_DIR / "scannet_scene0000_02"
+    if not (p / "segment.npy").is_file():
+        pytest.skip(f"real labelled data not present ({p}; see ../shared/data/real_labelled/README.md)")
+    return p
 
 
 @pytest.fixture(scope="session")

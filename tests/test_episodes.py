@@ -16,7 +16,7 @@ from navcore.nav.actions import MOVE_FORWARD, STOP
 from navcore.nav.embodiment import Embodiment, Limits
 from navcore.nav.geodesic import NavGraph, max_detour
 from navcore.nav.oracle import discrete_expert
-from navcore.nav.poses import integrate, relative_waypoints
+from navcore.nav.poses import integrate, point_regions, relative_waypoints
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.generate import EpisodeGenerator, habitat_keep_probability, scene_split, split_names
 from stages.episodes.planner import ScenePlanner, seed_ompl
@@ -194,7 +194,7 @@ def test_discrete_expert_reaches_the_goal_through_the_door(room_with_door):
     g = NavGraph(cm, ~cm.occupancy)
     goal = np.array([3.0, 0.5])
     f = g.field(cell_of(cm, *goal)[None])
-    acts = discrete_expert(f.grid, cm, (1.0, 0.5, 0.0), goal[None], 0.5)
+    acts = discrete_expert(f.grid, cm, (1.0, 0.5, 0.0), point_regions(goal[None]), 0.5)
     assert acts is not None and acts[-1] == STOP and (acts[:-1] != STOP).all()
     # replaying the actions never collides and ends inside the region
     x, y, yaw = 1.0, 0.5, 0.0
@@ -211,7 +211,7 @@ def test_discrete_expert_reaches_the_goal_through_the_door(room_with_door):
     n_fwd = int((acts == MOVE_FORWARD).sum())
     assert (d - 0.5) / 0.25 <= n_fwd <= (d - 0.5) / 0.25 * 1.3 + 2
     # ImageNav: turns to the goal heading before stopping
-    acts2 = discrete_expert(f.grid, cm, (1.0, 0.5, 0.0), goal[None], 0.5, goal_yaw=math.pi)
+    acts2 = discrete_expert(f.grid, cm, (1.0, 0.5, 0.0), point_regions(goal[None]), 0.5, goal_yaw=math.pi)
     yaw = sum(math.radians(15) * (1 if a == 2 else -1 if a == 3 else 0) for a in acts2)
     assert abs((yaw - math.pi + math.pi) % (2 * math.pi) - math.pi) <= math.radians(15) + 1e-9
 

@@ -30,7 +30,7 @@ def geodesic_potential(dist, ox, oy, res, x, y):
 
 
 @numba.njit(cache=True)
-def oracle_action(x, y, yaw, dist, clearance, ox, oy, res, thr, centres, radius, goal_yaw, yaw_tol,
+def oracle_action(x, y, yaw, dist, clearance, ox, oy, res, thr, regions, radius, goal_yaw, yaw_tol,
                   forward, turn):
     """The discrete oracle's next action from a pose.
 
@@ -40,7 +40,7 @@ def oracle_action(x, y, yaw, dist, clearance, ox, oy, res, thr, centres, radius,
     STOP (ImageNav: first turn to within yaw_tol of goal_yaw; goal_yaw NaN = no heading goal).
     Returns an action id, or -1 when no move makes progress (stuck).
     """
-    if in_region(x, y, centres, radius):
+    if in_region(x, y, regions, radius):
         if goal_yaw != goal_yaw:  # NaN
             return STOP
         e = (goal_yaw - yaw + math.pi) % (2 * math.pi) - math.pi
@@ -66,11 +66,11 @@ def oracle_action(x, y, yaw, dist, clearance, ox, oy, res, thr, centres, radius,
 
 
 @numba.njit(cache=True)
-def oracle_rollout(x, y, yaw, dist, clearance, ox, oy, res, thr, centres, radius, goal_yaw, yaw_tol,
+def oracle_rollout(x, y, yaw, dist, clearance, ox, oy, res, thr, regions, radius, goal_yaw, yaw_tol,
                     forward, turn, max_steps):
     out = np.empty(max_steps, np.int8)
     for s in range(max_steps):
-        a = oracle_action(x, y, yaw, dist, clearance, ox, oy, res, thr, centres, radius, goal_yaw, yaw_tol,
+        a = oracle_action(x, y, yaw, dist, clearance, ox, oy, res, thr, regions, radius, goal_yaw, yaw_tol,
                           forward, turn)
         if a < 0:
             return out[:0]
@@ -92,17 +92,17 @@ class DiscreteOracle:
     Args:
         dist_grid: [ny, nx] geodesic distance to the goal (set), metres, inf where unreachable.
         costmap: Costmap (moves are its swept-disk motions).
-        centres: [k, 2] success-region centres (PointNav / ImageNav: the goal; ObjectNav: the
-            category's instance centres), radius: their radius, metres.
+        regions: [k, 4] success regions (navcore.nav.poses.in_region; PointNav / ImageNav: the goal
+            point; ObjectNav: the category's instances, centres or footprints), radius: metres.
         goal_yaw: ImageNav: turn to within heading_tolerance / 2 of it before stopping.
         forward: metres per MOVE_FORWARD. turn: radians per TURN_*.
     """
 
-    def __init__(self, dist_grid: np.ndarray, costmap, centres: np.ndarray, radius: float,
+    def __init__(self, dist_grid: np.ndarray, costmap, regions: np.ndarray, radius: float,
                  goal_yaw: float | None = None, heading_tolerance: float = math.radians(30),
                  forward: float = 0.25, turn: float = math.radians(15)):
         self._args = (dist_grid, costmap.clearance, costmap.origin[0], costmap.origin[1], costmap.resolution,
-                      costmap.radius + costmap.margin, np.ascontiguousarray(centres, np.float64).reshape(-1, 2),
+                      costmap.radius + costmap.margin, np.ascontiguousarray(regions, np.float64).reshape(-1, 4),
                       float(radius), math.nan if goal_yaw is None else float(goal_yaw), heading_tolerance / 2,
                       float(forward), float(turn))
 
@@ -117,10 +117,10 @@ class DiscreteOracle:
         return acts if len(acts) else None
 
 
-def discrete_expert(dist_grid: np.ndarray, costmap, start, centres: np.ndarray, radius: float,
+def discrete_expert(dist_grid: np.ndarray, costmap, start, regions: np.ndarray, radius: float,
                     goal_yaw: float | None = None, heading_tolerance: float = math.radians(30),
                     forward: float = 0.25, turn: float = math.radians(15), max_steps: int = 1500) -> np.ndarray | None:
     """The discrete-action oracle's whole episode from `start` (x, y, yaw): [n] int8 action ids
     ending with STOP, or None when stuck or over budget (see DiscreteOracle for the arguments)."""
-    return DiscreteOracle(dist_grid, costmap, centres, radius, goal_yaw, heading_tolerance, forward,
+    return DiscreteOracle(dist_grid, costmap, regions, radius, goal_yaw, heading_tolerance, forward,
                           turn).episode(start, max_steps)

@@ -21,8 +21,13 @@ class TaskConfig:
     max_geodesic: float = 30.0
     """Longest allowed geodesic start-goal distance, metres."""
     success_radius: float = 0.5
-    """Success region radius around the goal (ObjectNav: around the nearest instance centre on the
-    floor), metres. Paper defaults: PointNav 0.5, ImageNav and ObjectNav 1.0."""
+    """Success region radius around the goal (ObjectNav: around the nearest instance, see
+    success_rule), metres. Paper defaults: PointNav 0.5, ImageNav and ObjectNav 1.0."""
+    success_rule: str = "footprint"
+    """ObjectNav: what success_radius is measured to: "footprint" (the instance's box on the floor,
+    as habitat's ObjectNav measures to the object: a bed or sofa is reached at its side) or
+    "centre" (the instance's centre, the paper's rule, for paper-exact evaluation). Each goal in
+    goals_json records its rule and footprint; the evaluator and metrics follow the stored rule."""
     heading_tolerance_deg: float = 30.0
     """ImageNav: the expert ends within this heading of the goal yaw (Pose SR criterion), degrees."""
     trivial_ratio: float = 1.1

@@ -12,10 +12,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from navcore.io.episode_schema import quantize_trajectory
+from navcore.labels import is_structure
 from navcore.nav.actions import ACTION_NAMES, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from navcore.nav.embodiment import Limits
 from navcore.nav.oracle import discrete_expert
-from navcore.nav.poses import in_region, relative_waypoints
+from navcore.nav.poses import in_region, point_regions, region_distance, relative_waypoints
 from stages.episodes.config import DifficultyConfig, EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.planner import ScenePlanner, seed_ompl
 from stages.episodes.rollout import rollout
@@ -119,11 +120,13 @@ class EpisodeGenerator:
         step = max(1, int(round(t.view_point_spacing / res)))
         by_cat: dict[str, list[dict]] = {}
         for inst in self.instances:
-            if inst["category"] not in t.categories:
+            if inst["category"] not in t.categories or is_structure(inst["category"]):
                 continue
             c = np.array([inst["center_x"], inst["center_y"]])
-            # lattice cells within the success radius of the centre that the graph holds
-            r = int(math.ceil(t.success_radius / res)) + 1
+            region = success_region(inst, t.success_rule)
+            # lattice cells within the success radius of the region that the graph holds
+            half = max(region[2] - region[0], region[3] - region[1]) / 2
+            r = int(math.ceil((t.success_radius + half) / res)) + 1
             ci, cj = int((c[1] - self.cm.origin[1]) / res), int((c[0] - self.cm.origin[0]) / res)
             ii, jj = np.mgrid[ci - r:ci + r + 1, cj - r:cj + r + 1]
             keep = (ii % step == 0) & (jj % step == 0) & (ii >= 0) & (jj >= 0) & \
@@ -131,7 +134,7 @@ class EpisodeGenerator:
             cells = np.stack([ii[keep], jj[keep]], 1)
             cells = cells[self.graph.valid[cells[:, 0], cells[:, 1]]]
             xy = self.cm.cell_centers(cells)
-            near = np.hypot(*(xy - c).T) <= t.success_radius - t.view_point_margin
+            near = region_distance(xy, region[None]) <= t.success_radius - t.view_point_margin
             cells, xy = cells[near], xy[near]
             if not len(cells):
                 self.rejections["instance_without_view_points"] += 1
@@ -142,7 +145,8 @@ class EpisodeGenerator:
                 cells, xy = cells[pick], xy[pick]
             yaw = np.arctan2(c[1] - xy[:, 1], c[0] - xy[:, 0])
             by_cat.setdefault(inst["category"], []).append(
-                {"instance": inst, "cells": cells, "xy": xy, "yaw": yaw, "centre": c})
+                {"instance": inst, "cells": cells, "xy": xy, "yaw": yaw, "centre": c, "region": region,
+                 "rule": t.success_rule})
         goals = []
         for cat in sorted(by_cat):
             insts = by_cat[cat]
@@ -171,10 +175,10 @@ class EpisodeGenerator:
             goal_xy, goal_yaw = goal.xy, goal.yaw
             goal_poses = np.array([[goal.xy[0], goal.xy[1], goal.yaw if goal.yaw is not None else 0.0]])
         euclid = float(np.hypot(*(goal_xy - start_xy)))
-        # success-region centres: the goal, or every instance of the ObjectNav category
-        centres = np.ascontiguousarray(
-            [v["centre"] for v in goal.instances] if goal.kind == "object" else goal_xy[None], np.float64)
-        if in_region(start_xy[0], start_xy[1], centres, t.success_radius):
+        # success regions: the goal, or every instance of the ObjectNav category
+        regions = np.ascontiguousarray([v["region"] for v in goal.instances], np.float64) \
+            if goal.kind == "object" else point_regions(goal_xy[None])
+        if in_region(start_xy[0], start_xy[1], regions, t.success_radius):
             self.rejections["start_in_success_region"] += 1  # trivial: SR 1 without a step (Habitat rejects these)
             return None
         if cm.is_motion_valid(start_xy[0], start_xy[1], goal_xy[0], goal_xy[1]):
@@ -196,7 +200,7 @@ class EpisodeGenerator:
         path, length = best
         final_yaw = goal_yaw if goal.kind in ("image", "object") else None
         ro = as_stored(rollout(path, start_yaw, final_yaw, self.limits, self.ecfg.dt))
-        success = lambda x, y: bool(in_region(x, y, centres, t.success_radius))  # noqa: E731
+        success = lambda x, y: bool(in_region(x, y, regions, t.success_radius))  # noqa: E731
         tol = math.radians(t.heading_tolerance_deg) if goal.kind == "image" else None
         why = check_trajectory(ro["x"], ro["y"], ro["yaw"], ro["v"], ro["w"], cm, self.emb.radius, self.limits,
                                self.ecfg.dt, success, goal_yaw if goal.kind == "image" else None, tol)
@@ -208,7 +212,7 @@ class EpisodeGenerator:
         geo = min(geo, travelled)  # the expert found a shorter valid path than the grid metric
         oracle = None
         if self.ecfg.oracle:
-            oracle = discrete_expert(fld.grid, cm, (start_xy[0], start_xy[1], start_yaw), centres, t.success_radius,
+            oracle = discrete_expert(fld.grid, cm, (start_xy[0], start_xy[1], start_yaw), regions, t.success_radius,
                                      goal_yaw if goal.kind == "image" else None,
                                      math.radians(t.heading_tolerance_deg), self.ecfg.actions.forward_step,
                                      self.ecfg.actions.turn, difficulty_budget)
@@ -292,9 +296,8 @@ class EpisodeGenerator:
         else:
             euclid = np.hypot(*(self.cm.cell_centers(self.graph.cells[nodes]) - goal.xy).T)
             w = habitat_keep_probability(d[nodes] / np.maximum(euclid, 1e-9), t.trivial_ratio)
-        centres = np.array([v["centre"] for v in goal.instances]) if goal.kind == "object" else goal.xy[None]
-        xy = self.cm.cell_centers(self.graph.cells[nodes])
-        near = np.hypot(xy[:, None, 0] - centres[None, :, 0], xy[:, None, 1] - centres[None, :, 1]).min(1, initial=np.inf)
+        regions = np.array([v["region"] for v in goal.instances]) if goal.kind == "object" else point_regions(goal.xy[None])
+        near = region_distance(self.cm.cell_centers(self.graph.cells[nodes]), regions)
         keep = (w > 0) & (near > t.success_radius)  # no start inside its own success region
         nodes, w = nodes[keep], w[keep]
         if not dc.balance:
@@ -384,6 +387,17 @@ class EpisodeGenerator:
                           n_req, from_expert, self.planner.fallbacks)
 
 
+def success_region(inst: dict, rule: str) -> np.ndarray:
+    """[4] success region of an instance-table row: its footprint (the box on the floor) under
+    rule "footprint" when the box is known, else its centre (the paper's rule, "centre")."""
+    if rule not in ("footprint", "centre"):
+        raise ValueError(f"task.success_rule={rule!r}; choose footprint | centre")
+    box = [inst.get(k) for k in ("min_x", "min_y", "max_x", "max_y")]
+    if rule == "footprint" and all(v is not None and math.isfinite(v) for v in box):
+        return np.array(box, np.float64)
+    return np.array([inst["center_x"], inst["center_y"], inst["center_x"], inst["center_y"]], np.float64)
+
+
 def as_stored(ro: dict) -> dict:
     """A rollout with its poses and controls rounded to their stored precision (float32): every
     check, length and oracle below sees exactly what the trajectory table will hold."""
@@ -405,6 +419,9 @@ def _instance_json(v: dict) -> dict:
             "position": [inst["center_x"], inst["center_y"], inst["center_z"]],
             "bounding_box": {"min": [inst["min_x"], inst["min_y"], inst["min_z"]],
                              "max": [inst["max_x"], inst["max_y"], inst["max_z"]]},
+            "success_rule": v["rule"],
+            **({"footprint": {"min": [float(v["region"][0]), float(v["region"][1])],
+                              "max": [float(v["region"][2]), float(v["region"][3])]}} if v["rule"] == "footprint" else {}),
             "view_points": [{"position": [float(x), float(y), 0.0], "yaw": float(w)}
                             for (x, y), w in zip(v["xy"], v["yaw"])]}
 

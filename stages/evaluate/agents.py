@@ -52,7 +52,7 @@ class OracleAgent:
     def bind(self, env) -> None:
         self.env = env
         ep = env.state.ep
-        self.oracle = DiscreteOracle(env.ctx.field(ep).grid, env.ctx.costmap, ep.centres, ep.success_radius,
+        self.oracle = DiscreteOracle(env.ctx.field(ep).grid, env.ctx.costmap, ep.regions, ep.success_radius,
                                      ep.goal_yaw, ep.heading_tolerance, env.cfg.actions.forward_step, env.turn)
 
     def act(self, obs: dict):

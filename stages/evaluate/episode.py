@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from navcore.nav.poses import in_region
+from navcore.nav.poses import in_region, object_regions, point_regions, region_distance
 
 
 @dataclass
@@ -31,9 +31,12 @@ class Episode:
     reference_path: np.ndarray | None = None  # [n, 2] expert positions (for DTW)
     scene_id: str = ""
     extra: dict = field(default_factory=dict)
+    regions: np.ndarray | None = None  # [k, 4] success regions (in_region); None: the centres as points
 
     def __post_init__(self):
-        self.centres = np.ascontiguousarray(self.centres, np.float64).reshape(-1, 2)  # as in_region takes them
+        self.centres = np.ascontiguousarray(self.centres, np.float64).reshape(-1, 2)
+        self.regions = point_regions(self.centres) if self.regions is None else \
+            np.ascontiguousarray(self.regions, np.float64).reshape(-1, 4)  # as in_region takes them
 
     @classmethod
     def from_row(cls, row: dict, reference_path: np.ndarray | None = None) -> "Episode":
@@ -45,14 +48,15 @@ class Episode:
         goals = json.loads(row["goals_json"]) if row.get("goals_json") else []
         if task == "objectnav":
             centres = np.array([g["position"][:2] for g in goals], float)
+            regions = object_regions(goals)  # each goal's stored success rule: footprint or centre
             sources = np.array([v["position"][:2] for g in goals for v in g["view_points"]], float)
         else:
-            centres, sources = goal[None], goal[None]
+            centres, sources, regions = goal[None], goal[None], None
         yaw = row.get("goal_yaw")
         return cls(
             episode_id=row["episode_id"], task=task,
             start=(float(row["start_position_x"]), float(row["start_position_y"]), float(row["start_yaw"])),
-            goal_xy=goal, centres=centres, success_radius=float(row["success_radius"]),
+            goal_xy=goal, centres=centres, regions=regions, success_radius=float(row["success_radius"]),
             geodesic=float(row["geodesic_distance"]), max_steps=int(row["max_steps"]),
             difficulty=row.get("difficulty", ""),
             goal_yaw=float(yaw) if task == "imagenav" and yaw is not None and not math.isnan(yaw) else None,
@@ -67,8 +71,9 @@ class Episode:
         return np.array([self.goal_xy[0], self.goal_xy[1], self.goal_yaw or 0.0], float)
 
     def in_region(self, x: float, y: float) -> bool:
-        return bool(in_region(float(x), float(y), self.centres, self.success_radius))
+        return bool(in_region(float(x), float(y), self.regions, self.success_radius))
 
-    def distance_to_centres(self, x: float, y: float) -> float:
-        """Planar Euclidean distance to the nearest success-region centre (NE)."""
-        return float(np.hypot(self.centres[:, 0] - x, self.centres[:, 1] - y).min())
+    def distance_to_goal(self, x: float, y: float) -> float:
+        """Planar Euclidean distance to the nearest success region (NE): its point, or the object's
+        footprint under the footprint rule (0 on it)."""
+        return float(region_distance([[x, y]], self.regions)[0])

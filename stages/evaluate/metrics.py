@@ -124,7 +124,7 @@ class NE(Metric):
     name = "ne"
 
     def __call__(self, s, d0, d_final, protocol):
-        return s.ep.distance_to_centres(s.x, s.y)
+        return s.ep.distance_to_goal(s.x, s.y)
 
 
 class NEGeodesic(Metric):

@@ -155,8 +155,11 @@ def plot_trajectory(cm, row: dict, ep: Episode, dataset) -> str:
     tr = row["trajectory"]
     ax.plot(tr[:, 0], tr[:, 1], color="tab:red", lw=1.2, label=f"agent ({'success' if row['sr'] else 'failure'})")
     ax.plot(*ep.start[:2], "o", color="tab:blue", label="start")
-    for c in ep.centres:
-        ax.add_patch(plt.Circle(c, ep.success_radius, color="tab:orange", alpha=0.35))
+    from matplotlib.patches import FancyBboxPatch
+
+    for x0, y0, x1, y1 in ep.regions:  # a point's disc, or a footprint grown by the radius
+        ax.add_patch(FancyBboxPatch((x0, y0), x1 - x0, y1 - y0, boxstyle=f"round,pad={ep.success_radius}",
+                                    color="tab:orange", alpha=0.35))
     ax.set_title(f"{ep.task} {ep.episode_id} ({ep.difficulty}): SPL {row['spl']:.2f}")
     ax.legend(loc="lower right", fontsize=7)
     fig.tight_layout()

@@ -123,19 +123,24 @@ class OracleSegmenter(Segmenter):
 
     @classmethod
     def from_scene(cls, scene, catalog, renderer, cfg, seed: int) -> "OracleSegmenter":
-        """Ground truth of a synthetic scene (its per-Gaussian instance ids and labels.json); the
+        """Ground truth of a synthetic scene (its per-Gaussian instance ids and labels.json), or of
+        a real scene that ships per-Gaussian labels (SceneSplat arrays or a labelled mesh, see
+        navcore.instances.gaussian_labels: its cleaned instances, by the goal vocabulary); the
         corruption of `cfg.oracle`."""
-        src = catalog.dataset("source_synthetic", scene) if scene.synthetic else None
-        ids = src.read_ground_truth("instance_ids.npy") if src is not None else None
-        if ids is None:
-            raise SegmenterUnavailable(f"scene {scene.scene_id!r} ({scene.name}): the oracle segmenter needs the per-Gaussian "
-                             "ground truth of a synthetic scene; use semantics.segmenter=sam3 for this scene")
+        if not scene.synthetic:
+            ids, categories = real_truth(scene, catalog, cfg)
+        else:
+            src = catalog.dataset("source_synthetic", scene)
+            ids = src.read_ground_truth("instance_ids.npy")
+            if ids is None:
+                raise SegmenterUnavailable(f"scene {scene.scene_id!r} ({scene.name}): the oracle segmenter needs the "
+                                           "per-Gaussian ground truth of a synthetic scene")
+            labels = src.read_ground_truth("labels.json")["labels"]
+            categories = {int(lab["instance_id"]): cfg.prompt(lab["category"]) for lab in labels}
         if len(ids) != renderer.num_gaussians:
-            raise SegmenterUnavailable(f"scene {scene.scene_id!r}: {src.ground_truth('instance_ids.npy')} labels {len(ids)} Gaussians, the "
-                             f"scene has {renderer.num_gaussians} (ingest dropped some); the oracle cannot align them")
-        labels = src.read_ground_truth("labels.json")["labels"]
-        return cls(renderer, ids, {int(lab["instance_id"]): cfg.prompt(lab["category"]) for lab in labels},
-                   cfg.oracle.corruption(), seed, cfg.oracle.min_weight)
+            raise SegmenterUnavailable(f"scene {scene.scene_id!r}: the ground truth labels {len(ids)} Gaussians, the "
+                                       f"scene has {renderer.num_gaussians} (ingest dropped some); the oracle cannot align them")
+        return cls(renderer, ids, categories, cfg.oracle.corruption(), seed, cfg.oracle.min_weight)
 
     def instance_map(self, viewmat: np.ndarray, K: np.ndarray, width: int, height: int,
                      weights: np.ndarray | None = None) -> np.ndarray:
@@ -152,3 +157,30 @@ class OracleSegmenter(Segmenter):
         imap = self.instance_map(context["viewmat"], context["K"], w, h, context.get("extra"))
         return corrupt(imap, self.categories, prompts, self.c, self.rng)
 
+
+
+def real_truth(scene, catalog, cfg) -> tuple[np.ndarray, dict[int, str]]:
+    """Per-Gaussian instance ids (1..K, 0 = none) and {id: prompt} of a real scene's shipped labels:
+    the instances the ground-truth path keeps (navcore.instances.shipped_instances), so that the
+    oracle sees what the shipped table holds; raises SegmenterUnavailable without labels."""
+    from navcore.instances import gaussian_labels, shipped_instances
+    from navcore.labels import GoalVocabulary
+
+    gs, attrs = catalog.dataset("aligned", scene).load()
+    t = np.asarray(attrs["source_to_aligned"])
+    per = gaussian_labels(scene, gs, t)
+    if per is None:
+        raise SegmenterUnavailable(f"scene {scene.scene_id!r} ({scene.name}): the oracle segmenter needs per-Gaussian ground "
+                                   "truth (a synthetic scene, SceneSplat instance.npy / segment.npy, or labels.mesh in the "
+                                   "catalog entry); use semantics.segmenter=sam3 or open_vocab for this scene")
+    inst = np.asarray(per[0])
+    vocab = GoalVocabulary(tuple(cfg.categories), dict(cfg.goal_map))
+    ceiling = catalog.dataset("alignment", scene).load().get("floor_to_ceiling_m")
+    table, _, _ = shipped_instances(scene, gs, t, vocab, cfg.labels, ceiling)
+    kept = dict(zip(table.column("instance_id").to_pylist(), table.column("category").to_pylist()))
+    order = np.array(sorted(kept), np.int64)
+    if not len(order):
+        return np.zeros(len(inst), np.int64), {}
+    pos = np.minimum(np.searchsorted(order, inst), len(order) - 1)
+    ids = np.where(order[pos] == inst, pos + 1, 0).astype(np.int64)
+    return ids, {k: cfg.prompt(kept[int(iid)]) for k, iid in enumerate(order, 1)}
