@@ -16,7 +16,7 @@ from navcore.nav.actions import MOVE_FORWARD, STOP
 from navcore.nav.embodiment import Embodiment, Limits
 from navcore.nav.geodesic import NavGraph, max_detour
 from navcore.nav.oracle import discrete_expert
-from navcore.nav.poses import integrate, point_regions, relative_waypoints
+from navcore.nav.poses import in_region, integrate, object_regions, point_regions, region_distance, relative_waypoints
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.generate import EpisodeGenerator, habitat_keep_probability, scene_split, split_names
 from stages.episodes.planner import ScenePlanner, seed_ompl
@@ -254,8 +254,10 @@ def test_generator_yields_valid_balanced_episodes(task, room_with_door):
         assert e["oracle_actions"][-1] == STOP
         if task == "objectnav":
             assert e["goal_object_id"] == 4 and e["goal_object_category"] == "chair"
-            vp = json.loads(e["goals_json"])[0]["view_points"]
-            assert all(math.hypot(p["position"][0] - 3.5, p["position"][1] - 2.5) <= 1.0 for p in vp)
+            goal = json.loads(e["goals_json"])[0]
+            assert goal["success_rule"] == "footprint" and goal["footprint"] == {"min": [3.3, 2.3], "max": [3.7, 2.7]}
+            vp = np.array([p["position"][:2] for p in goal["view_points"]])  # within the radius of the footprint
+            assert (region_distance(vp, np.array([[3.3, 2.3, 3.7, 2.7]])) <= 1.0 - tcfg.view_point_margin + 1e-9).all()
     # same seed, same episodes
     again = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), Embodiment(radius=cm.radius), "t/scene", 3, inst)
     assert [e["start_position_x"] for e in again.generate().episodes] == [e["start_position_x"] for e in res.episodes]
@@ -279,9 +281,8 @@ def test_stored_episodes_query_with_pandas_and_pass_the_recheck(episode_run):
         assert len(t) == e["num_steps"] and t["step"].tolist() == list(range(len(t)))
         centres = np.array([[e["goal_position_x"], e["goal_position_y"]]])
         r = float(e["success_radius"])
-        if task == "objectnav":
-            centres = np.array([g["position"][:2] for g in json.loads(e["goals_json"])])
-        success = lambda x, y: bool((np.hypot(*(centres - (x, y)).T) <= r + 1e-9).any())  # noqa: E731
+        regions = object_regions(json.loads(e["goals_json"])) if task == "objectnav" else point_regions(centres)
+        success = lambda x, y: bool(region_distance([[x, y]], regions)[0] <= r + 1e-9)  # noqa: E731
         assert not success(e["start_position_x"], e["start_position_y"]), (task, eid)  # no trivial episode
         why = check_trajectory(t["position_x"].to_numpy(), t["position_y"].to_numpy(), t["yaw"].to_numpy(),
                                t["linear_velocity"].to_numpy(np.float64), t["angular_velocity"].to_numpy(np.float64),
@@ -626,3 +627,29 @@ def test_episodes_do_not_start_blind(room_with_door):
             assert res.rejections["start_view_blind"] > 0 and views.checks > len(res.episodes)
             assert not any(blind(e["goal_position_x"], e["goal_position_y"], yaw(e, "goal_")) for e in res.episodes)
     assert counts[False] == 0 and counts[True] >= 3
+
+
+def test_success_regions_footprint_and_centre_known_answers(room_with_door):
+    """A 2 x 1 m bed: under the footprint rule its side is reached 1 m from its edge, under the
+    paper's centre rule only 1 m from its centre; the stored rule decides in the evaluator."""
+    from stages.episodes.generate import success_region
+    from stages.evaluate.episode import Episode
+
+    bed = {"center_x": 2.0, "center_y": 1.0, "min_x": 1.0, "min_y": 0.5, "max_x": 3.0, "max_y": 1.5}
+    fp, c = success_region(bed, "footprint"), success_region(bed, "centre")
+    assert fp.tolist() == [1.0, 0.5, 3.0, 1.5] and c.tolist() == [2.0, 1.0, 2.0, 1.0]
+    assert success_region({**bed, "min_x": float("nan")}, "footprint").tolist() == c.tolist()  # no box: the centre
+    with pytest.raises(ValueError, match="success_rule"):
+        success_region(bed, "middle")
+    p = (3.9, 1.0)  # 0.9 m from the bed's end, 1.9 m from its centre
+    assert in_region(*p, fp[None], 1.0) and not in_region(*p, c[None], 1.0)
+    assert region_distance([p, (2.0, 1.2)], fp[None]).tolist() == pytest.approx([0.9, 0.0])
+    row = {"episode_id": "e", "task_type": "objectnav", "start_position_x": 0.0, "start_position_y": 0.0, "start_yaw": 0.0,
+           "goal_position_x": 3.9, "goal_position_y": 1.0, "success_radius": 1.0, "geodesic_distance": 4.0,
+           "max_steps": 500, "heading_tolerance": float("nan"), "goal_yaw": float("nan"), "goal_object_category": "bed"}
+    goal = {"object_id": 1, "object_category": "bed", "position": [2.0, 1.0, 0.5], "view_points": [{"position": [3.9, 1.0, 0]}]}
+    foot = Episode.from_row({**row, "goals_json": json.dumps([{**goal, "success_rule": "footprint",
+                                                                "footprint": {"min": [1.0, 0.5], "max": [3.0, 1.5]}}])})
+    paper = Episode.from_row({**row, "goals_json": json.dumps([goal])})  # stored before the rule: the centre
+    assert foot.in_region(*p) and foot.distance_to_goal(*p) == pytest.approx(0.9)
+    assert not paper.in_region(*p) and paper.distance_to_goal(*p) == pytest.approx(1.9)

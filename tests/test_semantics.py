@@ -248,9 +248,9 @@ def test_instance_table_round_trip_and_oracle_levels():
 
     labels = [{"instance_id": 1, "category": "chair", "position": [1.0, 2.0, 0.4],
                "bounding_box": {"min": [0.8, 1.8, 0.0], "max": [1.2, 2.2, 0.8]}, "confidence": 0.75,
-               "source": "model_predicted"},
+               "source": "model_predicted", "dataset_class": None},
               {"instance_id": 2, "category": "bed", "position": [3.0, 1.0, 0.5], "bounding_box": None,
-               "confidence": 1.0, "source": "ground_truth"}]
+               "confidence": 1.0, "source": "ground_truth", "dataset_class": "double_bed"}]
     assert table_to_labels(labels_to_table(labels)) == labels
     assert OracleConfig(level="heavy").corruption().miss_rate == 0.3
     assert OracleConfig(level="heavy", miss_rate=0.5).corruption().bleed_px == 6
