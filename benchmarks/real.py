@@ -159,11 +159,68 @@ def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) ->
         "free_area_m2": main.get("free_area_m2"), "main_component_area_m2": main.get("main_component_area_m2"),
         "free_components": main.get("free_components"),
         "episodes": episode_counts(catalog, scene), "oracle_sr": oracle_sr(data, scene.scene_id),
+        "semantics": {k: v for k, v in marker(catalog, scene, "semantics").get("info", {}).items()
+                      if k in ("labels_from", "shortfall", "instances", "segmenter")},
+        "objectnav_rejections": marker(catalog, scene, "episodes").get("info", {}).get("tasks", {})
+        .get("objectnav", {}).get("rejections", {}),
         "render_fp_est": round(rc["fp_est"], 4), "render_fn_est": round(rc["fn_est"], 4),
         "render_check": {k: rc[k] for k in ("render_free", "render_blocked", "costmap_blocked", "poses")}
         | {"seconds": round(rc_s, 1)},
         "pictures": pics,
     }
+
+
+def objectnav_labelled(data: Path, executor: str, pictures: Path) -> list[dict]:
+    """ObjectNav on the real labelled scans (scenes=real_labelled): episodes per category, the
+    goal mapping, the oracle's SR under both protocols, and one rendered goal view per category
+    (CPU renderer, 320x240, from the first view point of the episode's goal instance; pictures
+    kept out of git)."""
+    import pandas as pd
+    from omegaconf import OmegaConf
+    from PIL import Image
+
+    from navcore.render import Renderer
+    from navcore.render.camera import embodiment_camera
+    from pipeline.catalog import Catalog
+    from pipeline.config import CONF_DIR
+    from pipeline.executor import execute
+
+    over = ["scenes=real_labelled", f"executor={executor}", "task=[objectnav]"]
+    s = execute(compose(str(data), *over, "stages=[episodes]"))
+    for p in PROTOCOLS:
+        execute(compose(str(data), *over, "stages=[evaluate]", "evaluate.agent=oracle", f"evaluate.protocol={p}",
+                        "evaluate.render=false", "evaluate.tasks=[objectnav]"))
+    cfg = compose(str(data), *over)
+    emb = OmegaConf.to_object(cfg.embodiment)
+    catalog = Catalog(CONF_DIR.parent / cfg.scenes.catalog, data)
+    out = []
+    for scene in catalog.select():
+        sem = marker(catalog, scene, "semantics").get("info", {})
+        ep_info = marker(catalog, scene, "episodes").get("info", {}).get("tasks", {}).get("objectnav", {})
+        row = {"scene": scene.name, "labels_from": sem.get("labels_from"), "goal_mapping": sem.get("goal_mapping", {}),
+               "failures": [f["error"] for f in s["failures"] if f["scene_id"] == scene.scene_id],
+               "episodes": 0, "by_category": {}, "rejections": ep_info.get("rejections", {}),
+               "oracle_sr": oracle_sr(data, scene.scene_id), "goal_views": {}}
+        p = catalog.path("episodes", scene, task="objectnav")
+        if p.exists():
+            e = pd.read_parquet(p)
+            row["episodes"] = len(e)
+            row["by_category"] = {str(k): int(v) for k, v in e["goal_object_category"].value_counts().sort_index().items()}
+            gs, _ = catalog.dataset("aligned", scene).load()
+            poses = []
+            for cat, g in e.groupby("goal_object_category"):
+                goal = next(x for x in json.loads(g.iloc[0]["goals_json"]) if x["object_id"] == g.iloc[0]["goal_object_id"])
+                v = goal["view_points"][0]
+                poses.append((str(cat), [v["position"][0], v["position"][1], v["yaw"]]))
+            if poses:
+                vm, ks, w, h = embodiment_camera(emb, np.array([q for _, q in poses]), 320, 240)
+                rgb = Renderer(gs, "cpu").render(vm, ks, w, h).rgb.numpy()
+                for (cat, _), im in zip(poses, rgb):
+                    name = f"{scene.name}_goal_{cat}.png"
+                    Image.fromarray((im * 255).round().astype(np.uint8)).save(pictures / name)
+                    row["goal_views"][cat] = name
+        out.append(row)
+    return out
 
 
 def synthetic_validation(n_scenes: int, poses: int, gaussians: int) -> dict:
@@ -226,6 +283,7 @@ def markdown(rep: dict, pictures_rel: str) -> str:
              for st in STAGES]
     for name, f in rows:
         lines.append(f"| {name} | " + " | ".join(f(s) for s in rep["scenes"]) + " |")
+    lines += objectnav_markdown(rep)
     v = rep["synthetic"]
     lines += ["", f"## Realistic synthetic scenes (realism moderate, {len(v['scenes'])} scenes, against the mesh)", "",
               "| figure | value | target |", "|---|---|---|",
@@ -250,6 +308,30 @@ def markdown(rep: dict, pictures_rel: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def objectnav_markdown(rep: dict) -> list[str]:
+    """ObjectNav on the real scenes: the trained captures (why none without labels) and the
+    labelled scans (per category, the goal mapping, the oracle's SR, the goal views)."""
+    lines = ["", "## ObjectNav on real scenes", "", "| scene | labels | episodes by category | oracle SR distance / "
+             "explicit stop | no episodes because |", "|---|---|---|---|---|"]
+    for s in rep["scenes"]:
+        sem = s.get("semantics", {})
+        why = "; ".join(x.get("reason", "") for x in sem.get("shortfall", [])) or \
+            ", ".join(f"{k} {v}" for k, v in s.get("objectnav_rejections", {}).items())
+        lines.append(f"| {s['scene']} | {sem.get('labels_from') or 'none'} | {s['episodes']['objectnav']} | "
+                     f"{s['oracle_sr']['distance'].get('objectnav')} / {s['oracle_sr']['explicit_stop'].get('objectnav')} | "
+                     f"{why if not s['episodes']['objectnav'] else ''} |")
+    for s in rep.get("objectnav_labelled", []):
+        cats = ", ".join(f"{k} {v}" for k, v in s["by_category"].items())
+        why = "" if s["episodes"] else ("; ".join(s["failures"]) or ", ".join(f"{k} {v}" for k, v in s["rejections"].items()))
+        lines.append(f"| {s['scene']} (labelled scan) | {s['labels_from']} | {s['episodes']} ({cats}) | "
+                     f"{s['oracle_sr']['distance'].get('objectnav')} / {s['oracle_sr']['explicit_stop'].get('objectnav')} | {why} |")
+    for s in rep.get("objectnav_labelled", []):
+        if s["goal_mapping"]:
+            lines += ["", f"{s['scene']}: goal categories from dataset classes: " + "; ".join(
+                f"{g} <- " + ", ".join(f"{c} ({n})" for c, n in sorted(m.items())) for g, m in sorted(s["goal_mapping"].items()))]
+    return lines
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--data", default="data")
@@ -258,6 +340,8 @@ def main(argv=None) -> int:
     ap.add_argument("--executor", default="sync", help="pipeline executor for the real scenes")
     ap.add_argument("--poses", type=int, default=200, help="poses of the render check per scene")
     ap.add_argument("--synthetic-scenes", type=int, default=3)
+    ap.add_argument("--no-labelled", dest="labelled", action="store_false",
+                    help="skip ObjectNav on the real labelled scans (scenes=real_labelled)")
     ap.add_argument("--synthetic-gaussians", type=int, default=300_000)
     args = ap.parse_args(argv)
     from pipeline.catalog import Catalog
@@ -278,7 +362,8 @@ def main(argv=None) -> int:
             continue
         scenes.append(scene_report(data, catalog, scene, cfg, args.poses, pictures))
         print(json.dumps({k: v for k, v in scenes[-1].items() if k != "pictures"}), flush=True)
-    rep = {"machine": machine(), "scenes": scenes, "failures": failures,
+    labelled = objectnav_labelled(data / "real_labelled", args.executor, pictures) if args.labelled else []
+    rep = {"machine": machine(), "scenes": scenes, "failures": failures, "objectnav_labelled": labelled,
            "pipeline_wall_s": round(time.perf_counter() - t0, 1),
            "synthetic": synthetic_validation(args.synthetic_scenes, args.poses, args.synthetic_gaussians)}
     rep.update({k: rep["synthetic"][k] for k in ("realism_fp_state", "realism_fn_state", "estimator_abs_err")})

@@ -230,4 +230,10 @@ def shipped_instances(scene, aligned, source_to_aligned: np.ndarray, vocab: Goal
     if f is None:
         return None
     report.origin = str(f)
-    return labels_to_table(transform_labels(read_label_file(f, vocab), source_to_aligned)), str(f), report
+    labels = read_label_file(f, vocab)
+    for lab in labels:
+        goal = vocab.goal_of(lab["dataset_class"])
+        if goal is not None:
+            m = report.goal_mapping.setdefault(goal, {})
+            m[lab["dataset_class"]] = m.get(lab["dataset_class"], 0) + 1
+    return labels_to_table(transform_labels(labels, source_to_aligned)), str(f), report
