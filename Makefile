@@ -14,7 +14,7 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install -q --upgrade pip
 	# the CPU build of torch (an unpinned torch would pull several GB of CUDA packages)
 	$(BIN)/python -m pip install -q "torch==2.13.0" || $(BIN)/python -m pip install -q torch --index-url https://download.pytorch.org/whl/cpu
-	$(BIN)/python -m pip install -q -e ".[test,bench,lerobot]"
+	$(BIN)/python -m pip install -q -e ".[test,bench,lerobot,open_vocab]"
 	# the lerobot package and the torchvision / torchcodec it imports, next to our CPU torch 2.13
 	$(BIN)/python -m pip install -q --no-deps "lerobot==0.4.4" "torchvision==0.25.0" "torchcodec==0.13.0"
 	sh scripts/system_packages.sh

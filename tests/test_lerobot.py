@@ -12,16 +12,8 @@ from benchmarks.render_gpu import psnr
 
 
 def _lerobot():
-    """lerobot's LeRobotDataset. The CPU torch here has no matching CPU torchvision wheel: the
-    PyPI one is built against CUDA torch, its C++ operators cannot load, and its Python part then
-    fails at import on one unguarded fake registration (torchvision::nms). Declaring that
-    operator's schema first lets the pure-Python torchvision (transforms, which lerobot imports)
-    load; nothing here calls the operator. With a matching torchvision this does nothing."""
+    """lerobot's LeRobotDataset (its test requests conftest's torchvision_shim)."""
     pytest.importorskip("torchcodec", reason="torchcodec needs FFmpeg 5 shared libraries (scripts/system_packages.sh)")
-    try:
-        torch.ops.torchvision.nms
-    except (AttributeError, RuntimeError):
-        torch.library.define("torchvision::nms", "(Tensor dets, Tensor scores, float iou_threshold) -> Tensor")
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     return LeRobotDataset
@@ -38,7 +30,7 @@ def exported(episode_run, tmp_path_factory):
     return root, out, res
 
 
-def test_lerobot_dataset_class_loads_the_export(exported):
+def test_lerobot_dataset_class_loads_the_export(exported, torchvision_shim):
     from navcore.nav.embodiment import Embodiment
     from navcore.render import Renderer
     from navcore.render.camera import embodiment_camera

@@ -7,6 +7,7 @@ from typing import Optional
 from navcore.labels.shipped import CleaningConfig
 from navcore.nav.tasks import OBJECTNAV_CATEGORIES
 from stages.semantics.lifting import LiftingConfig
+from stages.semantics.open_vocab import OpenVocabConfig
 from stages.semantics.segmenters import CORRUPTION_LEVELS, Corruption
 
 
@@ -66,7 +67,7 @@ class SemanticsConfig:
     """Extra lines of the goal mapping table for every scene (dataset class -> goal category, e.g.
     {'ottoman': 'sofa'}); a catalog entry's labels.goal_map adds its own."""
     segmenter: str = "oracle"
-    """Registry key (oracle | sam3) or "module:Class"."""
+    """Registry key (oracle | sam3 | open_vocab) or "module:Class"."""
     categories: list[str] = field(default_factory=lambda: list(OBJECTNAV_CATEGORIES))
     """Categories to find (the instance table's category names)."""
     prompts: dict[str, str] = field(default_factory=dict)
@@ -96,6 +97,7 @@ class SemanticsConfig:
     lifting: LiftingConfig = field(default_factory=LiftingConfig)
     oracle: OracleConfig = field(default_factory=OracleConfig)
     sam3: Sam3Config = field(default_factory=Sam3Config)
+    open_vocab: OpenVocabConfig = field(default_factory=OpenVocabConfig)
 
     def prompt(self, category: str) -> str:
         return self.prompts.get(category, category.replace("_", " "))

@@ -24,6 +24,7 @@ from navcore.registry import Registry
 SEGMENTERS = Registry("segmenter", {
     "oracle": "stages.semantics.segmenters:OracleSegmenter",
     "sam3": "stages.semantics.sam3_segmenter:Sam3Segmenter",  # imports torch and sam3 when used
+    "open_vocab": "stages.semantics.open_vocab:OpenVocabSegmenter",  # OWLv2 + SAM through transformers
 })
 
 
