@@ -142,3 +142,24 @@ def test_semantics_stage_runs_open_vocab_end_to_end(tmp_path, models, make_cfg):
     table = pq.read_table(tmp_path / "04_semantics" / res["scene_id"] / "instances.parquet")
     assert set(table.column("source").to_pylist()) <= {"model_predicted"}
     assert set(table.column("category").to_pylist()) <= {"chair", "tv_monitor"}
+
+
+def test_box_prompts_match_sam_processors_own_normalisation(models):
+    """The segmenter scales boxes to SAM's resized frame itself (one preprocessing pass per batch);
+    the masks equal those of SamProcessor(images, input_boxes) on the same frame (independent reference)."""
+    import torch
+
+    from stages.semantics.open_vocab import OpenVocabConfig, OpenVocabSegmenter
+
+    det, sam = models
+    seg = OpenVocabSegmenter(OpenVocabConfig(detector=str(det), masker=str(sam), device="cpu", box_threshold=0.0, batch=2))
+    frames = _frames(2, seed=3)
+    dets = [[(0, np.array([4.0, 6.0, 40.0, 30.0]), 0.9), (1, np.array([30.0, 10.0, 63.0, 47.0]), 0.5)], []]
+    ours = seg.masks(frames, dets)
+    assert ours[1] == []
+    inp = seg.mask_proc(images=frames[0], input_boxes=[[list(map(float, d[1])) for d in dets[0]]], return_tensors="pt")
+    with torch.no_grad():
+        res = seg.masker(**{k: v for k, v in inp.items() if k in ("pixel_values", "input_boxes")}, multimask_output=False)
+    ref = seg.mask_proc.post_process_masks(res.pred_masks, inp["original_sizes"], inp["reshaped_input_sizes"])[0]
+    for j, m in enumerate(ours[0]):
+        assert (m == ref[j, 0].numpy()).mean() > 0.999

@@ -53,6 +53,10 @@ class OpenVocabConfig:
     """Mask logits above this are inside the mask."""
     batch: int = 8
     """Frames per detector / image-encoder pass."""
+    fast_processor: bool = True
+    """Resize and pad frames with transformers' fast (torch) image processors where they load (they
+    need torchvision), else the slow numpy ones: on an H100 the slow OWLv2 preprocessing at 960 px
+    is most of the detector's time."""
 
 
 def _check_folder(path: Optional[str], key: str, kinds: tuple[str, ...], example: str) -> Path:
@@ -98,6 +102,16 @@ def _model_type(folder: Path, key: str, allowed: tuple[str, ...]) -> str:
     return mt
 
 
+def _processor(cls, folder: Path, fast: bool):
+    """A processor from a local folder: the fast image processor when asked for and loadable."""
+    if fast:
+        try:
+            return cls.from_pretrained(folder, local_files_only=True, use_fast=True)
+        except (ImportError, ValueError, TypeError, OSError, RuntimeError):
+            pass
+    return cls.from_pretrained(folder, local_files_only=True)
+
+
 def nms(boxes: np.ndarray, scores: np.ndarray, iou: float) -> np.ndarray:
     """Indices of the boxes [K, 4] (x0, y0, x1, y1) kept by greedy non-maximum suppression, best first."""
     order = np.argsort(-scores, kind="stable")
@@ -132,11 +146,11 @@ class OpenVocabSegmenter(Segmenter):
             raise SegmenterUnavailable("semantics.open_vocab.device=cuda but torch sees no CUDA device (use cpu or auto)")
         self.device = torch.device(dev)
         with _offline():
-            self.det_proc = AutoProcessor.from_pretrained(det, local_files_only=True)
+            self.det_proc = _processor(AutoProcessor, det, cfg.fast_processor)
             self.det = AutoModelForZeroShotObjectDetection.from_pretrained(det, local_files_only=True).to(self.device).eval()
             from transformers import SamModel, SamProcessor
 
-            self.mask_proc = SamProcessor.from_pretrained(msk, local_files_only=True)
+            self.mask_proc = _processor(SamProcessor, msk, cfg.fast_processor)
             self.masker = SamModel.from_pretrained(msk, local_files_only=True).to(self.device).eval()
 
     @classmethod
@@ -187,16 +201,18 @@ class OpenVocabSegmenter(Segmenter):
             if not idx:
                 continue
             # the image encoder once for the whole batch of frames, the prompt decoder once per frame
-            pix = self.mask_proc(images=[rgbs[i] for i in idx], return_tensors="pt")["pixel_values"].to(self.device)
+            inp = self.mask_proc(images=[rgbs[i] for i in idx], return_tensors="pt")
             with torch.no_grad():
-                emb = self.masker.get_image_embeddings(pix)
+                emb = self.masker.get_image_embeddings(inp["pixel_values"].to(self.device))
             for k, i in enumerate(idx):
-                boxes = [[float(v) for v in d[1]] for d in dets[i]]
-                inp = self.mask_proc(images=rgbs[i], input_boxes=[boxes], return_tensors="pt")
+                (h, w), (rh, rw) = inp["original_sizes"][k].tolist(), inp["reshaped_input_sizes"][k].tolist()
+                # boxes in the resized frame's pixels, as SamProcessor normalises them
+                boxes = np.array([d[1] for d in dets[i]], np.float64) * [rw / w, rh / h, rw / w, rh / h]
                 with torch.no_grad():
-                    res = self.masker(image_embeddings=emb[k:k + 1], input_boxes=inp["input_boxes"].to(self.device),
-                                      multimask_output=False)
-                m = self.mask_proc.post_process_masks(res.pred_masks.cpu(), inp["original_sizes"], inp["reshaped_input_sizes"],
+                    res = self.masker(image_embeddings=emb[k:k + 1], multimask_output=False,
+                                      input_boxes=torch.as_tensor(boxes[None], dtype=torch.float32, device=self.device))
+                m = self.mask_proc.post_process_masks(res.pred_masks.cpu(), inp["original_sizes"][k:k + 1],
+                                                      inp["reshaped_input_sizes"][k:k + 1],
                                                       mask_threshold=self.cfg.mask_threshold, binarize=True)[0]
                 out[i] = [np.asarray(m[j, 0], bool) for j in range(len(boxes))]
         return out
