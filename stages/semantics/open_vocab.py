@@ -91,12 +91,13 @@ def _offline():
 
 
 def _model_type(folder: Path, key: str, allowed: tuple[str, ...]) -> str:
-    import json
+    from transformers import AutoConfig
 
     try:
-        mt = json.loads((folder / "config.json").read_text()).get("model_type", "")
+        with _offline():
+            mt = AutoConfig.from_pretrained(folder, local_files_only=True).model_type
     except (OSError, ValueError) as e:
-        raise SegmenterUnavailable(f"{key}: {folder / 'config.json'} is unreadable ({e})") from None
+        raise SegmenterUnavailable(f"{key}: {folder / 'config.json'} is not a model config transformers reads ({e})") from None
     if mt not in allowed:
         raise SegmenterUnavailable(f"{key}: {folder} holds a {mt or 'unknown'!r} model; this segmenter takes {', '.join(allowed)}")
     return mt
