@@ -179,6 +179,7 @@ def objectnav_labelled(data: Path, executor: str, pictures: Path) -> list[dict]:
     from omegaconf import OmegaConf
     from PIL import Image
 
+    from benchmarks.scan_truth import rates
     from navcore.render import Renderer
     from navcore.render.camera import embodiment_camera
     from pipeline.catalog import Catalog
@@ -201,6 +202,10 @@ def objectnav_labelled(data: Path, executor: str, pictures: Path) -> list[dict]:
                "failures": [f["error"] for f in s["failures"] if f["scene_id"] == scene.scene_id],
                "episodes": 0, "by_category": {}, "rejections": ep_info.get("rejections", {}),
                "oracle_sr": oracle_sr(data, scene.scene_id), "goal_views": {}}
+        try:  # the costmap against the scan's own points (benchmarks.scan_truth)
+            row["scan_truth"] = rates(catalog, scene, emb, 4000)
+        except (TypeError, ValueError, FileNotFoundError) as e:  # no per-point labels (a labels.json scan)
+            row["scan_truth"] = {"absent": f"{type(e).__name__}: {e}"}
         p = catalog.path("episodes", scene, task="objectnav")
         if p.exists():
             e = pd.read_parquet(p)
@@ -325,6 +330,18 @@ def objectnav_markdown(rep: dict) -> list[str]:
         why = "" if s["episodes"] else ("; ".join(s["failures"]) or ", ".join(f"{k} {v}" for k, v in s["rejections"].items()))
         lines.append(f"| {s['scene']} (labelled scan) | {s['labels_from']} | {s['episodes']} ({cats}) | "
                      f"{s['oracle_sr']['distance'].get('objectnav')} / {s['oracle_sr']['explicit_stop'].get('objectnav')} | {why} |")
+    lines += ["", "### The costmap against scanned geometry (labelled scans; `python -m benchmarks.scan_truth`)", "",
+              "Poses over the scan's floor; blocked when a scanned non-floor point lies in the body cylinder. "
+              "FP: scan free, costmap blocked (target <= 10 %); FN: scan blocked, costmap free (target <= 0.5 %).", "",
+              "| scan | poses free / blocked | FP (95 % CI) | FN (95 % CI) |", "|---|---|---|---|"]
+    for s in rep.get("objectnav_labelled", []):
+        r = s.get("scan_truth", {})
+        if "fp_rate" in r:
+            lines.append(f"| {s['scene']} | {r['scan_free']} / {r['scan_blocked']} | {r['fp_rate']:.1%} "
+                         f"({r['fp_ci95'][0]:.1%}-{r['fp_ci95'][1]:.1%}) | {r['fn_rate']:.2%} "
+                         f"({r['fn_ci95'][0]:.2%}-{r['fn_ci95'][1]:.2%}) |")
+        else:
+            lines.append(f"| {s['scene']} | n/a: {r.get('absent', 'not measured')} | | |")
     for s in rep.get("objectnav_labelled", []):
         if s["goal_mapping"]:
             lines += ["", f"{s['scene']}: goal categories from dataset classes: " + "; ".join(

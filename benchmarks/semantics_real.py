@@ -30,8 +30,8 @@ from benchmarks.semantics import LEVELS, level_seed
 LEVEL_NAMES = LEVELS
 
 
-def _prepare(scan: Path, root: Path, name: str):
-    """Run the pipeline up to the costmap on the scan; (catalog, scene, cfg)."""
+def prepare_scan(scan: Path, root: Path, name: str):
+    """Run the pipeline up to the costmap on a scan folder (under root); (catalog, scene, cfg)."""
     from hydra import compose, initialize_config_dir
 
     from pipeline.config import CONF_DIR, register_configs
@@ -87,7 +87,7 @@ def bench_scan(scan: Path, tol: float = 0.0) -> dict:
     from stages.semantics.stage import category_masks, covering_cameras, render_views
 
     with tempfile.TemporaryDirectory() as tmp:
-        catalog, scene, cfg = _prepare(scan, Path(tmp), scan.name)
+        catalog, scene, cfg = prepare_scan(scan, Path(tmp), scan.name)
         scfg = OmegaConf.to_object(cfg.semantics)
         emb = OmegaConf.to_object(cfg.embodiment)
         gs, attrs = catalog.dataset("aligned", scene).load()

@@ -1,0 +1,103 @@
+"""The costmap against scanned geometry: state FP / FN on a real labelled scan.
+
+For a labelled scan (SceneSplat-style folder of ../shared/data/real_labelled: one Gaussian per
+scanned point, with the dataset's classes), the pipeline builds the costmap as for any scene; the
+truth is the scan itself: robot poses are sampled over the scan's floor (its floor-labelled points,
+jittered by up to 2.5 cm), and a pose is blocked when any scanned point that is not floor lies
+inside the robot's body cylinder (footprint radius, height band [h_min, h_max] above the aligned
+floor). Against that:
+- FP: poses the scan shows free that the costmap rejects (target <= 10 %);
+- FN: poses the scan shows blocked that the costmap accepts (target <= 0.5 %);
+each with its 95 % Wilson interval from the number of poses.
+
+    python -m benchmarks.scan_truth --scan ../shared/data/real_labelled/scannet_scene0000_02 [--poses 4000]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """95 % Wilson score interval of a proportion k / n."""
+    if n == 0:
+        return (float("nan"), float("nan"))
+    p = k / n
+    d = 1 + z * z / n
+    c = (p + z * z / (2 * n)) / d
+    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
+    return (max(0.0, c - h), min(1.0, c + h))
+
+
+def scan_blocked(xy: np.ndarray, points: np.ndarray, radius: float, h_min: float, h_max: float) -> np.ndarray:
+    """[n] bool: a scanned point (aligned frame) with h_min <= z <= h_max lies within `radius` of each pose."""
+    from scipy.spatial import cKDTree
+
+    band = points[(points[:, 2] >= h_min) & (points[:, 2] <= h_max)]
+    if not len(band):
+        return np.zeros(len(xy), bool)
+    d, _ = cKDTree(band[:, :2]).query(xy, k=1)
+    return d <= radius
+
+
+def rates(catalog, scene, emb, poses: int, seed: int = 0) -> dict:
+    """State FP / FN of a scene's costmap (already built) against its own scanned points (module doc)."""
+    from navcore.instances import gaussian_labels
+
+    gs, attrs = catalog.dataset("aligned", scene).load()
+    t = np.asarray(attrs["source_to_aligned"])
+    cm = catalog.dataset("costmaps", scene).load(emb.name)
+    _, seg, names = gaussian_labels(scene, gs, t)
+    floor_ids = [i + names.id_offset for i, n in enumerate(names.names) if n.strip().lower() == "floor"]
+    is_floor = np.isin(seg, floor_ids)
+    pts = gs.means.astype(np.float64)
+    rng = np.random.default_rng(seed)
+    base = pts[is_floor][rng.integers(is_floor.sum(), size=poses), :2]
+    xy = base + rng.uniform(-0.025, 0.025, base.shape)
+    truth = scan_blocked(xy, pts[~is_floor], emb.radius, emb.h_min, emb.h_max)
+    ours = ~cm.are_states_valid(xy)
+    fp, neg = int((ours & ~truth).sum()), int((~truth).sum())
+    fn, pos = int((~ours & truth).sum()), int(truth.sum())
+    return {"scene": scene.name, "poses": poses, "embodiment": emb.name, "radius_m": emb.radius,
+            "band_m": [emb.h_min, emb.h_max], "resolution_m": float(cm.resolution),
+            "scan_free": neg, "scan_blocked": pos, "fp": fp, "fn": fn,
+            "fp_rate": fp / max(neg, 1), "fp_ci95": wilson(fp, neg),
+            "fn_rate": fn / max(pos, 1), "fn_ci95": wilson(fn, pos)}
+
+
+def measure(scan: Path, poses: int, seed: int = 0) -> dict:
+    """The pipeline up to the costmap on the scan, then `rates`."""
+    from omegaconf import OmegaConf
+
+    from benchmarks.semantics_real import prepare_scan
+
+    with tempfile.TemporaryDirectory() as tmp:
+        catalog, scene, cfg = prepare_scan(scan, Path(tmp), scan.name)
+        return rates(catalog, scene, OmegaConf.to_object(cfg.embodiment), poses, seed)
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--scan", action="append", required=True)
+    ap.add_argument("--poses", type=int, default=4000)
+    ap.add_argument("--out", default="data/08_reports")
+    args = ap.parse_args(argv)
+    from benchmarks import machine
+
+    rep = {"machine": machine(), "scans": [measure(Path(s).resolve(), args.poses) for s in args.scan]}
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "scan_truth.json").write_text(json.dumps(rep, indent=1))
+    for s in rep["scans"]:
+        print(f"{s['scene']}: FP {s['fp_rate']:.1%} ({s['fp']}/{s['scan_free']}, 95 % {s['fp_ci95'][0]:.1%}-{s['fp_ci95'][1]:.1%}) "
+              f"FN {s['fn_rate']:.2%} ({s['fn']}/{s['scan_blocked']}, 95 % {s['fn_ci95'][0]:.2%}-{s['fn_ci95'][1]:.2%})")
+    return rep
+
+
+if __name__ == "__main__":
+    main()
