@@ -14,8 +14,10 @@ def write_report(out, name: str, rep: dict, omit=()):
     import json
     from pathlib import Path
 
+    from navcore.io import jsonio
+
     path = Path(out) / name
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(rep, indent=1, default=str))
+    path.write_text(jsonio.dumps(rep, indent=1, default=str))
     print(json.dumps({k: v for k, v in rep.items() if k not in omit}, indent=1, default=str))
     return path

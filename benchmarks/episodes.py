@@ -30,6 +30,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from benchmarks import machine
+from navcore.io import jsonio
 from navcore.io.datasets import CostmapDataset
 from navcore.nav.costmap import Costmap
 from navcore.nav.embodiment import Embodiment, Limits
@@ -290,7 +291,7 @@ def main(argv=None) -> dict:
         "rejections": {t: dict(sum((Counter(m["info"]["tasks"][t]["rejections"]) for m in markers), Counter()))
                        for t in TASKS},
     }
-    (out / "bench_episodes.json").write_text(json.dumps(result, indent=1))
+    (out / "bench_episodes.json").write_text(jsonio.dumps(result, indent=1))
     (out / "bench_episodes.md").write_text(_markdown(result))
     print(_markdown(result))
     return result

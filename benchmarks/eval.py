@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import machine
+from navcore.io import jsonio
 from navcore.io.datasets import CostmapDataset
 from navcore.nav.costmap import Costmap
 from navcore.nav.embodiment import Embodiment
@@ -155,7 +156,7 @@ def gpu_main(out: Path) -> dict:
            "psnr_cpu_vs_gsplat": cmp["psnr_cpu_vs_gsplat_min"],
            "psnr_cpu_vs_gsplat_median": cmp["psnr_cpu_vs_gsplat_median"],
            "depth_mae_m": cmp["depth_median_abs_m_max"], "gaussians": len(ctx.renderer._g["means"])}
-    (out / "eval_gpu.json").write_text(json.dumps(res, indent=1))
+    (out / "eval_gpu.json").write_text(jsonio.dumps(res, indent=1))
     print(json.dumps(res, indent=1))
     return res
 
@@ -193,7 +194,7 @@ def main(argv=None) -> dict:
         g = json.loads(gpu.read_text())
         result.update({k: g[k] for k in ("gpu_steps_per_s", "gsplat_raw_fps", "psnr_cpu_vs_gsplat", "depth_mae_m")})
         result["gpu"] = g
-    path.write_text(json.dumps(result, indent=1))
+    path.write_text(jsonio.dumps(result, indent=1))
     (out / "bench_eval.md").write_text(markdown(result))
     print(markdown(result))
     return result

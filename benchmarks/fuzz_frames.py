@@ -34,6 +34,8 @@ import tracemalloc
 import msgpack
 import numpy as np
 
+from navcore.io import jsonio
+
 TRACE_EVERY = 25
 """One case in this many runs under tracemalloc (its peak allocation is recorded)."""
 CLIENT_KINDS = ("action", "batch_action", "error", "episode_start", "garbage")
@@ -297,7 +299,7 @@ def main(argv=None) -> dict:
     os.makedirs(args.out, exist_ok=True)
     path = os.path.join(args.out, "fuzz_frames.json")
     with open(path, "w") as f:
-        json.dump(total, f, indent=1)
+        f.write(jsonio.dumps(total, indent=1))
     print(json.dumps({k: v for k, v in total.items() if k != "kinds"}))
     return total
 

@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from navcore.io import jsonio
+
 
 def build_models(root: Path) -> tuple[Path, Path]:
     import torch
@@ -40,7 +42,7 @@ def build_models(root: Path) -> tuple[Path, Path]:
         for c in "abcdefghijklmnopqrstuvwxyz":
             vocab[c + suffix] = len(vocab)
     vocab["<|startoftext|>"], vocab["<|endoftext|>"] = len(vocab), len(vocab) + 1
-    (root / "vocab.json").write_text(json.dumps(vocab))
+    (root / "vocab.json").write_text(jsonio.dumps(vocab))
     (root / "merges.txt").write_text("#version: 0.2\n")
     tok = CLIPTokenizer(str(root / "vocab.json"), str(root / "merges.txt"), pad_token="!")
     torch.manual_seed(0)
@@ -106,7 +108,7 @@ def main(argv=None) -> dict:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     name = "open_vocab_timing_gpu.json" if rep.get("device", "cpu") != "cpu" else "open_vocab_timing_cpu.json"
-    (out / name).write_text(json.dumps(rep, indent=1))
+    (out / name).write_text(jsonio.dumps(rep, indent=1))
     print(json.dumps(rep, indent=1))
     return rep
 

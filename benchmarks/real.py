@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import machine
+from navcore.io import jsonio
 
 TASKS = ("pointnav", "imagenav", "objectnav")
 PROTOCOLS = ("distance", "explicit_stop")
@@ -385,7 +386,7 @@ def main(argv=None) -> int:
            "synthetic": synthetic_validation(args.synthetic_scenes, args.poses, args.synthetic_gaussians)}
     rep.update({k: rep["synthetic"][k] for k in ("realism_fp_state", "realism_fn_state", "estimator_abs_err")})
     out.mkdir(parents=True, exist_ok=True)
-    (out / "bench_real.json").write_text(json.dumps(rep, indent=1))
+    (out / "bench_real.json").write_text(jsonio.dumps(rep, indent=1))
     md = markdown(rep, str(pictures))
     (out / "bench_real.md").write_text(md)
     Path(args.docs).write_text(md)

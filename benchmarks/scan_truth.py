@@ -15,12 +15,13 @@ each with its 95 % Wilson interval from the number of poses.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from navcore.io import jsonio
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
@@ -92,7 +93,7 @@ def main(argv=None) -> dict:
     rep = {"machine": machine(), "scans": [measure(Path(s).resolve(), args.poses) for s in args.scan]}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "scan_truth.json").write_text(json.dumps(rep, indent=1))
+    (out / "scan_truth.json").write_text(jsonio.dumps(rep, indent=1))
     for s in rep["scans"]:
         print(f"{s['scene']}: FP {s['fp_rate']:.1%} ({s['fp']}/{s['scan_free']}, 95 % {s['fp_ci95'][0]:.1%}-{s['fp_ci95'][1]:.1%}) "
               f"FN {s['fn_rate']:.2%} ({s['fn']}/{s['scan_blocked']}, 95 % {s['fn_ci95'][0]:.2%}-{s['fn_ci95'][1]:.2%})")

@@ -32,6 +32,7 @@ import numpy as np
 
 from benchmarks import machine
 from navcore.gaussians.cameras import cameras_from_json
+from navcore.io import jsonio
 from navcore.render import Renderer
 from stages.semantics.config import SemanticsConfig
 from stages.semantics.lifting import lift
@@ -248,7 +249,7 @@ def write_report(out: Path, cpu: dict | None, gpu: dict | None) -> dict:
     base["seconds_per_scene_cpu"] = cpu["seconds_per_scene"] if cpu else None
     if cpu and gpu:
         base["cpu_run"] = {k: cpu[k] for k in ("scenes", "valid_center_rate", "recall", "baseline_valid_center_rate")}
-    (out / "bench_semantics.json").write_text(json.dumps(base, indent=1))
+    (out / "bench_semantics.json").write_text(jsonio.dumps(base, indent=1))
     md = markdown(base)
     (out / "bench_semantics.md").write_text(md)
     docs = Path(__file__).resolve().parents[1] / "docs"
@@ -275,10 +276,10 @@ def main(argv=None) -> dict:
     gpu_file, cpu_file = out / "semantics_gpu.json", out / "semantics_cpu.json"
     if args.gpu:
         rep = run(args)
-        gpu_file.write_text(json.dumps(rep, indent=1))
+        gpu_file.write_text(jsonio.dumps(rep, indent=1))
         return rep
     if not args.merge_gpu:
-        cpu_file.write_text(json.dumps(run(args), indent=1))
+        cpu_file.write_text(jsonio.dumps(run(args), indent=1))
     load = lambda p: json.loads(p.read_text()) if p.exists() else None  # noqa: E731
     rep = write_report(out, load(cpu_file), load(gpu_file))
     print(markdown(rep))

@@ -17,7 +17,6 @@ free-space poses (the stage's fallback); a scan without cameras reports the firs
 from __future__ import annotations
 
 import argparse
-import json
 import tempfile
 import time
 from pathlib import Path
@@ -26,6 +25,7 @@ import numpy as np
 
 from benchmarks import machine
 from benchmarks.semantics import LEVELS, level_seed
+from navcore.io import jsonio
 
 LEVEL_NAMES = LEVELS
 
@@ -174,7 +174,7 @@ def main(argv=None) -> dict:
     rep = {"machine": machine(), "scans": [bench_scan(Path(s).resolve(), args.tol) for s in args.scan]}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "bench_semantics_real.json").write_text(json.dumps(rep, indent=1, default=str))
+    (out / "bench_semantics_real.json").write_text(jsonio.dumps(rep, indent=1, default=str))
     md = markdown(rep)
     (out / "bench_semantics_real.md").write_text(md)
     if args.docs:

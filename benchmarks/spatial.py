@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from navcore.gaussians.content import CONTENT_KEY, content_mask, content_of
+from navcore.io import jsonio
 from navcore.nav.costmap import Costmap
 from navcore.nav.embodiment import Embodiment
 from navcore.voxels.field import VoxelizeConfig
@@ -333,7 +334,7 @@ def write_report(rep: dict, out: Path) -> None:
     else:
         rep.setdefault("voxelize_1m_gpu_s", None)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "bench_spatial.json").write_text(json.dumps(rep, indent=1))
+    (out / "bench_spatial.json").write_text(jsonio.dumps(rep, indent=1))
     (out / "bench_spatial.md").write_text(markdown(rep))
     print(markdown(rep))
 

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from navcore.io import jsonio
+
 
 def main(argv=None) -> int:
     import torch
@@ -54,7 +56,7 @@ def main(argv=None) -> int:
            "occupancy_disagreement": float((occ_g != occ_c).mean()), "max_abs_diff_A": float(np.abs(a_gpu - a_cpu).max())}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "voxelize_gpu.json").write_text(json.dumps(rep, indent=1))
+    (out / "voxelize_gpu.json").write_text(jsonio.dumps(rep, indent=1))
     print(json.dumps(rep, indent=1))
     return 0
 

@@ -36,6 +36,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from navcore.io import jsonio
 from navcore.io.atomic import atomic_path
 from navcore.io.video import H264Writer
 from navcore.nav.embodiment import Embodiment
@@ -261,7 +262,7 @@ def _write_meta(tmp: Path, episodes_meta, task_index, features, fps, frames, spl
             "data_path": "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet",
             "video_path": "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4",
             "features": features, "navarena": {"data_files": n_data_files, "trajectory_hz": TRAJECTORY_HZ}}
-    (meta / "info.json").write_text(json.dumps(info, indent=2))
+    (meta / "info.json").write_text(jsonio.dumps(info, indent=2))
     tasks = pd.DataFrame({"task_index": list(task_index.values())}, index=pd.Index(list(task_index), name="task"))
     tasks.to_parquet(meta / "tasks.parquet")
     stats = {k: _stats(np.concatenate(v), 0) for k, v in stats_acc.items()}
@@ -275,7 +276,7 @@ def _write_meta(tmp: Path, episodes_meta, task_index, features, fps, frames, spl
         stats["observation.depth"] = {k: [[[float(v)]]] for k, v in
                                       (("min", d.min()), ("max", d.max()), ("mean", d.mean()), ("std", d.std()))}
         stats["observation.depth"]["count"] = [frames]
-    (meta / "stats.json").write_text(json.dumps(stats, indent=2))
+    (meta / "stats.json").write_text(jsonio.dumps(stats, indent=2))
     pq.write_table(pa.Table.from_pylist(episodes_meta), meta / "episodes/chunk-000/file-000.parquet")
 
 

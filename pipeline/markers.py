@@ -10,6 +10,7 @@ import json
 import os
 from pathlib import Path
 
+from navcore.io import jsonio
 from navcore.io.atomic import TEMP_PREFIXES, write_text_atomic
 
 VERIFY = ("size", "checksum", "none")
@@ -30,7 +31,7 @@ def is_done(path: Path, config_hash: str) -> bool:
 
 
 def write_marker(path: Path, payload: dict) -> None:
-    write_text_atomic(path, json.dumps(payload, indent=1, sort_keys=True, default=str))
+    write_text_atomic(path, jsonio.dumps(payload, indent=1, sort_keys=True, default=str))
 
 
 def _files(path: Path):

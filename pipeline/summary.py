@@ -3,12 +3,12 @@ data/_runs (one file per run and latest.json) and printed as tables."""
 from __future__ import annotations
 
 import datetime as dt
-import json
 import os
 
 from rich.console import Console
 from rich.table import Table
 
+from navcore.io import jsonio
 from navcore.io.atomic import write_text_atomic
 from pipeline.catalog import Catalog
 from pipeline.tasks import FAILED
@@ -34,7 +34,7 @@ def write_summary(summary: dict, catalog: Catalog, started: dt.datetime, shard: 
     """run-{time}-shard{k}-{pid}.json and latest.json under the runs folder; returns latest.json's path."""
     runs = catalog.path("runs")
     stamp = started.strftime("%Y%m%dT%H%M%S")
-    text = json.dumps(summary, indent=1, default=str)
+    text = jsonio.dumps(summary, indent=1, default=str)
     # the process id too: two runs started in the same second (two shards, or the same run twice)
     # must not overwrite each other's summary
     write_text_atomic(runs / f"run-{stamp}-shard{shard}-{os.getpid()}.json", text)

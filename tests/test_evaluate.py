@@ -16,8 +16,9 @@ def test_moves_collisions_and_action_forms(ctx, make_episode):
     env.reset(make_episode(start=(1.0, 0.5, -math.pi / 2)))  # facing the wall at y = 0
     env.step(MOVE_FORWARD)
     assert env.state.y == pytest.approx(0.25) and env.state.collisions == 0
-    env.step(MOVE_FORWARD)  # would end at y = 0, inside the wall: rejected
-    assert env.state.y == pytest.approx(0.25) and env.state.collisions == 1 and env.state.moves == 2
+    env.step(MOVE_FORWARD)  # would end at y = 0, inside the wall: blocked, truncated at the contact
+    assert env.state.y == pytest.approx(0.125, abs=0.006) and env.state.y >= 0.125 - 1e-9
+    assert env.state.collisions == 1 and env.state.moves == 2
     env.step(TURN_LEFT)  # turning in place never collides
     assert env.state.yaw == pytest.approx(-math.pi / 2 + math.radians(15))
     env.reset(make_episode())
@@ -30,8 +31,8 @@ def test_moves_collisions_and_action_forms(ctx, make_episode):
     m = episode_metrics(s, 2.0, 2.0, "distance")
     assert m["collision_rate"] == 0 and m["steps"] == 2
     assert s.path_length == pytest.approx(math.hypot(0.2, 0.1) + 0.1)
-    with pytest.raises(ValueError):
-        env.step({"jump": 1})
+    env.step({"jump": 1})  # refused: a step spent, recorded
+    assert env.state.invalid_actions == 1 and "unknown action" in env.state.action_error
 
 
 def test_explicit_stop_outside_the_region_fails(ctx, make_episode):
@@ -123,16 +124,21 @@ def test_each_metric_only_from_the_protocol_that_defines_it(ctx, make_episode):
     assert "explicit_stop" in md and line.split("|")[5].strip() == "-"  # Dist. SR column empty
 
 
-def test_collision_rate_per_action_and_per_move(ctx, make_episode):
-    env = NavEnv(ctx, EnvConfig(render=False))
+@pytest.mark.parametrize("mode,actions_collided,moves_collided", [("stay", 1, 2), ("truncate", 2, 4), ("slide", 2, 4)])
+def test_collision_rate_per_action_and_per_move(ctx, make_episode, mode, actions_collided, moves_collided):
+    """The definitions (per policy action, per attempted translation) hold in every dynamics mode;
+    what changes is where a blocked move ends: under stay the robot stays at y = 0.5, so the third
+    waypoint (to 0.4 m) and the last forward step (at -60 degrees) are free; under truncate / slide it
+    already stands at the wall (y = 0.125), and both are blocked too."""
+    env = _env_with(ctx, mode)
     env.reset(make_episode(start=(1.0, 0.5, -math.pi / 2), max_steps=10))  # facing the wall at y = 0
-    env.step({"waypoints": [{"x": 0.6}, {"x": 0.6}, {"x": 0.1}]})  # two rejected, one accepted
+    env.step({"waypoints": [{"x": 0.6}, {"x": 0.6}, {"x": 0.1}]})
     env.step(TURN_LEFT)
     env.step(TURN_LEFT)
     env.step(MOVE_FORWARD)
     m = episode_metrics(env.state, 2.0, 2.0, "distance")
-    assert m["collision_rate"] == pytest.approx(1 / 4)  # 1 of 4 policy actions collided
-    assert m["collision_rate_moves"] == pytest.approx(2 / 4)  # 2 of 4 attempted translations
+    assert m["collision_rate"] == pytest.approx(actions_collided / 4)  # of 4 policy actions
+    assert m["collision_rate_moves"] == pytest.approx(moves_collided / 4)  # of 4 attempted translations
 
 
 def test_spl_of_an_immediate_success_with_zero_optimum(ctx, make_episode):
@@ -151,15 +157,19 @@ def test_ne_euclidean_and_geodesic(ctx, make_episode):
     assert m["ne_geodesic"] == pytest.approx(env.geodesic_to_goal()) and m["ne_geodesic"] >= m["ne"] - 1e-6
 
 
-def test_non_finite_and_malformed_actions_fail_the_episode(ctx, make_episode):
+def test_non_finite_and_malformed_actions_spend_a_step_and_are_recorded(ctx, make_episode):
+    """An invalid action counts as one step with a recorded error (pose unchanged); the episode goes on."""
     env = NavEnv(ctx, EnvConfig(render=False))
     env.reset(make_episode())
-    for bad in ({"waypoints": [{"x": float("nan")}]}, {"x": float("inf")}, {"v": 0.5, "dt": -1.0},
-                {"waypoints": [{"x": 0.1}] * 1000}, {"waypoints": "far"}, 1.5, "1", True):
-        with pytest.raises(ValueError):
-            env.step(bad)
+    bad = ({"waypoints": [{"x": float("nan")}]}, {"x": float("inf")}, {"v": 0.5, "dt": -1.0},
+           {"waypoints": [{"x": 0.1}] * 1000}, {"waypoints": "far"}, 1.5, "1", True, {"v": 0.2, "w": None}, {})
+    for k, a in enumerate(bad, 1):
+        _, info = env.step(a)
+        assert env.state.steps == k and env.state.invalid_actions == k and not info["done"]
+        assert env.state.pose.tolist() == pytest.approx([1.0, 0.5, 0.0])
+    assert env.state.action_error.startswith("step 1: ") and "finite" in env.state.action_error
     env.step({"x": 0.2, "y": 0.0, "yaw": 0.1})  # navarena-server's flat waypoint
-    assert (env.state.x, env.state.yaw) == pytest.approx((1.2, 0.1))
+    assert (env.state.x, env.state.yaw) == pytest.approx((1.2, 0.1)) and env.state.invalid_actions == len(bad)
     assert all(math.isfinite(v) for v in env.state.pose)
 
 
@@ -300,3 +310,121 @@ def test_batched_loop_equals_the_single_loop_for_in_process_agents(ctx, make_epi
     assert [r["episode_id"] for r in batched] == [e.episode_id for e in eps]
     for a, b in zip(single, batched):
         assert (a["sr"], a["steps"], a["spl"]) == (b["sr"], b["steps"], b["spl"]) and a["sr"] == 1
+
+
+# ---- blocked moves (navcore.nav.dynamics) ----------------------------------------------------------
+
+def _env_with(ctx, mode):
+    from stages.evaluate.env import DynamicsConfig
+
+    return NavEnv(ctx, EnvConfig(render=False, dynamics=DynamicsConfig(blocked=mode)))
+
+
+def test_blocked_move_known_poses_per_mode(ctx, make_episode):
+    """room_with_door: the wall's cells start at x = 2.0 m, clearance 2.025 - x, robot radius 0.1:
+    valid up to x = 1.925. A 1 m forward move from x = 1.5 and a 0.8 m move at 45 degrees."""
+    ends = {}
+    for mode in ("stay", "truncate", "slide"):
+        env = _env_with(ctx, mode)
+        env.reset(make_episode(start=(1.5, 1.0, 0.0)))
+        env.step({"x": 1.0, "yaw": 0.3})
+        straight = (env.state.x, env.state.y, env.state.yaw)
+        env.reset(make_episode(start=(1.5, 1.0, math.pi / 4)))
+        env.step({"x": 0.8})
+        ends[mode] = (straight, (env.state.x, env.state.y), env.state.collisions)
+    (s1, s2, c) = ends["stay"]
+    assert s1 == pytest.approx((1.5, 1.0, 0.3)) and s2 == pytest.approx((1.5, 1.0)) and c == 1  # the turn applies
+    (s1, s2, c) = ends["truncate"]
+    assert s1[0] == pytest.approx(1.925, abs=0.006) and s1[0] <= 1.925 + 1e-9 and s1[1:] == pytest.approx((1.0, 0.3))
+    assert s2 == pytest.approx((1.925, 1.425), abs=0.006) and c == 1
+    (s1, s2, c) = ends["slide"]
+    assert s1[0] == pytest.approx(1.925, abs=0.006) and s1[1] == pytest.approx(1.0)  # head-on: nothing to slide along
+    assert s2[0] == pytest.approx(1.925, abs=0.006) and s2[1] == pytest.approx(1.0 + 0.8 * math.sqrt(0.5), abs=0.006)
+    assert c == 1
+
+
+def test_swept_paths_never_enter_an_obstacle(ctx, room_with_door):
+    """Random blocked and free moves in every mode: each leg is a valid motion of the costmap, and
+    points every quarter cell along it keep the robot's disk clear of every obstacle cell."""
+    from navcore.nav.dynamics import blocked_motion
+
+    cm = room_with_door
+    rng = np.random.default_rng(5)
+    valid = np.argwhere(~cm.occupancy)
+    starts = cm.cell_centers(valid[rng.integers(len(valid), size=150)])
+    blocked = 0
+    for mode in ("stay", "truncate", "slide"):
+        for x0, y0 in starts:
+            a, d = rng.uniform(-math.pi, math.pi), rng.uniform(0.1, 1.5)
+            x1, y1 = x0 + d * math.cos(a), y0 + d * math.sin(a)
+            if cm.is_motion_valid(x0, y0, x1, y1):
+                continue
+            blocked += 1
+            p = (x0, y0)
+            for q in blocked_motion(cm, x0, y0, x1, y1, mode):
+                assert cm.is_motion_valid(p[0], p[1], q[0], q[1])
+                n = max(2, int(math.hypot(q[0] - p[0], q[1] - p[1]) / (cm.resolution / 4)) + 2)
+                pts = np.linspace(p, q, n)
+                assert (cm.clearance_at(pts) >= cm.radius - 1e-6).all()
+                p = q
+    assert blocked > 100
+
+
+def test_forward_and_turn_policy_facing_a_wall_escapes(ctx, make_episode):
+    """NavArena-Server's ImageNav example drives forward and steers; blocked in front of a wall it
+    must still turn away (the old rule threw the step's turn away with the blocked translation)."""
+    for mode in ("stay", "truncate", "slide"):
+        env = _env_with(ctx, mode)
+        env.reset(make_episode(start=(1.8, 1.0, 0.0), goal=(3.5, 0.5), radius=0.2, max_steps=40))
+        for _ in range(30):
+            env.step({"x": 0.25, "yaw": 0.3})
+            assert not env.state.done
+        s = env.state
+        assert s.path_length > 2.0 and s.collisions < 12, (mode, s.path_length, s.collisions)
+        assert math.hypot(s.x - 1.8, s.y - 1.0) > 0.3
+
+
+def test_unknown_dynamics_mode_is_refused(ctx):
+    with pytest.raises(ValueError, match="dynamics.blocked"):
+        _env_with(ctx, "bounce")
+
+
+def test_every_json_a_full_run_writes_is_strict(episode_run, tmp_path, make_cfg):
+    """The default graph through export plus an evaluation under both protocols: every .json and
+    .json.gz under the data root parses with a strict parser (no NaN / Infinity), and the summary
+    says what its nulls mean."""
+    import gzip
+    import json as _json
+    import shutil
+
+    from pipeline.executor import execute
+
+    root, over, _ = episode_run
+    data = tmp_path / "d"
+    shutil.copytree(root, data)
+    keep = [o for o in over if not o.startswith("stages=")]
+    for protocol in ("distance", "explicit_stop"):
+        s = execute(make_cfg(data, *keep, "stages=[evaluate]", "evaluate.render=false", "evaluate.episodes_per_scene=3",
+                             f"evaluate.protocol={protocol}"))
+        assert not s["failures"], s["failures"]
+
+    def refuse(name):
+        raise ValueError(f"non-standard JSON constant {name}")
+
+    files = sorted(p for p in data.rglob("*") if p.name.endswith((".json", ".json.gz")))
+    for p in files:
+        raw = gzip.decompress(p.read_bytes()) if p.name.endswith(".gz") else p.read_bytes()
+        _json.loads(raw, parse_constant=refuse)
+    names = {p.name for p in files}
+    assert {"summary.json", "results.json", "latest.json", "dataset_meta.json"} <= names and len(files) > 20
+    summary = _json.loads((data / "07_eval" / "oracle_distance" / "summary.json").read_text())
+    assert summary["tasks"]["pointnav"]["overall"]["stop_sr"] is None and "distance run" in summary["null_means"]["stop_sr"]
+
+
+def test_presets_paper_and_habitat(make_cfg, tmp_path):
+    paper = make_cfg(tmp_path, "+preset=paper")
+    habitat = make_cfg(tmp_path, "+preset=habitat")
+    default = make_cfg(tmp_path)
+    assert (paper.task.objectnav.success_rule, paper.evaluate.dynamics.blocked) == ("centre", "stay")
+    assert (habitat.task.objectnav.success_rule, habitat.evaluate.dynamics.blocked) == ("footprint", "slide")
+    assert (default.task.objectnav.success_rule, default.evaluate.dynamics.blocked) == ("footprint", "truncate")

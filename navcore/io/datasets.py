@@ -15,6 +15,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from navcore.io import jsonio
 from navcore.io.atomic import atomic_path, write_text_atomic
 
 
@@ -52,7 +53,7 @@ class JSONDataset(Dataset):
         return self.load() if self.path.exists() else default
 
     def save(self, obj: Any, indent: int | None = 1, **dumps_kwargs) -> None:
-        write_text_atomic(self.path, json.dumps(obj, indent=indent, **dumps_kwargs))
+        write_text_atomic(self.path, jsonio.dumps(obj, indent=indent, **dumps_kwargs))
 
 
 class JSONGzDataset(Dataset):
@@ -67,7 +68,7 @@ class JSONGzDataset(Dataset):
         import gzip
 
         with atomic_path(self.path) as tmp, open(tmp, "wb") as f, gzip.GzipFile(fileobj=f, mode="wb", mtime=0) as g:
-            g.write(json.dumps(obj).encode())
+            g.write(jsonio.dumps(obj).encode())
 
     def delete(self) -> None:
         self.path.unlink(missing_ok=True)
@@ -252,7 +253,7 @@ class FolderWriter:
         return p
 
     def json(self, name: str, obj: Any, indent: int | None = 1) -> str:
-        (self / name).write_text(json.dumps(obj, indent=indent))
+        (self / name).write_text(jsonio.dumps(obj, indent=indent))
         return name
 
     def text(self, name: str, text: str) -> str:

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from navcore.io import jsonio
 from navcore.io.episode_schema import quantize_trajectory
 from navcore.labels import is_structure
 from navcore.nav.actions import ACTION_NAMES, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
@@ -329,7 +330,7 @@ class EpisodeGenerator:
         if t.type == "objectnav":
             goal_sets = self._object_goals()
             for g in goal_sets:
-                g.goals_json = json.dumps([_instance_json(v) for v in g.instances])
+                g.goals_json = jsonio.dumps([_instance_json(v) for v in g.instances])
             fields = {}
             if not goal_sets:
                 self.rejections["no_goal_category"] += 1

@@ -42,11 +42,7 @@ class BatchNavEnv:
         for i, (env, a) in enumerate(zip(self.envs, actions)):
             if a is None or env.state is None or env.state.done:
                 continue
-            try:
-                env.apply(a)
-            except ValueError as e:  # a malformed action fails its own episode only
-                self.errors[i] = f"{type(e).__name__}: {e}"
-                env.state.fail()
+            env.apply(a)  # a malformed action spends its step and is recorded (NavEnv.apply)
             live.append(i)
         self._observe(live)
         return list(self._obs), [e.info() if e.state else {} for e in self.envs]

@@ -9,10 +9,14 @@ Actions (any of):
   most MAX_WAYPOINTS); a single flat waypoint {"x", "y", "yaw"} (navarena-server's random agent
   sends this form) is one such move;
 - velocity {"v", "w", "dt"}: integrated as x = v dt forward, then yaw = w dt (0 < dt <= MAX_DT).
-Every number must be finite: NaN or inf fails the episode as an agent error (a ValueError).
-A translation is checked as a swept disk on the costmap (its exact straight-motion test); a
-rejected move leaves the pose unchanged and counts as a collision. Turning in place never collides
-(the footprint is a disk).
+Every number must be finite: an invalid action (NaN or inf, missing fields, an unknown form)
+consumes its step, changes nothing and is recorded (`invalid_actions`, the first message in
+`action_error`); the episode goes on.
+A translation is checked as a swept disk on the costmap (its exact straight-motion test). A
+blocked translation counts as a collision and goes where `dynamics.blocked` says
+(navcore.nav.dynamics: truncate, the default: to the last collision-free pose along the path;
+stay; slide: along the obstacle, as habitat-sim's allow_sliding); the step's heading change
+applies in every mode. Turning in place never collides (the footprint is a disk).
 
 Protocols: "distance" (success as soon as the agent is inside the success region after a step;
 STOP only consumes a step) and "explicit_stop" (STOP ends the episode; success only when issued
@@ -27,6 +31,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from navcore.nav.actions import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, ActionSpace
+from navcore.nav.dynamics import BLOCKED_MODES, blocked_motion
 from navcore.nav.oracle import geodesic_potential
 from navcore.nav.poses import wrap_angle
 from stages.evaluate.episode import Episode
@@ -95,6 +100,18 @@ def decode_action(action, actions: ActionSpace) -> tuple[bool, list[tuple[float,
 
 
 @dataclass
+class DynamicsConfig:
+    """What the environment does with a blocked translation (navcore.nav.dynamics)."""
+
+    blocked: str = "truncate"
+    """truncate (to the last collision-free pose along the swept path) | stay (the pose stays: the
+    paper's evaluator and NavArena before this option) | slide (along the obstacle's tangent, as
+    habitat-sim's allow_sliding). The collision is counted and the heading change applied in every mode."""
+    tolerance: float = 0.005
+    """Metres: how close truncate and slide come to the first colliding pose."""
+
+
+@dataclass
 class EnvSettings:
     """The environment's rules and sensors that a run chooses (also fields of EvaluateConfig)."""
 
@@ -106,6 +123,8 @@ class EnvSettings:
     """Image height, pixels (null = the embodiment's)."""
     render: bool = True
     """Render RGB-D observations (false: pose and goal only, for metric-only runs)."""
+    dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
+    """Blocked moves (evaluate.dynamics.blocked=truncate|stay|slide)."""
 
 
 @dataclass
@@ -168,6 +187,8 @@ class EpisodeState:
         self.moves = 0          # attempted translations
         self.collisions = 0     # rejected translations
         self.collided_actions = 0  # policy actions with at least one rejected translation
+        self.invalid_actions = 0  # actions that could not be decoded (each consumed its step)
+        self.action_error = ""    # the first of their messages
         self.path_length = 0.0
         self.positions = [(self.x, self.y)]
         self.ever_in_region = False  # inside the region after some action (the start never counts)
@@ -193,6 +214,8 @@ class NavEnv:
         self.ctx, self.cfg = ctx, cfg or EnvConfig()
         if self.cfg.protocol not in PROTOCOLS:
             raise ValueError(f"unknown protocol {self.cfg.protocol!r}; choose one of {PROTOCOLS}")
+        if self.cfg.dynamics.blocked not in BLOCKED_MODES:
+            raise ValueError(f"evaluate.dynamics.blocked={self.cfg.dynamics.blocked!r}; choose one of {BLOCKED_MODES}")
         self.w = int(self.cfg.width or ctx.emb.image_width)
         self.h = int(self.cfg.height or ctx.emb.image_height)
         self.turn = self.cfg.actions.turn
@@ -220,7 +243,12 @@ class NavEnv:
         """Apply one action to the running episode (no rendering)."""
         s = self.state
         s.steps += 1
-        stop, moves = self._decode(action)
+        try:
+            stop, moves = self._decode(action)
+        except ValueError as e:  # a refused action: its step is spent, nothing moves, the error is kept
+            s.invalid_actions += 1
+            s.action_error = s.action_error or f"step {s.steps}: {e}"
+            stop, moves = False, []
         if stop:
             s.stopped = True
             s.stop_in_region = s.ep.in_region(s.x, s.y)
@@ -259,12 +287,16 @@ class NavEnv:
             c, sn = math.cos(s.yaw), math.sin(s.yaw)
             nx, ny = s.x + c * dx - sn * dy, s.y + sn * dx + c * dy
             s.moves += 1
-            if not self.ctx.costmap.is_motion_valid(s.x, s.y, nx, ny):
+            if self.ctx.costmap.is_motion_valid(s.x, s.y, nx, ny):
+                legs = [(nx, ny)]
+            else:  # blocked: counted, and the translation goes where the dynamics say
                 s.collisions += 1
-                return  # rejected: the pose stays, heading change included
-            s.path_length += math.hypot(nx - s.x, ny - s.y)
-            s.x, s.y = nx, ny
-            s.positions.append((nx, ny))
+                legs = blocked_motion(self.ctx.costmap, s.x, s.y, nx, ny, self.cfg.dynamics.blocked,
+                                      self.cfg.dynamics.tolerance)
+            for lx, ly in legs:
+                s.path_length += math.hypot(lx - s.x, ly - s.y)
+                s.x, s.y = float(lx), float(ly)
+                s.positions.append((s.x, s.y))
         s.yaw = float(wrap_angle(s.yaw + dyaw))
 
     def goal_observation(self) -> dict:

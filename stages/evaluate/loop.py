@@ -50,6 +50,7 @@ def result_row(env: NavEnv, ep, d0: float, error: str, seconds: float) -> dict:
     s = env.state
     return {"episode_id": ep.episode_id, "task": ep.task, "scene_id": ep.scene_id, "difficulty": ep.difficulty,
             "protocol": env.cfg.protocol, "end_reason": s.end_reason, "error": error,
+            "invalid_actions": s.invalid_actions, "action_error": s.action_error,
             **episode_metrics(s, d0, env.geodesic_to_goal(), env.cfg.protocol),
             "geodesic": ep.geodesic, "path_length": s.path_length, "seconds": seconds,
             "trajectory": np.asarray(s.positions, np.float32)}

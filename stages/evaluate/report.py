@@ -29,10 +29,23 @@ def load_results(parts: dict[str, object]) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
+NULL_MEANS = {
+    "distance_sr": "not defined by an explicit_stop run (success there needs STOP inside the region)",
+    "stop_sr": "not defined by a distance run (STOP only consumes a step there)",
+    "osr": "not defined by a distance run (equal to the distance SR by construction)",
+    "pose_sr": "ImageNav only (a goal heading)",
+    "pose_retention": "ImageNav only, and undefined when SR is 0",
+    "dtw": "no reference path stored for the episode",
+    "ndtw": "no reference path stored for the episode",
+}
+"""Why a metric of the summary may be null (JSON has no NaN; the summary says what null means)."""
+
+
 def summarize(df: pd.DataFrame) -> dict:
     protocols = sorted(set(df["protocol"])) if len(df) else []
     out = {"episodes": int(len(df)), "agent_errors": int((df["error"] != "").sum()) if len(df) else 0,
-           "protocol": ",".join(protocols), "tasks": {}}
+           "invalid_actions": int(df["invalid_actions"].sum()) if "invalid_actions" in df else 0,
+           "protocol": ",".join(protocols), "null_means": NULL_MEANS, "tasks": {}}
     for task in TASKS:
         rows = df[df["task"] == task].to_dict("records")
         if rows:

@@ -111,16 +111,18 @@ def run(scene, cfg, catalog) -> dict:
     write_results(rows, out)
     return {"outputs": [str(out.path), *videos, *plots], "episodes": len(rows),
             "agent_errors": sum(bool(r["error"]) for r in rows),
+            "invalid_actions": sum(int(r.get("invalid_actions", 0)) for r in rows),
             "sr": float(np.mean([r["sr"] for r in rows])) if rows else None, "run": run}
 
 
 def write_results(rows: list[dict], dataset) -> None:
     metric_cols = list(METRICS)
     # scene_id comes from the hive partition folder
-    cols = {c: [r[c] for r in rows] for c in ("episode_id", "task", "difficulty", "protocol", "end_reason",
-                                               "error")}
+    cols = {c: [r.get(c, "") for r in rows] for c in ("episode_id", "task", "difficulty", "protocol", "end_reason",
+                                                       "error", "action_error")}
     table = pa.table({**{c: pa.array(v, pa.string()) for c, v in cols.items()},
                       **{c: pa.array([float(r[c]) for r in rows], pa.float64()) for c in metric_cols},
+                      "invalid_actions": pa.array([int(r.get("invalid_actions", 0)) for r in rows], pa.int32()),
                       "geodesic": pa.array([r["geodesic"] for r in rows], pa.float64()),
                       "path_length": pa.array([r["path_length"] for r in rows], pa.float64()),
                       "seconds": pa.array([r["seconds"] for r in rows], pa.float64()),
