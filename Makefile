@@ -6,8 +6,10 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARGS ?=
+CUDA ?=
+WHEELS ?=
 
-.PHONY: setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: setup-gpu test-gpu bench-gpu setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -21,6 +23,20 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 setup: $(STAMP)
+
+# a CUDA machine in one command (scripts/setup_gpu.sh): CUDA torch matching the driver (CUDA=12.8 to
+# choose), gsplat 1.5.3 with its kernels compiled once, the segmenter extras, then the ready check;
+# offline from a folder of wheels with WHEELS=dir. Stops with a clear message without a GPU.
+setup-gpu:
+	PY=$(PY) VENV=$(VENV) CUDA=$(CUDA) WHEELS=$(WHEELS) sh scripts/setup_gpu.sh
+
+# every gpu-marked test (skipped by make test)
+test-gpu:
+	$(BIN)/python -m pytest -q -m gpu $(ARGS)
+
+# every GPU figure in one report: data/08_reports/bench_gpu.{json,md} and docs/bench_gpu.md
+bench-gpu:
+	$(BIN)/python -m benchmarks.bench_gpu --docs $(ARGS)
 
 dataset: $(STAMP)
 	$(BIN)/python -m pipeline $(ARGS)

@@ -38,6 +38,32 @@ def room_poses(rooms: np.ndarray, k: int, rng, margin: float = 0.6) -> np.ndarra
     return np.stack([x, y, rng.uniform(-np.pi, np.pi, k)], 1)
 
 
+def fps_grid(emb, rng, sizes: list[int], batch: int, repeats: int = 7) -> list[dict]:
+    """gsplat RGB-D frames/s per (Gaussians, resolution, frames per call): the median of `repeats`
+    timed calls after 3 warm-ups, each call `batch` robot views (or one)."""
+    out = []
+    for n in sizes:
+        gs, rooms = canonical_scene(4, n)
+        gp = Renderer(gs, "gsplat")
+        poses = room_poses(rooms, batch, rng)
+        for w, h in ((640, 480), (160, 120)):
+            for b in (1, batch):
+                vm, K, ww, hh = embodiment_camera(emb, poses[:b], w, h)
+                for _ in range(3):
+                    gp.render(vm, K, ww, hh)
+                torch.cuda.synchronize()
+                times = []
+                for _ in range(repeats):
+                    t0 = time.perf_counter()
+                    gp.render(vm, K, ww, hh)
+                    torch.cuda.synchronize()
+                    times.append(time.perf_counter() - t0)
+                out.append({"gaussians": len(gs.means), "width": w, "height": h, "batch": b,
+                            "fps": b / float(np.median(times))})
+                print(out[-1], flush=True)
+    return out
+
+
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
     mse = float(np.mean((a - b) ** 2))
     return 10 * math.log10(1.0 / max(mse, 1e-12))
@@ -49,6 +75,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--views", type=int, default=10)
     ap.add_argument("--fps-gaussians", type=int, default=1_000_000)
     ap.add_argument("--fps-batch", type=int, default=64)
+    ap.add_argument("--grid-gaussians", default="1000000,1500000",
+                    help="scene sizes of the frame-rate grid (x 640x480 / 160x120 x one frame / a batch)")
     ap.add_argument("--out", default="data/08_reports")
     args = ap.parse_args(argv)
     emb = Embodiment()
@@ -86,12 +114,14 @@ def main(argv=None) -> dict:
         torch.cuda.synchronize()
         times.append(time.perf_counter() - t0)
     fps = args.fps_batch / float(np.median(times))
+    grid = fps_grid(emb, rng, [int(n) for n in args.grid_gaussians.split(",") if n], args.fps_batch)
     result = {"device": torch.cuda.get_device_name(0), "host": platform.node(), "views": len(views),
               "psnr_cpu_vs_gsplat_min": min(v["psnr"] for v in views),
               "psnr_cpu_vs_gsplat_median": float(np.median([v["psnr"] for v in views])),
               "depth_median_abs_m_max": max(v["depth_median_abs_m"] for v in views),
               "depth_mean_abs_m_max": max(v["depth_mean_abs_m"] for v in views),
               "gsplat_raw_fps": fps, "gsplat_fps_batch": args.fps_batch, "gsplat_fps_gaussians": len(gs.means),
+              "gsplat_fps_grid": grid,
               "per_view": views}
     write_report(args.out, "render_gpu.json", result, omit=("per_view",))
     return result

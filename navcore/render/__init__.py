@@ -11,12 +11,18 @@ Cameras follow navcore/render/camera.py (OpenCV axes, world -> camera `viewmats`
 """
 from __future__ import annotations
 
+import os
+import sys
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from navcore.gaussians.model import render_sh_degree
+
+if sys.prefix != sys.base_prefix:  # in a venv: gsplat's compiled CUDA kernels live with it (make setup-gpu builds them)
+    os.environ.setdefault("TORCH_EXTENSIONS_DIR", str(Path(sys.prefix) / "torch_extensions"))
 
 if TYPE_CHECKING:  # torch is imported when a renderer is built, not when cameras are
     import torch
