@@ -147,11 +147,13 @@ def gpu_main(out: Path) -> dict:
     from benchmarks import render_gpu
 
     rng = np.random.default_rng(0)
-    cmp = render_gpu.main(["--out", str(out)])
+    cmp = render_gpu.main(["--out", str(out), "--grid-gaussians", ""])  # the frame-rate grid is bench_gpu's
     ctx, _ = bench_scene(3, 1_000_000, backend="gsplat")
     batch = 64
     steps = steps_per_second(ctx, 640, 480, batch, 60, rng, device_obs=True)
+    one = steps_per_second(ctx, 640, 480, 1, 300, rng, device_obs=True)  # one env: a render call per step
     res = {"device": torch.cuda.get_device_name(0), "gpu_steps_per_s": steps["steps_per_s"], "gpu_steps": steps,
+           "gpu_steps_per_s_one_env": one["steps_per_s"], "gpu_steps_one_env": one,
            "gsplat_raw_fps": steps["raw_render_fps"], "gsplat_raw_fps_room_views": cmp["gsplat_raw_fps"],
            "psnr_cpu_vs_gsplat": cmp["psnr_cpu_vs_gsplat_min"],
            "psnr_cpu_vs_gsplat_median": cmp["psnr_cpu_vs_gsplat_median"],
