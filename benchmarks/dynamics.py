@@ -61,9 +61,9 @@ def old_rule_env(ctx, cfg):
 
 
 def run(root: Path, tasks: list[str], episodes: int) -> dict:
+    from navcore.io.catalog import Catalog
     from navcore.nav.embodiment import load_embodiment
     from navcore.nav.geodesic import NavGraph
-    from pipeline.catalog import Catalog
     from stages.evaluate.agents import RandomAgent
     from stages.evaluate.env import DynamicsConfig, EnvConfig, NavEnv, SceneContext
     from stages.evaluate.episode import Episode

@@ -1,4 +1,4 @@
-"""Frames/s of the renderer-backed observation datasets (pipeline.observations).
+"""Frames/s of the renderer-backed observation datasets (navarena.observations).
 
 CPU (this machine): ExpertObservationStream over a data root's stored expert trajectories with
 the CPU renderer, as a user without a GPU runs it: frames/s per batch after the first (which loads
@@ -42,7 +42,7 @@ def _stream_fps(stream, batches: int) -> tuple[float, list[float]]:
 
 
 def cpu(args) -> dict:
-    from pipeline.observations import ExpertObservationStream
+    from navarena.observations import ExpertObservationStream
 
     out = {"machine": platform.node(), "cpu_cores": os.cpu_count(), "renderer": "cpu", "data": args.data}
     sizes = [(160, 120)] + ([(640, 480)] if args.big else [])
@@ -61,8 +61,8 @@ def gpu(args) -> dict:
     import torch
 
     from benchmarks.render_gpu import canonical_scene, room_poses
+    from navarena.observations import ExpertObservationStream
     from navcore.render import Renderer
-    from pipeline.observations import ExpertObservationStream
 
     gs, rooms = canonical_scene(8, args.gaussians)
     rng = np.random.default_rng(0)

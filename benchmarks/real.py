@@ -181,9 +181,9 @@ def objectnav_labelled(data: Path, executor: str, pictures: Path) -> list[dict]:
     from PIL import Image
 
     from benchmarks.scan_truth import rates
+    from navcore.io.catalog import Catalog
     from navcore.render import Renderer
     from navcore.render.camera import embodiment_camera
-    from pipeline.catalog import Catalog
     from pipeline.config import CONF_DIR
     from pipeline.executor import execute
 
@@ -362,7 +362,7 @@ def main(argv=None) -> int:
                     help="skip ObjectNav on the real labelled scans (scenes=real_labelled)")
     ap.add_argument("--synthetic-gaussians", type=int, default=300_000)
     args = ap.parse_args(argv)
-    from pipeline.catalog import Catalog
+    from navcore.io.catalog import Catalog
     from pipeline.config import CONF_DIR
 
     data, out = Path(args.data), Path(args.out)

@@ -21,7 +21,7 @@ def _app(cfg) -> None:
         sys.exit(code)
 
 
-TOOLS = {"render-episodes": "pipeline.render_episodes", "export-lerobot": "pipeline.lerobot_export"}
+TOOLS = {"render-episodes": "navarena.render_episodes", "export-lerobot": "navarena.lerobot"}
 """Subcommands beside the Hydra pipeline run: ``navarena render-episodes --help``."""
 
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from distributed.diagnostics.plugin import WorkerPlugin
 from rich.console import Console
 
-from pipeline.catalog import Catalog
+from navcore.io.catalog import Catalog
 from pipeline.tasks import FAILED, current, run_task
 
 

@@ -13,8 +13,8 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from navcore.io.atomic import sweep_stale_temporaries
+from navcore.io.catalog import Catalog, SceneEntry
 from pipeline.backends import run_on_dask
-from pipeline.catalog import Catalog, SceneEntry
 from pipeline.graph import closure, config_hashes, scene_hash
 from pipeline.summary import build_summary, print_summary, write_summary
 from pipeline.tasks import finalize_due, run_finalize, run_task

@@ -10,7 +10,7 @@ from rich.table import Table
 
 from navcore.io import jsonio
 from navcore.io.atomic import write_text_atomic
-from pipeline.catalog import Catalog
+from navcore.io.catalog import Catalog
 from pipeline.tasks import FAILED
 
 

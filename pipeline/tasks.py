@@ -8,7 +8,7 @@ import os
 import time
 import traceback
 
-from pipeline.catalog import Catalog, SceneEntry
+from navcore.io.catalog import Catalog, SceneEntry
 from pipeline.graph import BY_NAME
 from pipeline.locks import locked
 from pipeline.markers import manifest_problem, output_manifest, read_marker, write_marker

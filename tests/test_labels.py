@@ -94,7 +94,7 @@ def test_instance_cleaning_known_answers():
 
 
 def test_label_spec_from_catalog_entry_and_scene_hash(tmp_path):
-    from pipeline.catalog import Catalog
+    from navcore.io.catalog import Catalog
     from pipeline.graph import scene_hash
 
     (tmp_path / "cat.yaml").write_text(

@@ -21,7 +21,7 @@ def _lerobot():
 
 @pytest.fixture(scope="module")
 def exported(episode_run, tmp_path_factory):
-    from pipeline.lerobot_export import export_lerobot
+    from navarena.lerobot import export_lerobot
 
     root, _, _ = episode_run
     out = tmp_path_factory.mktemp("lerobot") / "navarena_train"
@@ -31,10 +31,10 @@ def exported(episode_run, tmp_path_factory):
 
 
 def test_lerobot_dataset_class_loads_the_export(exported, torchvision_shim):
+    from navcore.io.catalog import Catalog
     from navcore.nav.embodiment import Embodiment
     from navcore.render import Renderer
     from navcore.render.camera import embodiment_camera
-    from pipeline.catalog import Catalog
 
     root, out, res = exported
     LeRobotDataset = _lerobot()
@@ -84,7 +84,7 @@ def test_lerobot_dataset_class_loads_the_export(exported, torchvision_shim):
 
 
 def test_lerobot_export_is_deterministic(exported, tmp_path):
-    from pipeline.lerobot_export import export_lerobot
+    from navarena.lerobot import export_lerobot
 
     root, out, _ = exported
     again = tmp_path / "again"

@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 import torch
 
-from pipeline.observations import ExpertObservations, ExpertObservationStream
+from navarena.observations import ExpertObservations, ExpertObservationStream
 
 
 @pytest.fixture(scope="module")
@@ -16,10 +16,10 @@ def stream_args(episode_run):
 
 def test_stream_frames_match_the_environment_render_and_carry_expert_actions(stream_args):
     from navcore.gaussians.content import without_splats
+    from navcore.io.catalog import Catalog
     from navcore.nav.embodiment import Embodiment
     from navcore.render import Renderer
     from navcore.render.camera import embodiment_camera
-    from pipeline.catalog import Catalog
 
     root, kw = stream_args
     batches = list(ExpertObservationStream(root, batch_size=10, **kw))

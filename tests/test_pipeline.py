@@ -273,7 +273,7 @@ def test_same_config_same_bytes_whatever_the_workers(tmp_path, make_cfg):
 
 
 def test_shards_are_disjoint_and_cover(tmp_path, project_root):
-    from pipeline.catalog import Catalog
+    from navcore.io.catalog import Catalog
 
     cat = Catalog(project_root / "catalogs" / "synthetic_large.yaml", tmp_path)
     shards = [cat.select(k, 3) for k in range(3)]
@@ -445,7 +445,7 @@ def test_stored_costmap_loads_into_the_same_queries(tmp_path, make_cfg):
 
 
 def test_catalog_paths_ids_and_layout(tmp_path, project_root):
-    from pipeline.catalog import Catalog, scene_id_for
+    from navcore.io.catalog import Catalog, scene_id_for
 
     (tmp_path / "cats").mkdir()
     cat = tmp_path / "cats" / "mine.yaml"
@@ -465,7 +465,7 @@ def test_catalog_paths_ids_and_layout(tmp_path, project_root):
 
 
 def test_a_catalog_cannot_steer_writes_outside_the_data_root(tmp_path):
-    from pipeline.catalog import Catalog
+    from navcore.io.catalog import Catalog
 
     def cat(text):
         f = tmp_path / "c.yaml"
@@ -491,8 +491,8 @@ def test_catalog_datasets_round_trip_atomically_and_find_partitions(tmp_path, pr
     import pyarrow as pa
 
     from navcore.gaussians import GaussianScene
+    from navcore.io.catalog import Catalog
     from navcore.io.datasets import GaussianDataset, JSONDataset, ParquetDataset
-    from pipeline.catalog import Catalog
 
     cat = Catalog(project_root / "catalogs" / "synthetic.yaml", tmp_path)
     scene = cat.scenes[0]

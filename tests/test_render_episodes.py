@@ -6,12 +6,12 @@ import subprocess
 import numpy as np
 import pytest
 
-from pipeline.render_episodes import MapInset, costmap_image, headings
+from navarena.render_episodes import MapInset, costmap_image, headings
 
 
 @pytest.fixture(scope="module")
 def rendered(episode_run, tmp_path_factory):
-    from pipeline.render_episodes import render_episodes
+    from navarena.render_episodes import render_episodes
 
     root, _, _ = episode_run
     out = tmp_path_factory.mktemp("render")

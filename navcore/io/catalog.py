@@ -1,0 +1,205 @@
+"""Catalogs: which scenes exist (id, group, path, format) and where each logical dataset lives.
+
+A catalog YAML has ``scenes:`` (explicit entries; relative paths are relative to the catalog
+file's folder) and/or ``synthetic:`` (a generated range of
+procedural scenes), and may override entries of the shared layout (catalogs/layout.yaml) under
+``layout:``. Each layout entry is a path template and a dataset type (navcore/io/datasets.py);
+stage code asks ``catalog.dataset("costmaps", scene)`` and loads or saves through it, never
+building or opening paths itself. ``catalog.path`` is for the pipeline's own files (markers,
+run summaries) and for walking the roots of partitioned datasets.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import string
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from navcore.gaussians.formats import detect_format
+from navcore.io.datasets import TYPES, Dataset
+from navcore.labels.shipped import LabelSpec
+
+LAYOUT_FILE = Path(__file__).resolve().parents[2] / "catalogs" / "layout.yaml"
+
+
+SAFE_COMPONENT = re.compile(r"[A-Za-z0-9][A-Za-z0-9._=-]{0,127}")
+"""What a value substituted into a path template may be: one plain path component (no separator,
+no '..', no leading dot), so that a catalog cannot steer a write outside the data root."""
+
+
+def safe_component(value, what: str, where) -> str:
+    v = str(value)
+    if not SAFE_COMPONENT.fullmatch(v) or ".." in v:
+        raise ValueError(f"{where}: {what} {v!r} is not a plain name (letters, digits, '.', '_', '-', '='; no "
+                         f"'/' or '..'): it is used in output paths")
+    return v
+
+
+def scene_id_for(dataset: str, name: str, taken: set[str] | None = None) -> str:
+    """NavArena scene id: first 8 hex chars of sha256("{dataset}:{name}"), 12 on collision."""
+    h = hashlib.sha256(f"{dataset}:{name}".encode()).hexdigest()
+    return h[:12] if taken and h[:8] in taken else h[:8]
+
+
+@dataclass(frozen=True)
+class SceneEntry:
+    scene_id: str
+    name: str
+    group: str
+    path: str  # source file / folder ("" for synthetic until generated)
+    format: str  # inria_ply, supersplat_ply, ply, splat, spz, sog, npy_folder, synthetic
+    seed: int | None = None
+    num_gaussians: int | None = None
+    labels: LabelSpec | None = None  # the entry's `labels:` (class table, labelled mesh; navcore.labels.shipped)
+
+    @property
+    def synthetic(self) -> bool:
+        return self.format == "synthetic"
+
+
+class Catalog:
+    """Scenes of one catalog file plus the data layout rooted at ``root``."""
+
+    def __init__(self, catalog_file: str | Path, root: str | Path, synthetic_count: int | None = None,
+                 synthetic_num_gaussians: int | None = None):
+        self.file = Path(catalog_file)
+        if not self.file.exists():
+            raise FileNotFoundError(f"catalog {self.file} does not exist (scenes.catalog=...)")
+        spec = yaml.safe_load(self.file.read_text()) or {}
+        self.root = Path(root).resolve()
+        self.layout = dict(yaml.safe_load(LAYOUT_FILE.read_text()))
+        self.layout.update(spec.get("layout") or {})
+        self.scenes: list[SceneEntry] = []
+        taken: set[str] = set()
+        for e in spec.get("scenes") or []:
+            for key in ("name", "path"):
+                if key not in e:
+                    raise ValueError(f"catalog {self.file}: scene entry {e} lacks '{key}'")
+            group = safe_component(e.get("group", "default"), "group", self.file)
+            sid = safe_component(e.get("id") or scene_id_for(group, e["name"], taken), "id", self.file)
+            path = Path(e["path"])
+            if not path.is_absolute():
+                path = (self.file.parent / path).resolve()  # relative to the catalog file's folder
+            fmt = e.get("format") or detect_format(path)  # left out: the path tells
+            labels = LabelSpec.from_entry(e.get("labels"), self.file.parent, f"catalog {self.file}, scene {e['name']!r}")
+            self.scenes.append(SceneEntry(sid, e["name"], group, str(path), fmt, labels=labels))
+            taken.add(sid)
+        syn = spec.get("synthetic")
+        if syn:
+            syn = dict(syn)
+            if synthetic_count is not None:
+                syn["count"] = synthetic_count
+            if synthetic_num_gaussians is not None:
+                syn["num_gaussians"] = synthetic_num_gaussians
+            for k in range(int(syn.get("count", 0))):
+                seed = int(syn.get("first_seed", 0)) + k
+                name = safe_component(f"{syn.get('prefix', 'synth')}_{seed:04d}", "synthetic prefix", self.file)
+                group = safe_component(syn.get("group", "synthetic"), "group", self.file)
+                sid = scene_id_for(group, name, taken)
+                taken.add(sid)
+                self.scenes.append(SceneEntry(sid, name, group, "", "synthetic", seed,
+                                              syn.get("num_gaussians")))
+
+    @classmethod
+    def for_root(cls, root: str | Path) -> "Catalog":
+        """The layout of an existing data root without a catalog file (readers of a finished
+        dataset: scenes are found from what is on disk, see scene_ids)."""
+        cat = cls.__new__(cls)
+        cat.file, cat.root = LAYOUT_FILE, Path(root).resolve()
+        if not cat.root.is_dir():
+            raise FileNotFoundError(f"data root {cat.root} does not exist")
+        cat.layout = dict(yaml.safe_load(LAYOUT_FILE.read_text()))
+        cat.scenes = []
+        return cat
+
+    def scene_ids(self, dataset: str = "episodes", **extra) -> list[str]:
+        """Scene ids for which `dataset` exists on disk (any value of its other fields), sorted."""
+        template, _ = self._entry(dataset)
+        free = [n for _, n, _, _ in string.Formatter().parse(template) if n and n not in ("root",) and n not in extra]
+        found = self.find(dataset, **extra)
+        pos = free.index("scene_id")
+        return sorted({k.split("/")[pos] for k in found})
+
+    def scene(self, scene_id: str) -> SceneEntry:
+        """The catalog entry of a scene id, or a bare entry (id only) for a root without a catalog."""
+        for s in self.scenes:
+            if s.scene_id == scene_id:
+                return s
+        return SceneEntry(safe_component(scene_id, "scene id", self.file), scene_id, "default", "", "")
+
+    def _entry(self, dataset: str) -> tuple[str, str | None]:
+        if dataset not in self.layout:
+            raise KeyError(f"dataset {dataset!r} is not in the layout ({', '.join(self.layout)})")
+        e = self.layout[dataset]
+        return (e, None) if isinstance(e, str) else (e["path"], e["type"])
+
+    def _fields(self, scene: SceneEntry | None, extra: dict) -> dict:
+        """Values of a path template's placeholders: the root, a scene's id / group / name, extras."""
+        fields = {"root": str(self.root), **extra}
+        if scene is not None:
+            fields.update(scene_id=scene.scene_id, group=scene.group, name=scene.name)
+        return fields
+
+    def path(self, dataset: str, scene: SceneEntry | None = None, **extra) -> Path:
+        """Resolve a logical dataset name to a path: always inside the data root (a layout entry
+        or a field that would lead elsewhere is refused: the pipeline writes only there)."""
+        template, _ = self._entry(dataset)
+        fields = self._fields(scene, extra)
+        used = {n for _, n, _, _ in string.Formatter().parse(template) if n}
+        for k in sorted(used & set(fields) - {"root"}):
+            safe_component(fields[k], f"{k} of dataset {dataset!r}", self.file)
+        try:
+            p = Path(template.format(**fields))
+        except KeyError as e:
+            raise KeyError(f"dataset {dataset!r} ({template}) needs the field {e.args[0]!r}") from None
+        # lexical (a data root may hold symlinks to other disks): the fields are plain names, so
+        # only the template itself could lead out
+        if not Path(os.path.normpath(p)).is_relative_to(self.root):
+            raise ValueError(f"layout entry {dataset!r} ({template}) resolves to {p}, outside the data root "
+                             f"{self.root}")
+        return p
+
+    def dataset(self, dataset: str, scene: SceneEntry | None = None, **extra) -> Dataset:
+        """The typed dataset (load / save / writing) of a logical name, for one scene (and task,
+        run, ... where its path template has them)."""
+        _, kind = self._entry(dataset)
+        if kind is None:
+            raise KeyError(f"{dataset!r} is a folder of datasets, not a dataset; use catalog.path")
+        if kind not in TYPES:
+            raise ValueError(f"layout: dataset {dataset!r} has unknown type {kind!r} ({', '.join(TYPES)})")
+        base = self.layout[dataset].get("base")  # a dataset derived on read from another one
+        kwargs = {"base": self.dataset(base, scene, **extra)} if base else {}
+        return TYPES[kind](self.path(dataset, scene, **extra), **kwargs)
+
+    def find(self, dataset: str, scene: SceneEntry | None = None, **extra) -> dict[str, Dataset]:
+        """The existing datasets of a name whose path fields other than the given ones vary
+        (e.g. every task of one scene's episodes), keyed by the varying fields' values joined
+        with "/" (in the template's order), sorted."""
+        template, _ = self._entry(dataset)
+        fields = self._fields(scene, extra)
+        free = list(dict.fromkeys(n for _, n, _, _ in string.Formatter().parse(template) if n and n not in fields))
+        pattern = template.format(**{**{n: "*" for n in free}, **fields})
+        anchor = Path(pattern.split("*")[0]).parent if "*" in pattern else Path(pattern).parent
+        found = {}
+        regex = re.escape(pattern).replace(re.escape("*"), "([^/]+)")
+        for p in sorted(anchor.glob(str(Path(pattern).relative_to(anchor)))):
+            m = re.fullmatch(regex, str(p))
+            if m:
+                values = dict(zip(free, m.groups()))
+                found["/".join(m.groups())] = self.dataset(dataset, scene, **extra, **values)
+        return found
+
+    def select(self, shard: int = 0, num_shards: int = 1, ids: list[str] | None = None,
+               limit: int | None = None) -> list[SceneEntry]:
+        """Shard k of n: a disjoint, deterministic slice (by scene id order), optionally filtered."""
+        if not 0 <= shard < num_shards:
+            raise ValueError(f"shard {shard} is outside 0..{num_shards - 1}")
+        scenes = sorted(self.scenes, key=lambda s: s.scene_id)
+        if ids:
+            scenes = [s for s in scenes if s.scene_id in ids or s.name in ids]
+        scenes = scenes[shard::num_shards]
+        return scenes[:limit] if limit else scenes
