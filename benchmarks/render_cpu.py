@@ -62,19 +62,36 @@ def scene_fps(gs, poses, emb, ref_views: int) -> dict:
 
 
 def revision_renderer(rev: str):
-    """navcore/render/cpu_fast.py as it was at git revision rev, imported as its own module."""
+    """The compiled CPU renderer as it was at git revision rev, imported as its own module: the
+    single file navcore/render/cpu_fast.py of older revisions, or the package navcore/render/cpu_fast/
+    (its modules copied under a package name of their own, their imports of each other rewritten)."""
+    import importlib
     import importlib.util
     import subprocess
+    import sys
     import tempfile
 
-    src = subprocess.run(["git", "show", f"{rev}:navcore/render/cpu_fast.py"], cwd=Path(__file__).parent.parent,
-                         check=True, capture_output=True, text=True).stdout
-    path = Path(tempfile.mkdtemp(prefix="navarena_rev_")) / f"cpu_fast_{rev[:12]}.py"
-    path.write_text(src)
-    spec = importlib.util.spec_from_file_location(path.stem, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    root = Path(__file__).parent.parent
+    git = lambda *a: subprocess.run(["git", *a], cwd=root, capture_output=True, text=True)  # noqa: E731
+    tmp = Path(tempfile.mkdtemp(prefix="navarena_rev_"))
+    one = git("show", f"{rev}:navcore/render/cpu_fast.py")
+    if one.returncode == 0:
+        path = tmp / f"cpu_fast_{rev[:12]}.py"
+        path.write_text(one.stdout)
+        spec = importlib.util.spec_from_file_location(path.stem, path)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod
+    name = f"cpu_fast_{rev[:12].replace('-', '_').replace('~', '_')}"
+    files = [f for f in git("ls-tree", "--name-only", f"{rev}:navcore/render/cpu_fast/").stdout.split() if f.endswith(".py")]
+    if not files:
+        raise SystemExit(f"revision {rev} has no navcore/render/cpu_fast(.py)")
+    (tmp / name).mkdir()
+    for f in files:
+        text = git("show", f"{rev}:navcore/render/cpu_fast/{f}").stdout
+        (tmp / name / f).write_text(text.replace("navcore.render.cpu_fast", name))
+    sys.path.insert(0, str(tmp))
+    return importlib.import_module(name)
 
 
 def scene_ab(gs, poses, emb, old) -> dict:
