@@ -35,28 +35,18 @@ render_one / render are the entry points.
 """
 from __future__ import annotations
 
-import numba
+import numba  # noqa: F401 - the entry points' callers expect numba loaded with the package
 import numpy as np
 
 from navcore.gaussians.model import render_sh_degree
-from navcore.gaussians.sh import C0 as C0
-from navcore.gaussians.sh import C1 as C1
-from navcore.gaussians.sh import C2 as C2
-from navcore.gaussians.sh import C3 as C3
-from navcore.render.cpu_fast.binning import (
-    SMALL_SORT,  # noqa: F401 - the package's public names
-    _bin,
-    _depth_ranks,
-    _depths,
-)
+from navcore.render.cpu_fast.binning import SMALL_SORT, _bin, _depth_ranks, _depths
 from navcore.render.cpu_fast.composite import _rasterize
-from navcore.render.cpu_fast.project import (
-    NDATA,
-    _cull,
-    _project,
-    prepare,  # noqa: F401
-)
-from navcore.render.cpu_fast.simd import ALPHA_MIN, EXTENT_MAX, SQRT_EPS2D, T_MIN, TILE, _prefetch, _wide_vectors  # noqa: F401
+from navcore.render.cpu_fast.project import NDATA, _block_out, _cull, _project, prepare
+from navcore.render.cpu_fast.simd import ALPHA_MIN, EXTENT_MAX, SQRT_EPS2D, T_MIN, TILE, _prefetch, _wide_vectors
+
+__all__ = ["ALPHA_MIN", "EXTENT_MAX", "NDATA", "SMALL_SORT", "SQRT_EPS2D", "TILE", "T_MIN", "_bin", "_block_out",
+           "_cull", "_depth_ranks", "_depths", "_prefetch", "_project", "_rasterize", "_wide_vectors", "prepare",
+           "render", "render_one"]
 
 
 def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: int, deg: int,
