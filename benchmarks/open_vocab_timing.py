@@ -23,7 +23,12 @@ import numpy as np
 from navcore.io import jsonio
 
 
-def build_models(root: Path) -> tuple[Path, Path]:
+def build_models(root: Path, tiny: bool = False) -> tuple[Path, Path]:
+    """(detector folder, masker folder) with random weights, written by save_pretrained as a user's
+    download would be: the published architectures (OWLv2 base / patch 16 at 960 px, SAM ViT-B at
+    1024 px), or with `tiny` the same architectures at 64 px with one small layer each (tests). The
+    tokenizer is a letters-only CLIP BPE vocabulary (its special tokens last: OWL masks a query
+    whose first id is 0)."""
     import torch
     from transformers import (
         CLIPTokenizer,
@@ -46,12 +51,28 @@ def build_models(root: Path) -> tuple[Path, Path]:
     (root / "merges.txt").write_text("#version: 0.2\n")
     tok = CLIPTokenizer(str(root / "vocab.json"), str(root / "merges.txt"), pad_token="!")
     torch.manual_seed(0)
-    cfg = Owlv2Config()  # base / patch 16, 768 px
-    cfg.vision_config.image_size = 960  # the ensemble checkpoint's input size
-    Owlv2ForObjectDetection(cfg).save_pretrained(root / "det")
-    Owlv2Processor(image_processor=Owlv2ImageProcessor(size={"height": 960, "width": 960}), tokenizer=tok).save_pretrained(root / "det")
-    SamModel(SamConfig()).save_pretrained(root / "sam")  # ViT-B, 1024 px
-    SamProcessor(SamImageProcessor()).save_pretrained(root / "sam")
+    if tiny:
+        det_cfg = Owlv2Config(text_config=dict(vocab_size=len(vocab), hidden_size=32, intermediate_size=64,
+                                               num_hidden_layers=1, num_attention_heads=2, max_position_embeddings=16),
+                              vision_config=dict(hidden_size=32, intermediate_size=64, num_hidden_layers=1,
+                                                 num_attention_heads=2, image_size=64, patch_size=16), projection_dim=32)
+        sam_cfg = SamConfig(
+            vision_config=dict(hidden_size=32, output_channels=16, num_hidden_layers=1, num_attention_heads=2,
+                               image_size=64, patch_size=16, mlp_dim=64, global_attn_indexes=[0], window_size=2,
+                               num_pos_feats=8),
+            prompt_encoder_config=dict(hidden_size=16, image_size=64, patch_size=16, mask_input_channels=4),
+            mask_decoder_config=dict(hidden_size=16, mlp_dim=32, num_hidden_layers=1, num_attention_heads=2,
+                                     iou_head_hidden_dim=16))
+        det_px, sam_proc = 64, SamImageProcessor(size={"longest_edge": 64}, pad_size={"height": 64, "width": 64},
+                                                 mask_size={"longest_edge": 16}, mask_pad_size={"height": 16, "width": 16})
+    else:
+        det_cfg, sam_cfg, det_px, sam_proc = Owlv2Config(), SamConfig(), 960, SamImageProcessor()
+        det_cfg.vision_config.image_size = 960  # the ensemble checkpoint's input size
+    Owlv2ForObjectDetection(det_cfg).eval().save_pretrained(root / "det")
+    Owlv2Processor(image_processor=Owlv2ImageProcessor(size={"height": det_px, "width": det_px}),
+                   tokenizer=tok).save_pretrained(root / "det")
+    SamModel(sam_cfg).eval().save_pretrained(root / "sam")
+    SamProcessor(sam_proc).save_pretrained(root / "sam")
     return root / "det", root / "sam"
 
 

@@ -73,16 +73,6 @@ def _frames_of(tr: pd.DataFrame, stride: int) -> pd.DataFrame:
     return f
 
 
-def _count_episodes(cat, sid: str, task: str, split: str | None, per_scene: int | None) -> int:
-    """Episodes of one scene and task the export will write (the progress display's total)."""
-    ds = cat.dataset("episodes", cat.scene(sid), task=task)
-    if not ds.exists():
-        return 0
-    eps = ds.load(["split"]).to_pandas()
-    n = int((eps["split"] == split).sum()) if split else len(eps)
-    return n if per_scene is None else min(n, per_scene)
-
-
 def _stats(a: np.ndarray, axis) -> dict:
     return {"min": a.min(axis=axis).tolist(), "max": a.max(axis=axis).tolist(), "mean": a.mean(axis=axis).tolist(),
             "std": a.std(axis=axis).tolist(), "count": [int(a.shape[0])]}
@@ -96,7 +86,7 @@ def export_lerobot(root, out, split: str | None = "train", tasks=("pointnav", "i
     """Write the LeRobot dataset of `split` of the data root `root` to `out` (replaced whole:
     written beside it and renamed in place). Returns a summary (episodes, frames, bytes). A progress
     display (episodes, frames, frames/s, time left) unless quiet."""
-    from navcore.render.frames import SceneFrames
+    from navcore.render.frames import SceneFrames, chosen_episodes
 
     if TRAJECTORY_HZ % fps:
         raise ValueError(f"fps must divide the trajectories' {TRAJECTORY_HZ} Hz, got {fps}")
@@ -112,22 +102,15 @@ def export_lerobot(root, out, split: str | None = "train", tasks=("pointnav", "i
     episodes_meta, data_rows, frames_total = [], [], 0
     stats_acc = {"observation.state": [], "observation.goal": [], "action": [], "action.waypoint": []}
     rgb_sum, rgb_sq, rgb_min, rgb_max, depth_acc = np.zeros(3), np.zeros(3), np.full(3, 255.0), np.zeros(3), []
-    total = sum(_count_episodes(cat, sid, task, split, episodes_per_scene) for sid in src.scene_ids for task in tasks)
+    total = sum(len(chosen_episodes(cat, cat.scene(sid), task, split, episodes_per_scene, ["episode_id", "split"]))
+                for sid in src.scene_ids for task in tasks)  # the progress display's total
     with atomic_path(out) as tmp, ToolProgress("export-lerobot", total, quiet) as bar:
         tmp.mkdir(parents=True)
         ep_index = 0
         for sid in src.scene_ids:
             scene = cat.scene(sid)
             for task in tasks:
-                eps_ds = cat.dataset("episodes", scene, task=task)
-                if not eps_ds.exists():
-                    continue
-                eps = eps_ds.load().to_pandas()
-                if split:
-                    eps = eps[eps["split"] == split]
-                eps = eps.sort_values("episode_id")
-                if episodes_per_scene is not None:
-                    eps = eps.head(episodes_per_scene)
+                eps = chosen_episodes(cat, scene, task, split, episodes_per_scene)
                 if not len(eps):
                     continue
                 tr_all = cat.dataset("trajectories", scene, task=task).load().to_pandas()

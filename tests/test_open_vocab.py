@@ -15,46 +15,9 @@ pytest.importorskip("transformers", reason="the open_vocab extra: pip install -e
 def models(tmp_path_factory, torchvision_shim):
     """(detector folder, masker folder): tiny OWLv2 (64 px, 16 px patches, a letters-only CLIP BPE
     vocabulary) and SAM (64 px) with random weights, written by save_pretrained."""
-    import torch
-    from transformers import (
-        CLIPTokenizer,
-        Owlv2Config,
-        Owlv2ForObjectDetection,
-        Owlv2ImageProcessor,
-        Owlv2Processor,
-        SamConfig,
-        SamImageProcessor,
-        SamModel,
-        SamProcessor,
-    )
+    from benchmarks.open_vocab_timing import build_models
 
-    root = tmp_path_factory.mktemp("open_vocab")
-    vocab = {"!": 0}
-    for suffix in ("", "</w>"):
-        for c in "abcdefghijklmnopqrstuvwxyz":
-            vocab[c + suffix] = len(vocab)
-    vocab["<|startoftext|>"], vocab["<|endoftext|>"] = len(vocab), len(vocab) + 1  # OWL masks queries starting with id 0
-    (root / "vocab.json").write_text(json.dumps(vocab))
-    (root / "merges.txt").write_text("#version: 0.2\n")
-    tok = CLIPTokenizer(str(root / "vocab.json"), str(root / "merges.txt"), pad_token="!")
-    torch.manual_seed(0)
-    det = Owlv2ForObjectDetection(Owlv2Config(
-        text_config=dict(vocab_size=len(vocab), hidden_size=32, intermediate_size=64, num_hidden_layers=1,
-                         num_attention_heads=2, max_position_embeddings=16),
-        vision_config=dict(hidden_size=32, intermediate_size=64, num_hidden_layers=1, num_attention_heads=2,
-                           image_size=64, patch_size=16), projection_dim=32)).eval()
-    det.save_pretrained(root / "det")
-    Owlv2Processor(image_processor=Owlv2ImageProcessor(size={"height": 64, "width": 64}), tokenizer=tok).save_pretrained(root / "det")
-    sam = SamModel(SamConfig(
-        vision_config=dict(hidden_size=32, output_channels=16, num_hidden_layers=1, num_attention_heads=2, image_size=64,
-                           patch_size=16, mlp_dim=64, global_attn_indexes=[0], window_size=2, num_pos_feats=8),
-        prompt_encoder_config=dict(hidden_size=16, image_size=64, patch_size=16, mask_input_channels=4),
-        mask_decoder_config=dict(hidden_size=16, mlp_dim=32, num_hidden_layers=1, num_attention_heads=2,
-                                 iou_head_hidden_dim=16))).eval()
-    sam.save_pretrained(root / "sam")
-    SamProcessor(SamImageProcessor(size={"longest_edge": 64}, pad_size={"height": 64, "width": 64},
-                                   mask_size={"longest_edge": 16}, mask_pad_size={"height": 16, "width": 16})).save_pretrained(root / "sam")
-    return root / "det", root / "sam"
+    return build_models(tmp_path_factory.mktemp("open_vocab"), tiny=True)
 
 
 def _frames(n, h=48, w=64, seed=0):

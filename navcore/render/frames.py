@@ -19,6 +19,20 @@ STEP_COLUMNS = ["episode_id", "step", "position_x", "position_y", "yaw", "linear
                 "dx", "dy", "dyaw", "action_id"]
 
 
+def chosen_episodes(catalog: Catalog, scene, task: str, split: str | None = None, per_scene: int | None = None,
+                    columns: list[str] | None = None) -> pd.DataFrame:
+    """The episodes of one scene and task a tool works on: of `split` (None: all), by id, the first
+    `per_scene` (None: all); empty when the task has none."""
+    ds = catalog.dataset("episodes", scene, task=task)
+    if not ds.exists():
+        return pd.DataFrame(columns=columns or ["episode_id", "split"])
+    eps = ds.load(columns).to_pandas()
+    if split:
+        eps = eps[eps["split"] == split]
+    eps = eps.sort_values("episode_id")
+    return eps if per_scene is None else eps.head(per_scene)
+
+
 def expert_steps(catalog: Catalog, scene_id: str, tasks, split: str | None = None, stride: int = 1,
                  episodes: int | None = None) -> pd.DataFrame:
     """The expert steps of one scene (every `stride`-th of each episode, its last always kept), with
@@ -26,15 +40,7 @@ def expert_steps(catalog: Catalog, scene_id: str, tasks, split: str | None = Non
     scene = catalog.scene(scene_id)
     parts = []
     for task in tasks:
-        eps_ds = catalog.dataset("episodes", scene, task=task)
-        if not eps_ds.exists():
-            continue
-        eps = eps_ds.load(["episode_id", "split"]).to_pandas()
-        if split:
-            eps = eps[eps["split"] == split]
-        eps = eps.sort_values("episode_id")
-        if episodes is not None:
-            eps = eps.head(episodes)
+        eps = chosen_episodes(catalog, scene, task, split, episodes, ["episode_id", "split"])
         if not len(eps):
             continue
         tr = catalog.dataset("trajectories", scene, task=task).load(STEP_COLUMNS).to_pandas()
