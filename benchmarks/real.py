@@ -205,7 +205,7 @@ def objectnav_labelled(data: Path, executor: str, pictures: Path) -> list[dict]:
                "oracle_sr": oracle_sr(data, scene.scene_id), "goal_views": {}}
         try:  # the costmap against the scan's own points (benchmarks.scan_truth)
             row["scan_truth"] = rates(catalog, scene, emb, 4000)
-        except (TypeError, ValueError, FileNotFoundError) as e:  # no per-point labels (a labels.json scan)
+        except (ValueError, FileNotFoundError) as e:  # no per-point labels (a labels.json scan)
             row["scan_truth"] = {"absent": f"{type(e).__name__}: {e}"}
         p = catalog.path("episodes", scene, task="objectnav")
         if p.exists():
@@ -323,14 +323,15 @@ def objectnav_markdown(rep: dict) -> list[str]:
         sem = s.get("semantics", {})
         why = "; ".join(x.get("reason", "") for x in sem.get("shortfall", [])) or \
             ", ".join(f"{k} {v}" for k, v in s.get("objectnav_rejections", {}).items())
+        sr = lambda p: s["oracle_sr"][p].get("objectnav", "-")  # noqa: E731
         lines.append(f"| {s['scene']} | {sem.get('labels_from') or 'none'} | {s['episodes']['objectnav']} | "
-                     f"{s['oracle_sr']['distance'].get('objectnav')} / {s['oracle_sr']['explicit_stop'].get('objectnav')} | "
-                     f"{why if not s['episodes']['objectnav'] else ''} |")
+                     f"{sr('distance')} / {sr('explicit_stop')} | {why if not s['episodes']['objectnav'] else ''} |")
     for s in rep.get("objectnav_labelled", []):
         cats = ", ".join(f"{k} {v}" for k, v in s["by_category"].items())
         why = "" if s["episodes"] else ("; ".join(s["failures"]) or ", ".join(f"{k} {v}" for k, v in s["rejections"].items()))
-        lines.append(f"| {s['scene']} (labelled scan) | {s['labels_from']} | {s['episodes']} ({cats}) | "
-                     f"{s['oracle_sr']['distance'].get('objectnav')} / {s['oracle_sr']['explicit_stop'].get('objectnav')} | {why} |")
+        sr = lambda p: s["oracle_sr"][p].get("objectnav", "-")  # noqa: E731
+        lines.append(f"| {s['scene']} (labelled scan) | {s['labels_from']} | {s['episodes']}{f' ({cats})' if cats else ''} | "
+                     f"{sr('distance')} / {sr('explicit_stop')} | {why} |")
     lines += ["", "### The costmap against scanned geometry (labelled scans; `python -m benchmarks.scan_truth`)", "",
               "Poses over the scan's floor; blocked when a scanned non-floor point lies in the body cylinder. "
               "FP: scan free, costmap blocked (target <= 10 %); FN: scan blocked, costmap free (target <= 0.5 %).", "",

@@ -53,7 +53,10 @@ def rates(catalog, scene, emb, poses: int, seed: int = 0) -> dict:
     gs, attrs = catalog.dataset("aligned", scene).load()
     t = np.asarray(attrs["source_to_aligned"])
     cm = catalog.dataset("costmaps", scene).load(emb.name)
-    _, seg, names = gaussian_labels(scene, gs, t)
+    per = gaussian_labels(scene, gs, t)
+    if per is None:
+        raise ValueError("the scan ships no per-point labels (boxes only): no labelled floor to sample poses on")
+    _, seg, names = per
     floor_ids = [i + names.id_offset for i, n in enumerate(names.names) if n.strip().lower() == "floor"]
     is_floor = np.isin(seg, floor_ids)
     pts = gs.means.astype(np.float64)
