@@ -223,8 +223,7 @@ def shipped_instances(scene, aligned, source_to_aligned: np.ndarray, vocab: Goal
     per_gaussian = gaussian_labels(scene, aligned, source_to_aligned, report)
     if per_gaussian is not None:
         ins, seg, names = per_gaussian
-        opacity = 1.0 / (1.0 + np.exp(-aligned.opacity_logits.astype(np.float64)))
-        labels, support = instances_from_gaussians(aligned.means, opacity, ins, seg, names, vocab, cleaning, ceiling, report)
+        labels, support = instances_from_gaussians(aligned.means, aligned.alphas, ins, seg, names, vocab, cleaning, ceiling, report)
         return labels_to_table(labels, support), report.origin, report
     f = label_file_for(scene.path)
     if f is None:
@@ -232,8 +231,5 @@ def shipped_instances(scene, aligned, source_to_aligned: np.ndarray, vocab: Goal
     report.origin = str(f)
     labels = read_label_file(f, vocab)
     for lab in labels:
-        goal = vocab.goal_of(lab["dataset_class"])
-        if goal is not None:
-            m = report.goal_mapping.setdefault(goal, {})
-            m[lab["dataset_class"]] = m.get(lab["dataset_class"], 0) + 1
+        report.count_goal(vocab, lab["dataset_class"])
     return labels_to_table(transform_labels(labels, source_to_aligned)), str(f), report

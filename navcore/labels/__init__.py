@@ -58,6 +58,13 @@ class LabelSet:
             return None
         return self.names[k]
 
+    def with_ids(self, id_offset: int | None = None, ignore=None) -> "LabelSet":
+        """The same names with the id of the first and the ignore values overridden (None: kept)."""
+        if id_offset is None and ignore is None:
+            return self
+        return LabelSet(self.name, self.names, self.id_offset if id_offset is None else int(id_offset),
+                        tuple(self.ignore if ignore is None else (int(i) for i in ignore)), self.source)
+
 
 def read_table(path: str | Path, name: str | None = None) -> LabelSet:
     """A class table file: one name per line in id order ('#' lines are comments, joined into
@@ -102,10 +109,7 @@ def resolve(spec: str, base: Path | None = None, id_offset: int | None = None, i
             raise FileNotFoundError(f"labels.classes={spec!r}: neither a built-in table ({', '.join(BUILTIN)}) nor a file "
                                     f"({p} does not exist)")
         table = read_table(p)
-    if id_offset is not None or ignore is not None:
-        table = LabelSet(table.name, table.names, table.id_offset if id_offset is None else int(id_offset),
-                         tuple(table.ignore if ignore is None else (int(i) for i in ignore)), table.source)
-    return table
+    return table.with_ids(id_offset, ignore)
 
 
 # ---- the goal vocabulary ------------------------------------------------------------------------
@@ -159,13 +163,15 @@ class GoalVocabulary:
     categories: tuple[str, ...] = GOAL_CATEGORIES
     aliases: dict[str, str] = field(default_factory=dict)
 
+    def __post_init__(self):
+        self._extra = {normalise(k): v for k, v in self.aliases.items()}
+
     def goal_of(self, name: str) -> str | None:
         """The goal category of a dataset class name, or None (structure, or no mapping line)."""
         n = normalise(name)
         if n in STRUCTURE:
             return None
-        extra = {normalise(k): v for k, v in self.aliases.items()}
-        goal = extra.get(n) or GOAL_ALIASES.get(n) or (as_category(n) if as_category(n) in self.categories else None)
+        goal = self._extra.get(n) or GOAL_ALIASES.get(n) or (as_category(n) if as_category(n) in self.categories else None)
         return goal if goal in self.categories else None
 
     def category_of(self, name: str) -> str:

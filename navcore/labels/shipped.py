@@ -117,6 +117,13 @@ class LabelReport:
     warnings: list[str] = field(default_factory=list)
     transfer: dict = field(default_factory=dict)
 
+    def count_goal(self, vocab: GoalVocabulary, name: str) -> None:
+        """One instance of dataset class `name` in the goal mapping (when it maps to a goal)."""
+        goal = vocab.goal_of(name)
+        if goal is not None:
+            m = self.goal_mapping.setdefault(goal, {})
+            m[normalise(name)] = m.get(normalise(name), 0) + 1
+
     def as_dict(self) -> dict:
         return {"origin": self.origin, "label_set": self.label_set, "gaussians": self.gaussians,
                 "unlabelled_gaussians": self.unlabelled, "fragment_gaussians": self.fragment_gaussians,
@@ -138,9 +145,7 @@ def class_table(spec: LabelSpec | None, folder: Path | None) -> LabelSet | None:
     if spec is not None and spec.classes:
         return resolve(spec.classes, Path(spec.base) if spec.base else None, spec.id_offset, spec.ignore)
     table = folder_class_table(folder) if folder is not None and folder.is_dir() else None
-    if table is not None and spec is not None and (spec.id_offset is not None or spec.ignore is not None):
-        return resolve(table.name, None, spec.id_offset, spec.ignore)
-    return table
+    return table.with_ids(spec.id_offset, spec.ignore) if table is not None and spec is not None else table
 
 
 def largest_cluster(points: np.ndarray, eps: float, spacing_factor: float = 4.0) -> np.ndarray:
@@ -221,10 +226,7 @@ def instances_from_gaussians(means: np.ndarray, opacity: np.ndarray, instance: n
                        "position": ((lo + hi) / 2).tolist(), "bounding_box": {"min": lo.tolist(), "max": hi.tolist()},
                        "confidence": 1.0, "source": "ground_truth"})
         support[iid] = int(len(keep))
-        goal = vocab.goal_of(name)
-        if goal is not None:
-            m = report.goal_mapping.setdefault(goal, {})
-            m[normalise(name)] = m.get(normalise(name), 0) + 1
+        report.count_goal(vocab, name)
     report.unlabelled = int((~ok).sum())
     return labels, support
 
