@@ -80,7 +80,6 @@ def bench_scan(scan: Path, tol: float = 0.0) -> dict:
 
     from navcore.gaussians.cameras import camera_file
     from navcore.instances import shipped_instances, table_to_labels
-    from navcore.labels import GoalVocabulary
     from navcore.render import Renderer
     from stages.semantics.lifting import lift
     from stages.semantics.segmenters import CORRUPTION_LEVELS, OracleSegmenter, corrupt, real_truth
@@ -94,7 +93,7 @@ def bench_scan(scan: Path, tol: float = 0.0) -> dict:
         t = np.asarray(attrs["source_to_aligned"])
         cm = catalog.dataset("costmaps", scene).load(emb.name)
         ceiling = catalog.dataset("alignment", scene).load().get("floor_to_ceiling_m")
-        table, origin, _ = shipped_instances(scene, gs, t, GoalVocabulary(tuple(scfg.categories)), scfg.labels, ceiling)
+        table, origin, _ = shipped_instances(scene, gs, t, scfg.vocabulary(scene), scfg.labels, ceiling)
         truth = table_to_labels(table)
         ids, cats = real_truth(scene, catalog, scfg)
         renderer = Renderer(gs, scfg.renderer)

@@ -99,5 +99,13 @@ class SemanticsConfig:
     sam3: Sam3Config = field(default_factory=Sam3Config)
     open_vocab: OpenVocabConfig = field(default_factory=OpenVocabConfig)
 
+    def vocabulary(self, scene=None):
+        """The goal vocabulary of a scene: these categories, `goal_map`, and the catalog entry's own
+        labels.goal_map (which wins)."""
+        from navcore.labels import GoalVocabulary
+
+        entry = dict(scene.labels.goal_map) if scene is not None and getattr(scene, "labels", None) else {}
+        return GoalVocabulary(tuple(self.categories), {**self.goal_map, **entry})
+
     def prompt(self, category: str) -> str:
         return self.prompts.get(category, category.replace("_", " "))

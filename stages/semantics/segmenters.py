@@ -162,10 +162,11 @@ class OracleSegmenter(Segmenter):
 
 def real_truth(scene, catalog, cfg) -> tuple[np.ndarray, dict[int, str]]:
     """Per-Gaussian instance ids (1..K, 0 = none) and {id: prompt} of a real scene's shipped labels:
-    the instances the ground-truth path keeps (navcore.instances.shipped_instances), so that the
-    oracle sees what the shipped table holds; raises SegmenterUnavailable without labels."""
-    from navcore.instances import gaussian_labels, shipped_instances
-    from navcore.labels import GoalVocabulary
+    the instances the ground-truth path keeps (the same cleaning and vocabulary as
+    navcore.instances.shipped_instances), so that the oracle sees what the shipped table holds;
+    raises SegmenterUnavailable without labels."""
+    from navcore.instances import gaussian_labels
+    from navcore.labels.shipped import LabelReport, instances_from_gaussians
 
     gs, attrs = catalog.dataset("aligned", scene).load()
     t = np.asarray(attrs["source_to_aligned"])
@@ -174,11 +175,12 @@ def real_truth(scene, catalog, cfg) -> tuple[np.ndarray, dict[int, str]]:
         raise SegmenterUnavailable(f"scene {scene.scene_id!r} ({scene.name}): the oracle segmenter needs per-Gaussian ground "
                                    "truth (a synthetic scene, SceneSplat instance.npy / segment.npy, or labels.mesh in the "
                                    "catalog entry); use semantics.segmenter=sam3 or open_vocab for this scene")
-    inst = np.asarray(per[0])
-    vocab = GoalVocabulary(tuple(cfg.categories), dict(cfg.goal_map))
+    inst, seg, names = per
+    inst = np.asarray(inst)
     ceiling = catalog.dataset("alignment", scene).load().get("floor_to_ceiling_m")
-    table, _, _ = shipped_instances(scene, gs, t, vocab, cfg.labels, ceiling)
-    kept = dict(zip(table.column("instance_id").to_pylist(), table.column("category").to_pylist()))
+    labels, _ = instances_from_gaussians(gs.means, gs.alphas, inst, seg, names, cfg.vocabulary(scene), cfg.labels,
+                                         ceiling, LabelReport())  # the labels as read once (a mesh transfers once)
+    kept = {lab["instance_id"]: lab["category"] for lab in labels}
     order = np.array(sorted(kept), np.int64)
     if not len(order):
         return np.zeros(len(inst), np.int64), {}

@@ -14,7 +14,6 @@ import numpy as np
 
 from navcore.gaussians.cameras import CAMERA_FILE, camera_file, read_cameras
 from navcore.instances import labels_to_table, shipped_instances
-from navcore.labels import GoalVocabulary
 from navcore.render.camera import camera_to_world, intrinsics
 from stages.semantics.config import SemanticsConfig
 from stages.semantics.lifting import lift
@@ -130,8 +129,7 @@ def run(scene, cfg, catalog) -> dict:
     shipped = None
     if scfg.shipped_labels:
         align = catalog.dataset("alignment", scene).load()
-        vocab = GoalVocabulary(tuple(scfg.categories), {**scfg.goal_map, **dict(scene.labels.goal_map if scene.labels else ())})
-        shipped = shipped_instances(scene, gs, np.asarray(attrs["source_to_aligned"]), vocab, scfg.labels,
+        shipped = shipped_instances(scene, gs, np.asarray(attrs["source_to_aligned"]), scfg.vocabulary(scene), scfg.labels,
                                     align.get("floor_to_ceiling_m"))
     if shipped is not None:  # the dataset's own truth beats any model
         table, origin, report = shipped
