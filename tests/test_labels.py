@@ -289,3 +289,17 @@ def test_real_scannet_scan_yields_objectnav_for_every_goal_category(tmp_path, sc
                          "evaluate.tasks=[objectnav]", f"evaluate.protocol={protocol}"))
         res = json.loads((tmp_path / "d" / "07_eval" / f"oracle_{protocol}" / "summary.json").read_text().replace("NaN", "null"))
         assert res["tasks"]["objectnav"]["overall"]["sr"] == 1.0, protocol
+
+
+def test_scannet_vertices_outside_every_group_keep_their_nyu40_class(tmp_path):
+    from navcore.labels.mesh import read_labelled_geometry
+
+    a, b = _box_mesh([0, 0, 0], [1, 1, 0.5]), _box_mesh([2, 0, 0], [2.5, 0.5, 1])
+    verts, faces = np.concatenate([a.vertices, b.vertices]), np.concatenate([a.faces, b.faces + 8])
+    _write_ply(tmp_path / "s_vh_clean_2.labels.ply", verts, faces, {"label": [6] * 8 + [5] * 4 + [25] * 2 + [0] * 2})
+    (tmp_path / "s_vh_clean_2.0.010000.segs.json").write_text(json.dumps({"segIndices": [10] * 8 + [20] * 4 + [30] * 4}))
+    (tmp_path / "s.aggregation.json").write_text(json.dumps({"segGroups": [{"objectId": 0, "label": "couch", "segments": [10]}]}))
+    g = read_labelled_geometry(tmp_path / "s_vh_clean_2.labels.ply")
+    named = [g.names.names[s] if s >= 0 else None for s in g.segment]
+    assert named == ["couch"] * 8 + ["chair"] * 4 + ["television"] * 2 + [None] * 2  # raw NYU40 ids 5, 25; 0 none
+    assert g.instance.tolist() == [1] * 8 + [-1] * 8

@@ -79,6 +79,12 @@ def _triangulate(faces) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(tris, np.int64).reshape(-1, 3), np.asarray(src, np.int64)
 
 
+def _per_value(values: np.ndarray, fn, dtype=np.int64) -> np.ndarray:
+    """fn applied once per distinct value of `values` (ids repeat over many vertices / faces)."""
+    u, inv = np.unique(np.asarray(values).reshape(-1), return_inverse=True)
+    return np.array([fn(v) for v in u.tolist()], dtype=dtype)[inv]
+
+
 def _names_from(values: list[str]) -> tuple[LabelSet, dict[str, int]]:
     uniq = sorted(set(values))
     return LabelSet("mesh", tuple(uniq)), {n: i for i, n in enumerate(uniq)}
@@ -125,7 +131,7 @@ def read_labelled_geometry(path: str | Path, classes: LabelSet | None = None) ->
             if n:
                 obj_cls[int(o["id"])] = str(n)
         names, index = _names_from(list(obj_cls.values()))
-        seg_face = np.array([index.get(obj_cls.get(int(o), ""), -1) for o in face_obj], np.int64)
+        seg_face = _per_value(face_obj, lambda o: index.get(obj_cls.get(int(o), ""), -1))
         inst_face = np.where(seg_face >= 0, face_obj.astype(np.int64), -1)
         return LabelledGeometry(verts, tris, seg_face[src], inst_face[src], names, per_face=True, kind="replica")
     # ScanNet: segments grouped into objects by the aggregation file
@@ -140,17 +146,18 @@ def read_labelled_geometry(path: str | Path, classes: LabelSet | None = None) ->
         for g in groups:
             for s in g["segments"]:
                 seg_to[int(s)] = (index[str(g["label"])], int(g.get("objectId", g.get("id"))) + 1)
-        pairs = np.array([seg_to.get(int(s), (-1, -1)) for s in seg_idx], np.int64).reshape(-1, 2)
-        segment, instance = pairs[:, 0], pairs[:, 1]
+        segment = _per_value(seg_idx, lambda s: seg_to.get(int(s), (-1, -1))[0])
+        instance = _per_value(seg_idx, lambda s: seg_to.get(int(s), (-1, -1))[1])
         nyu = _col(raw["vertex"], ("label",))
         if nyu is not None:  # vertices in no group: their NYU40 class, no instance
             table = builtin("nyu40")
-            extra = [table.lookup(int(c) - 1) if c > 0 else None for c in nyu]
-            missing = sorted({n for n, s in zip(extra, segment) if n and s < 0 and n not in index})
+            name_of = lambda c: table.lookup(int(c) - 1) if c > 0 else None  # noqa: E731
+            free = segment < 0
+            missing = sorted({n for c in np.unique(nyu[free]).tolist() if (n := name_of(c))} - set(index))
             if missing:
                 names = LabelSet("mesh", names.names + tuple(missing))
                 index.update({n: len(index) + i for i, n in enumerate(missing)})
-            segment = np.where(segment >= 0, segment, [index.get(n, -1) if n else -1 for n in extra])
+            segment = np.where(free, _per_value(nyu, lambda c: index.get(name_of(c), -1)), segment)
         return LabelledGeometry(verts, tris, segment, instance, names, kind="scannet")
     # generic: per-vertex class / instance ids
     cls = _col(raw["vertex"], CLASS_PROPS)
@@ -161,7 +168,7 @@ def read_labelled_geometry(path: str | Path, classes: LabelSet | None = None) ->
     if classes is None:
         raise ValueError(f"{path}: per-vertex class ids need a class table: set labels.mesh_classes (or labels.classes)")
     cls = np.full(len(verts), -1) if cls is None else cls.astype(np.int64)
-    segment = np.array([-1 if (n := classes.lookup(int(c))) is None else classes.names.index(n) for c in cls], np.int64)
+    segment = _per_value(cls, lambda c: -1 if (n := classes.lookup(int(c))) is None else classes.names.index(n))
     names = LabelSet(classes.name, classes.names, 0, (), classes.source)
     return LabelledGeometry(verts, tris, segment, (np.full(len(verts), -1) if ins is None else ins.astype(np.int64)),
                             names)

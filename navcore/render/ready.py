@@ -32,7 +32,7 @@ def _driver() -> tuple[str, str]:
 
 def test_room(n_side: int = 120, seed: int = 0):
     """A 4 x 4 m room: floor, four walls 2.5 m high and a red box, as flat Gaussians (~70 k)."""
-    from navcore.gaussians.model import GaussianScene
+    from navcore.gaussians.model import GaussianScene, rotmat_to_quat
 
     rng = np.random.default_rng(seed)
     parts = []
@@ -41,13 +41,7 @@ def test_room(n_side: int = 120, seed: int = 0):
         a, b = np.meshgrid(np.linspace(0, 1, nu), np.linspace(0, 1, nv))
         p = origin + a.reshape(-1, 1) * u + b.reshape(-1, 1) * v
         n = np.cross(u, v)
-        n = n / np.linalg.norm(n)
-        # quaternion rotating z onto the plane normal
-        z = np.array([0.0, 0.0, 1.0])
-        axis, c = np.cross(z, n), float(z @ n)
-        q = np.array([1.0, 0, 0, 0]) if np.linalg.norm(axis) < 1e-9 else \
-            np.concatenate([[np.sqrt((1 + c) / 2)], axis / np.linalg.norm(axis) * np.sqrt((1 - c) / 2)])
-        q = q if c > -0.999 else np.array([0.0, 1.0, 0, 0])
+        q = rotmat_to_quat(np.stack([u / np.linalg.norm(u), v / np.linalg.norm(v), n / np.linalg.norm(n)], 1))
         step = max(np.linalg.norm(u) / nu, np.linalg.norm(v) / nv)
         col = np.clip(colour + rng.normal(0, 0.03, (len(p), 3)), 0, 1)
         parts.append((p, np.tile(q, (len(p), 1)), np.tile([step, step, step / 10], (len(p), 1)), col))
