@@ -10,8 +10,10 @@ task also asks for its stage's memory_gb (capped at a worker's memory).
 """
 from __future__ import annotations
 
+import functools
 import os
 import subprocess
+import sys
 import time
 from dataclasses import dataclass
 
@@ -33,6 +35,39 @@ def visible_gpus() -> list[str]:
     except (OSError, subprocess.SubprocessError):
         return []
     return [str(i) for i, line in enumerate(ln for ln in out.splitlines() if ln.startswith("GPU "))]
+
+
+@functools.cache
+def gpu_uuids() -> dict[str, str]:
+    """nvidia-smi's GPUs of this host, index -> UUID (without the 'GPU-' prefix); empty without
+    nvidia-smi. CUDA_VISIBLE_DEVICES does not change what nvidia-smi lists."""
+    try:
+        out = subprocess.run(["nvidia-smi", "--query-gpu=index,uuid", "--format=csv,noheader"],
+                             capture_output=True, text=True, timeout=20).stdout
+    except (OSError, subprocess.SubprocessError):
+        return {}
+    rows = [[f.strip() for f in ln.split(",")] for ln in out.splitlines() if ln.count(",") == 1]
+    return {i: u.removeprefix("GPU-") for i, u in rows}
+
+
+def gpu_identity() -> dict:
+    """Where this process's CUDA work went: the GPU it is pinned to (CUDA_VISIBLE_DEVICES, and that
+    GPU's UUID by nvidia-smi) and, once a task has used CUDA, torch's current device and its UUID
+    as the driver reports it. Nothing is imported: a process whose tasks never touched CUDA says
+    only where it is pinned."""
+    pinned = os.environ.get("CUDA_VISIBLE_DEVICES")
+    if not pinned:
+        return {}
+    out = {"gpu": pinned}
+    expected = pinned if pinned.startswith("GPU-") else gpu_uuids().get(pinned)
+    if expected:
+        out["gpu_pinned_uuid"] = expected.removeprefix("GPU-")
+    torch = sys.modules.get("torch")
+    if torch is not None and torch.cuda.is_initialized():
+        i = torch.cuda.current_device()
+        out["cuda_device"] = i
+        out["gpu_uuid"] = str(torch.cuda.get_device_properties(i).uuid).removeprefix("GPU-")
+    return out
 
 
 def memory_gb(limit) -> float:
@@ -185,18 +220,17 @@ class RunContext(WorkerPlugin):
 
 
 def run_placed(stage_name: str, scene, run_id: str, *args) -> dict:
-    """run_task of the run `run_id`, its result saying where and when it ran (worker name, the GPU
-    it was given, the start time: the scale benchmark measures the scheduler's gaps from it)."""
+    """run_task of the run `run_id`, its result saying where and when it ran (worker name, start and
+    end times: the scale benchmark measures the scheduler's gaps from them, the summary the overlap
+    of CPU and GPU stages; on a GPU worker the GPU it is pinned to and the one its CUDA work used,
+    see gpu_identity)."""
     from dask.distributed import get_worker
 
     t0 = time.time()
     cfg, catalog = RUNS[run_id]
     r = run_task(stage_name, scene, cfg, catalog, *args)
-    r["worker"], r["started"] = str(get_worker().name), round(t0, 3)
-    gpu = os.environ.get("CUDA_VISIBLE_DEVICES")
-    if gpu:
-        r["gpu"] = gpu
-    return r
+    r["worker"], r["started"], r["finished"] = str(get_worker().name), round(t0, 3), round(time.time(), 3)
+    return {**r, **gpu_identity()}
 
 
 def run_on_dask(cfg, catalog: Catalog, chain, record, console: Console) -> None:

@@ -24,10 +24,63 @@ def build_summary(results: list[dict], started: dt.datetime, cat_file, shard: li
                "shortfalls": [r for r in results if r.get("shortfall")],
                "warnings": [r for r in results if r.get("warnings")],
                "goal_mappings": [r for r in results if r.get("goal_mapping")], "results": results}
+    placed = placement(results)
+    if placed:
+        summary["placement"] = placed
     for r in results:
         c = summary["counts"].setdefault(r["stage"], {})
         c[r["status"]] = c.get(r["status"], 0) + 1
     return summary
+
+
+def _union(intervals: list[tuple[float, float]]) -> list[tuple[float, float]]:
+    out: list[list[float]] = []
+    for a, b in sorted(intervals):
+        if out and a <= out[-1][1]:
+            out[-1][1] = max(out[-1][1], b)
+        else:
+            out.append([a, b])
+    return [(a, b) for a, b in out]
+
+
+def _overlap(xs: list[tuple[float, float]], ys: list[tuple[float, float]]) -> float:
+    """Seconds covered by both unions of intervals (each sorted and disjoint)."""
+    total, i, j = 0.0, 0, 0
+    while i < len(xs) and j < len(ys):
+        total += max(0.0, min(xs[i][1], ys[j][1]) - max(xs[i][0], ys[j][0]))
+        if xs[i][1] < ys[j][1]:
+            i += 1
+        else:
+            j += 1
+    return total
+
+
+def placement(results: list[dict]) -> dict | None:
+    """Where a Dask run's tasks ran: per worker its GPU (pinned, and the UUIDs its CUDA work used),
+    the tasks it computed by stage and its busy seconds; the tasks whose CUDA work went to a GPU
+    other than their worker's (none, or the pinning is broken); how long GPU and CPU stages ran at
+    the same time. None for runs without worker records (sync runs, fully cached runs)."""
+    placed = [r for r in results if r.get("status") == "done" and "worker" in r and "finished" in r]
+    if not placed:
+        return None
+    workers: dict[str, dict] = {}
+    for r in placed:
+        w = workers.setdefault(r["worker"], {"gpu": r.get("gpu"), "pinned_uuid": r.get("gpu_pinned_uuid"),
+                                             "cuda_uuids": [], "tasks": {}, "busy_s": 0.0})
+        w["tasks"][r["stage"]] = w["tasks"].get(r["stage"], 0) + 1
+        w["busy_s"] = round(w["busy_s"] + r["finished"] - r["started"], 3)
+        if r.get("gpu_uuid") and r["gpu_uuid"] not in w["cuda_uuids"]:
+            w["cuda_uuids"].append(r["gpu_uuid"])
+    misplaced = [{k: r.get(k) for k in ("stage", "scene_id", "worker", "gpu", "gpu_pinned_uuid", "cuda_device", "gpu_uuid")}
+                 for r in placed if "gpu_uuid" in r and (r.get("cuda_device") != 0 or r["gpu_uuid"] != r.get("gpu_pinned_uuid"))]
+    on_gpu = _union([(r["started"], r["finished"]) for r in placed if r.get("gpu")])
+    on_cpu = _union([(r["started"], r["finished"]) for r in placed if not r.get("gpu")])
+    gpu_busy = sum(b - a for a, b in on_gpu)
+    return {"workers": dict(sorted(workers.items())), "misplaced": misplaced,
+            "gpu_tasks": sum(1 for r in placed if r.get("gpu")),
+            "gpu_tasks_with_cuda": sum(1 for r in placed if r.get("gpu_uuid")),
+            "gpu_busy_s": round(gpu_busy, 3), "cpu_busy_s": round(sum(b - a for a, b in on_cpu), 3),
+            "cpu_gpu_overlap_s": round(_overlap(on_gpu, on_cpu), 3)}
 
 
 def write_summary(summary: dict, catalog: Catalog, started: dt.datetime, shard: int):
@@ -76,6 +129,29 @@ def print_summary(summary: dict, console: Console) -> None:
             for goal, classes in sorted(r["goal_mapping"].items()):
                 f.add_row(f"{r['scene_id']} ({r['scene']})", goal, ", ".join(f"{c} {n}" for c, n in sorted(classes.items())))
         console.print(f)
+    placed = summary.get("placement")
+    if placed and any(w["gpu"] for w in placed["workers"].values()):
+        f = Table(title="where tasks ran (GPU workers; CPU workers summed)")
+        for col in ("worker", "pinned GPU", "CUDA work on", "tasks", "busy s"):
+            f.add_column(col, overflow="fold")
+        cpu = [w for w in placed["workers"].values() if not w["gpu"]]
+        for name, w in placed["workers"].items():
+            if w["gpu"]:
+                pinned = f"{w['gpu']} ({(w['pinned_uuid'] or '?')[:8]})"
+                seen = ", ".join(u[:8] for u in w["cuda_uuids"]) or "-"
+                f.add_row(name, pinned, seen, ", ".join(f"{k} {v}" for k, v in w["tasks"].items()), f"{w['busy_s']:.1f}")
+        if cpu:
+            tasks: dict = {}
+            for w in cpu:
+                for k, v in w["tasks"].items():
+                    tasks[k] = tasks.get(k, 0) + v
+            f.add_row(f"{len(cpu)} CPU workers", "none", "-", ", ".join(f"{k} {v}" for k, v in tasks.items()),
+                      f"{sum(w['busy_s'] for w in cpu):.1f}")
+        console.print(f)
+        style = "red" if placed["misplaced"] else "green"
+        console.print(f"[{style}]{len(placed['misplaced'])} GPU task(s) ran on a GPU other than their worker's[/]; "
+                      f"GPU stages busy {placed['gpu_busy_s']:.1f} s, CPU stages running beside them "
+                      f"{placed['cpu_gpu_overlap_s']:.1f} s of it")
     if summary["warnings"]:
         f = Table(title="warnings")
         for col in ("scene", "stage", "warning"):

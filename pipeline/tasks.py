@@ -98,8 +98,9 @@ def describe(e: BaseException, catalog: Catalog) -> str:
 def notes(info: dict) -> dict:
     """What a stage's result says the run summary must show: shortfalls (outputs it could not
     yield), warnings (e.g. a scene whose scale is implausible for metres), and where a scene's
-    ObjectNav goal categories came from (goal_mapping: goal category -> {dataset class: instances})."""
-    return {k: info[k] for k in ("shortfall", "warnings", "goal_mapping") if info.get(k)}
+    ObjectNav goal categories came from (goal_mapping: goal category -> {dataset class: instances});
+    and the work a closed-loop task did (steps: environment steps, for steps/s per GPU)."""
+    return {k: info[k] for k in ("shortfall", "warnings", "goal_mapping", "steps") if info.get(k)}
 
 
 def finalize_due(stage, results: list[dict], catalog: Catalog) -> bool:

@@ -346,6 +346,34 @@ def test_gpu_stages_go_to_gpu_workers_only(tmp_path, make_cfg):
             assert r["worker"] == f"gpu-{r['gpu']}" and r["gpu"] in ("0", "1")
         else:
             assert r["worker"] == "cpu-0" and "gpu" not in r
+    placed = summary["placement"]
+    gpu_done = [r for r in done if r["status"] == "done" and BY_NAME[r["stage"]].gpu]
+    assert placed["gpu_tasks"] == len(gpu_done) and not placed["misplaced"]
+    assert {w: v["tasks"] for w, v in placed["workers"].items() if v["gpu"]} == {
+        f"gpu-{g}": {"voxelize": sum(r["gpu"] == g for r in gpu_done)} for g in {r["gpu"] for r in gpu_done}}
+
+
+def test_placement_report_known_answer():
+    """The summary's placement section: CUDA work on a GPU other than the pinned one is reported,
+    and the seconds GPU and CPU stages ran side by side are the intervals' intersection."""
+    from pipeline.summary import placement
+
+    def r(stage, worker, t0, t1, **gpu):
+        return {"stage": stage, "scene_id": "s", "status": "done", "worker": worker, "started": t0, "finished": t1, **gpu}
+
+    ok = {"gpu": "0", "gpu_pinned_uuid": "aa", "cuda_device": 0, "gpu_uuid": "aa"}
+    results = [r("voxelize", "gpu-0", 0.0, 4.0, **ok), r("semantics", "gpu-0", 6.0, 10.0, **ok),
+               r("semantics", "gpu-1", 1.0, 2.0, gpu="1", gpu_pinned_uuid="bb", cuda_device=0, gpu_uuid="aa"),
+               r("costmap", "cpu-0", 3.0, 7.0), r("costmap", "cpu-1", 9.0, 12.0),
+               {"stage": "align", "scene_id": "s", "status": "cached"}]
+    p = placement(results)
+    assert [m["worker"] for m in p["misplaced"]] == ["gpu-1"]
+    # GPU busy [0, 4] + [6, 10]; CPU [3, 7] + [9, 12]: both at [3, 4], [6, 7], [9, 10]
+    assert p["gpu_busy_s"] == 8.0 and p["cpu_busy_s"] == 7.0 and p["cpu_gpu_overlap_s"] == 3.0
+    assert p["workers"]["gpu-0"] == {"gpu": "0", "pinned_uuid": "aa", "cuda_uuids": ["aa"],
+                                     "tasks": {"voxelize": 1, "semantics": 1}, "busy_s": 8.0}
+    assert p["gpu_tasks"] == 3 and p["gpu_tasks_with_cuda"] == 3
+    assert placement([results[-1]]) is None
 
 
 @pytest.mark.parametrize("cmd", [["-m", "pipeline"], None])

@@ -109,7 +109,7 @@ def run(scene, cfg, catalog) -> dict:
              for r in rows[:ecfg.trajectory_plots]]
     out = catalog.dataset("eval_results", scene, run=run)
     write_results(rows, out)
-    return {"outputs": [str(out.path), *videos, *plots], "episodes": len(rows),
+    return {"outputs": [str(out.path), *videos, *plots], "episodes": len(rows), "steps": sum(int(r["steps"]) for r in rows),
             "agent_errors": sum(bool(r["error"]) for r in rows),
             "invalid_actions": sum(int(r.get("invalid_actions", 0)) for r in rows),
             "sr": float(np.mean([r["sr"] for r in rows])) if rows else None, "run": run}
