@@ -29,7 +29,7 @@ import numpy as np
 
 GPU_STAGES = ("voxelize", "semantics", "goal_images", "evaluate")
 EVAL = ["evaluate.agent=oracle", "evaluate.batch_slots=64", "evaluate.episodes_per_scene=64", "evaluate.videos=0",
-        "evaluate.trajectory_plots=0", "evaluate.renderer=gsplat"]
+        "evaluate.trajectory_plots=0", "goal_images.enabled=true", "evaluate.renderer=gsplat"]
 
 
 def write_catalog(data: Path, real: list[Path], scenes: int, gaussians: int) -> Path:
@@ -64,7 +64,8 @@ def compose(data: Path, catalog: Path, *over: str):
 
 
 def gpu_rates(summary: dict) -> dict:
-    """GPU-stage throughput of a run: tasks per second of wall time, per stage the task seconds."""
+    """GPU-stage throughput of a run: tasks per second of wall time, per stage the task seconds (and
+    the goal images rendered)."""
     gpu = [r for r in summary["results"] if r["stage"] in GPU_STAGES and r["status"] == "done" and "finished" in r]
     if not gpu:
         return {"gpu_tasks": 0}
@@ -74,6 +75,8 @@ def gpu_rates(summary: dict) -> dict:
         rs = [r for r in gpu if r["stage"] == st]
         if rs:
             per_stage[st] = {"tasks": len(rs), "task_s": round(sum(r["duration_s"] for r in rs), 2)}
+            if st == "goal_images":
+                per_stage[st]["images"] = sum(r.get("images", 0) for r in rs)
     return {"gpu_tasks": len(gpu), "span_s": round(span, 2), "tasks_per_s": len(gpu) / span, "per_stage": per_stage,
             "by_gpu": {g: sum(1 for r in gpu if r.get("gpu") == g) for g in sorted({r.get("gpu") for r in gpu})},
             "failures": len(summary["failures"])}
@@ -194,6 +197,7 @@ def main(argv=None) -> int:
     ap.add_argument("--phases", default="release,scaling,env")
     ap.add_argument("--steps", type=int, default=40)
     ap.add_argument("--out", default="data/08_reports")
+    ap.add_argument("--eval-episodes", type=int, default=64, help="evaluated episodes per scene and task")
     ap.add_argument("--renderer", default="gsplat", help="the evaluation's renderer (cpu: a smoke test without CUDA)")
     # an env worker process (started by the env phase)
     ap.add_argument("--env-worker", action="store_true", help=argparse.SUPPRESS)
@@ -209,6 +213,7 @@ def main(argv=None) -> int:
     from pipeline.backends import visible_gpus
 
     EVAL[-1] = f"evaluate.renderer={args.renderer}"
+    EVAL[2] = f"evaluate.episodes_per_scene={args.eval_episodes}"
 
     n_gpus = len(visible_gpus())
     if n_gpus < 1:

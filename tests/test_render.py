@@ -402,3 +402,38 @@ def test_block_culling_keeps_exactly_what_the_per_gaussian_test_keeps(spatial_or
     # the cull's footprint bound assumes eps2d <= SQRT_EPS2D^2: a larger one is refused, not culled wrongly
     with pytest.raises(ValueError, match="eps2d=0.5 exceeds the cull's bound"):
         cpu_fast.render_one(g, vm[0], k, 160, 120, 0, eps2d=0.5)
+
+
+def test_gsplat_kernel_build_is_one_process_at_a_time(tmp_path, project_root):
+    """GPU workers starting together must not build gsplat's kernels at the same time (gsplat
+    deletes a build folder it finds unfinished): load_kernels imports gsplat's backend under an
+    exclusive lock. A stand-in backend that takes 0.5 s to 'build' logs its start and end; three
+    processes started together log three whole builds, never interleaved."""
+    import os
+    import subprocess
+    import sys
+    import textwrap
+
+    fake = tmp_path / "fake" / "gsplat" / "cuda"
+    fake.mkdir(parents=True)
+    (fake.parent / "__init__.py").write_text("")
+    (fake / "__init__.py").write_text("")
+    log = tmp_path / "log.txt"
+    (fake / "_backend.py").write_text(textwrap.dedent(f"""
+        import os, time
+        with open({str(log)!r}, "a") as f:
+            f.write(f"start {{os.getpid()}}\\n"); f.flush()
+            time.sleep(0.5)
+            f.write(f"end {{os.getpid()}}\\n")
+        _C = object()
+    """))
+    code = "from navcore.render.gsplat_backend import load_kernels; load_kernels(); load_kernels()"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path / "fake"), str(project_root)]),
+           "TORCH_EXTENSIONS_DIR": str(tmp_path / "ext")}
+    procs = [subprocess.Popen([sys.executable, "-c", code], env=env) for _ in range(3)]
+    assert all(p.wait(timeout=120) == 0 for p in procs)
+    lines = log.read_text().split()
+    events = list(zip(lines[0::2], lines[1::2]))
+    assert len(events) == 6 and (tmp_path / "ext" / "navarena-gsplat-build.lock").exists()
+    for k in range(0, 6, 2):  # each start is followed by the same process's end
+        assert events[k][0] == "start" and events[k + 1] == ("end", events[k][1])
