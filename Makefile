@@ -9,7 +9,7 @@ ARGS ?=
 CUDA ?=
 WHEELS ?=
 
-.PHONY: setup-gpu test-gpu bench-gpu setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: setup-gpu test-gpu bench-gpu bench-multi-gpu setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -37,6 +37,13 @@ test-gpu:
 # every GPU figure in one report: data/08_reports/bench_gpu.{json,md} and docs/bench_gpu.md
 bench-gpu:
 	$(BIN)/python -m benchmarks.bench_gpu --docs $(ARGS)
+
+REAL_INDOOR ?= ../shared/data/real_indoor/fungi_room_lod3.spz ../shared/data/real_indoor/wangsha_hall_lod3.spz
+# on a host with several GPUs (make setup-gpu first): the release stages over every GPU, 1 GPU vs
+# all, one env group per GPU; data/08_reports/multi_gpu.json, merged into bench-gpu's report
+bench-multi-gpu:
+	$(BIN)/python -m benchmarks.multi_gpu --real $(REAL_INDOOR) --out data/08_reports $(ARGS)
+	$(BIN)/python -m benchmarks.multi_gpu --markdown --out data/08_reports
 
 dataset: $(STAMP)
 	$(BIN)/python -m pipeline $(ARGS)

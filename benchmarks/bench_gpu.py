@@ -123,6 +123,10 @@ def main(argv=None) -> dict:
            "parts": parts}
     (out / "bench_gpu.json").write_text(jsonio.dumps(rep, indent=1))
     md = markdown(rep)
+    if (out / "multi_gpu.json").exists():  # written on a multi-GPU host by make bench-multi-gpu
+        from benchmarks.multi_gpu import markdown as multi_gpu_markdown
+
+        md += "\n" + multi_gpu_markdown(json.loads((out / "multi_gpu.json").read_text())) + "\n"
     (out / "bench_gpu.md").write_text(md)
     if args.docs:
         (Path(__file__).resolve().parents[1] / "docs" / "bench_gpu.md").write_text(md)

@@ -178,6 +178,63 @@ def env_groups(data: Path, catalog: Path, n_gpus: int, steps: int) -> dict:
     return out
 
 
+def markdown(rep: dict) -> str:
+    """The multi-GPU section of docs/bench_gpu.md from multi_gpu.json."""
+    m = rep["machine"]
+    lines = ["## Several GPUs on one host", "",
+             f"{len(m['gpus'])} x {m['gpus'][0]}, {m['cpu_cores']} cores; torch {m['torch']}, Python {m['python']}. "
+             f"Reproduce: `make bench-multi-gpu` (`python -m benchmarks.multi_gpu`).", ""]
+    rel = rep.get("release")
+    if rel:
+        p, g = rel["placement"], rel["gpu"]
+        lines += [f"**Release run**: {rel['scenes']} scenes ({rep['scenes']} synthetic of {rep['gaussians']:,} Gaussians "
+                  f"and {rel['scenes'] - rep['scenes']} real indoor), {rep['cpu_workers']} CPU workers beside "
+                  f"{rep['gpus']} GPU workers, every default stage plus goal images and a batched oracle evaluation "
+                  f"(gsplat, 64 slots): {rel['wall_s']:.0f} s. From the run summary's placement section:", "",
+                  "| worker | pinned GPU (UUID) | UUID its CUDA work used | tasks | busy s |", "|---|---|---|---|---|"]
+        for name, w in p["workers"].items():
+            if w["gpu"]:
+                lines.append(f"| {name} | {w['gpu']} ({w['pinned_uuid'][:8]}) | {', '.join(u[:8] for u in w['cuda_uuids'])} | "
+                             f"{', '.join(f'{k} {v}' for k, v in w['tasks'].items())} | {w['busy_s']:.0f} |")
+        cpu = [w for w in p["workers"].values() if not w["gpu"]]
+        lines += [f"| {len(cpu)} CPU workers | none | - | {sum(sum(w['tasks'].values()) for w in cpu)} tasks | "
+                  f"{sum(w['busy_s'] for w in cpu):.0f} |", "",
+                  f"{p['gpu_tasks_with_cuda']} of {p['gpu_tasks']} GPU tasks used CUDA, {len(p['misplaced'])} on a GPU other "
+                  f"than their worker's; the GPU stages were busy {p['gpu_busy_s']:.0f} s of wall time and CPU stages ran "
+                  f"beside them {p['cpu_gpu_overlap_s']:.0f} s of it. GPU-stage task seconds: "
+                  + ", ".join(f"{k} {v['task_s']:.0f}" for k, v in g["per_stage"].items()) + ".", ""]
+    gi = rep.get("release_goal_images")
+    if gi:
+        st = gi["gpu"]["per_stage"]
+        lines += [f"**Goal images** (a second release run, {gi.get('scenes_synthetic', gi['scenes'])} synthetic scenes, "
+                  f"goal_images.enabled=true): {st['goal_images']['images']} goal images in {st['goal_images']['task_s']:.1f} "
+                  f"task seconds over {len(gi['gpu']['by_gpu'])} GPUs; {len(gi['placement']['misplaced'])} tasks misplaced.", ""]
+    sc = rep.get("scaling")
+    if sc and "scaling" in sc:
+        n = str(rep["gpus"])
+        lines += ["**GPU-stage throughput, 1 GPU vs all** (voxelize, semantics, goal_images, evaluate forced on the same "
+                  "scenes, upstream cached; tasks / wall seconds from the first GPU task's start to the last one's end):", "",
+                  "| GPUs | GPU tasks | seconds | tasks/s | tasks per GPU |", "|---|---|---|---|---|"]
+        for k in ("1", n):
+            r = sc[k]
+            lines.append(f"| {k} | {r['gpu_tasks']} | {r['span_s']:.1f} | {r['tasks_per_s']:.3f} | "
+                         f"{', '.join(f'{g}: {c}' for g, c in r['by_gpu'].items())} |")
+        lines += ["", f"Scaling {sc['scaling']:.2f}x on {n} GPUs ({sc['scaling'] / int(n):.2f} N; target >= 0.8 N).", ""]
+    env = rep.get("env")
+    if env and "scaling" in env:
+        n = str(rep["gpus"])
+        e1, en = env["1"], env[n]
+        lines += [f"**Vectorised evaluation env, one env group per GPU** (64 slots, 640x480 RGB-D, {e1['scene']} of "
+                  f"{e1['gaussians']:,} Gaussians, one process per GPU, all stepping at once):", "",
+                  "| GPUs | steps/s per GPU | total steps/s | each process on its pinned GPU |", "|---|---|---|---|"]
+        for k, e in (("1", e1), (n, en)):
+            per = ", ".join(f"{r['steps_per_s']:,.0f}" for r in e["per_gpu"])
+            lines.append(f"| {k} | {per} | "
+                         f"{e['total_steps_per_s']:,.0f} | {all(r['uuid_matches_pinned'] for r in e['per_gpu'])} |")
+        lines += ["", f"Total {env['scaling']:.2f}x with {n} GPUs.", ""]
+    return "\n".join(lines)
+
+
 def machine() -> dict:
     import platform
 
@@ -198,6 +255,7 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=40)
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--eval-episodes", type=int, default=64, help="evaluated episodes per scene and task")
+    ap.add_argument("--markdown", action="store_true", help="print the docs section of an existing multi_gpu.json")
     ap.add_argument("--renderer", default="gsplat", help="the evaluation's renderer (cpu: a smoke test without CUDA)")
     # an env worker process (started by the env phase)
     ap.add_argument("--env-worker", action="store_true", help=argparse.SUPPRESS)
@@ -209,6 +267,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.env_worker:
         env_worker(args)
+        return 0
+    if args.markdown:
+        print(markdown(json.loads((Path(args.out) / "multi_gpu.json").read_text())))
         return 0
     from pipeline.backends import visible_gpus
 
