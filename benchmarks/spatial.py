@@ -115,13 +115,14 @@ def time_batch(fn, arg, n: int, repeats: int = 7) -> float:
 
 
 def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_states: int,
-              n_motions: int, realism: str = "none", resolutions=RESOLUTIONS, timing: bool = True,
+              n_motions: int, realism: "str | RealismConfig" = "none", resolutions=RESOLUTIONS, timing: bool = True,
               render_check: RenderCheckConfig | None = None, ablations: dict | None = None) -> dict:
     """One synthetic scene through content -> align -> costmap, against FCL on the mesh; with
     render_check, the render-based estimate of the 0.05 m map's FP / FN rates at the first
     render_check.poses of the same states, beside the true rates there; ablations: name -> CostmapConfig
     overrides whose 0.05 m state FP / FN are reported beside the default's."""
-    sc = generate_scene(seed, SyntheticConfig(num_gaussians=n_gauss, realism=RealismConfig(level=realism)))
+    real = realism if isinstance(realism, RealismConfig) else RealismConfig(level=realism)
+    sc = generate_scene(seed, SyntheticConfig(num_gaussians=n_gauss, realism=real))
     g = sc.gaussians
     mask, _ = content_mask(g.means)
     g.extras[CONTENT_KEY] = mask

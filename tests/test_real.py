@@ -331,3 +331,57 @@ def test_visible_clearance_known_answer_and_rates():
     assert np.isinf(v[3])  # 2 m from the wall: beyond the crop, and the floor is never a hit
     r = estimate_rates(np.array([True, True, False, False, True]), np.array([True, False, False, True, True]))
     assert r["fp_est"] == 0.5 and r["fn_est"] == 1 / 3 and r["render_blocked"] == 3
+
+
+def test_glossy_tiles_and_wall_mirrors_change_the_gaussians_not_the_truth():
+    """Reflections under glossy tiles only (the floor there fades), wall mirrors put a mirrored copy
+    of the room behind an outer wall; the layout (the ground truth) is the same scene's."""
+    base = realistic(40, 40_000, level="none")
+    sc = realistic(40, 40_000, level="none", reflection_fraction=0.8, reflection_coverage=0.5,
+                   reflection_floor_alpha=0.2, mirror_walls=2)
+    assert base.layout.rooms == sc.layout.rooms and np.array_equal(base.transform, sc.transform)
+    canon = (sc.gaussians.means.astype(float) - sc.transform[:3, 3]) @ sc.transform[:3, :3]
+    rooms = np.asarray(sc.layout.rooms)
+    lo, hi = rooms[:, :2].min(0), rooms[:, 2:].max(0)
+    added = sc.instance_ids == -1
+    below = added & (canon[:, 2] < -0.02)
+    tiles = {tuple(t) for t in np.floor(canon[below, :2]).astype(int)}
+    floor = (sc.instance_ids == 0) & (np.abs(canon[:, 2]) < 0.01)
+    faded = floor & (sc.gaussians.alphas < 0.5 * np.median(base.gaussians.alphas))
+    faded_tiles = {tuple(t) for t in np.floor(canon[faded, :2]).astype(int)}
+    all_tiles = {tuple(t) for t in np.floor(canon[floor, :2]).astype(int)}
+    assert below.sum() > 1000 and tiles & all_tiles <= faded_tiles and 0.3 < len(faded_tiles) / len(all_tiles) < 0.7
+    def behind_walls(s):  # Gaussians beyond the outer walls at mirror height (the generator's strays too)
+        c = (s.gaussians.means.astype(float) - s.transform[:3, 3]) @ s.transform[:3, :3]
+        out = ((c[:, :2] < lo - 0.05) | (c[:, :2] > hi + 0.05)).any(1)
+        return int((out & (c[:, 2] > 0.3) & (c[:, 2] < 2.2)).sum()), int((out & ((c[:, 2] <= 0.3) | (c[:, 2] >= 2.2))).sum())
+
+    walls = realistic(40, 40_000, level="none", mirror_walls=2)
+    (mirrored, other), (mirrored0, other0) = behind_walls(walls), behind_walls(base)
+    assert mirrored > mirrored0 + 100 and other == other0
+
+
+@pytest.mark.parametrize("seed", [300, 302])
+def test_floor_is_the_mirror_plane_of_a_faded_glossy_floor(seed):
+    """A glossy floor whose own splats faded to a fifth, over strong, deep reflections: the mirrored
+    table tops below are denser than the floor, but only the floor is the plane the room below
+    mirrors (a plane off by dz puts every reflected surface 2 dz off). Floor within 5 cm, and the
+    costmap's state FP / FN against the mesh within 1 point of the scene without reflections."""
+    from benchmarks.spatial import run_scene
+    from navcore.nav.embodiment import Embodiment
+    from navcore.voxels.field import VoxelizeConfig
+
+    glossy = RealismConfig(level="none", reflection_fraction=0.8, reflection_alpha=0.9, reflection_coverage=0.5,
+                           reflection_floor_alpha=0.2)
+    sc = generate_scene(seed, SyntheticConfig(num_gaussians=200_000, realism=glossy))
+    mask, _ = content_mask(sc.gaussians.means)
+    n, d, info = fit_floor(sc.gaussians.subset(mask), AlignConfig())
+    ang, h = floor_errors(sc, n, d)
+    assert h < 0.05 and ang < 0.2, (ang, h, info["floor_candidates"][:3])
+    assert info["floor_candidates"][info["chosen"]]["mirrored_below"] > 0.5
+    rates = {}
+    for name, real in (("clean", RealismConfig(level="none")), ("glossy", glossy)):
+        r = run_scene(seed, 200_000, Embodiment(), VoxelizeConfig(), 2000, 10, realism=real, resolutions=(0.05,),
+                      timing=False)["res"]["0.05"]
+        rates[name] = (r["fp_state"] / max(r["neg_state"], 1), r["fn_state"] / max(r["pos_state"], 1))
+    assert abs(rates["glossy"][0] - rates["clean"][0]) <= 0.01 and abs(rates["glossy"][1] - rates["clean"][1]) <= 0.01

@@ -72,6 +72,18 @@ class AlignConfig:
     """Flat Gaussians within this distance of the floor candidate feed the refinement, metres."""
     refine_min_alpha: float = 0.5
     """Only Gaussians at least this opaque feed the refinement."""
+    faint_floor_alpha: float = 0.05
+    """Flat Gaussians facing up count towards a floor candidate's area from this opacity on (a glossy
+    floor's own splats fade; opaque ones of any shape count too)."""
+    mirror_depth_m: float = 2.5
+    """Depth below a floor candidate searched for a mirror image of the room above it, metres."""
+    mirror_tolerance_m: float = 0.03
+    """A Gaussian below a candidate is a mirror image when its reflection lands this close to one above."""
+    mirror_samples: int = 20_000
+    """Gaussians below a candidate tested for a mirror image (a seeded subset)."""
+    area_balanced_refinement: bool = True
+    """The floor plane's least squares weight every floor cell (coverage_cell_m) alike, so that the
+    densest patch does not tilt the plane of the whole room."""
     seed: int = 0
     """Seed of the subsampling and of the dominant-normal search."""
 
@@ -196,6 +208,30 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
     def coverage(sel: np.ndarray) -> int:
         """Area covered by the selected Gaussians, in cfg.coverage_cell_m cells of the plane."""
         return len(np.unique(np.floor(plane_xy[sel] / cfg.coverage_cell_m).astype(np.int64), axis=0))
+    from scipy.spatial import cKDTree
+
+    # horizontal surfaces only: a wall's reflection lands on the wall about any nearby plane, a table
+    # top's only about the true mirror (a plane off by dz puts it 2 dz off)
+    flat_idx = np.nonzero(facing)[0]
+    pts3 = np.column_stack([plane_xy, t])
+    tree = cKDTree(pts3[flat_idx]) if len(flat_idx) else None
+
+    def mirror_share(sign: float, z: float) -> float:
+        """Share of the opacity within cfg.mirror_depth_m below the plane at signed height z whose
+        mirror image across it lands on a Gaussian above (within cfg.mirror_tolerance_m): the
+        mirrored room a glossy floor grows is symmetric about the floor, and about no other plane."""
+        hs = sign * t
+        sel = flat_idx[(hs[flat_idx] < z - 0.05) & (hs[flat_idx] > z - cfg.mirror_depth_m)]
+        if len(sel) < 50 or tree is None:
+            return 0.0
+        if len(sel) > cfg.mirror_samples:
+            sel = np.sort(rng.choice(sel, cfg.mirror_samples, replace=False))
+        q = pts3[sel].copy()
+        q[:, 2] = 2 * sign * z - q[:, 2]  # reflect the height across the plane (t = sign * h)
+        dist, _ = tree.query(q, distance_upper_bound=cfg.mirror_tolerance_m)
+        w = alpha[sel]
+        return float(w[np.isfinite(dist)].sum() / max(w.sum(), 1e-12))
+
     floors = []
     for sign in (1.0, -1.0):
         if cam_up is not None and sign * (u @ cam_up) < 0:
@@ -221,9 +257,14 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
             if cam_h is not None and z > cam_h - 0.1:
                 continue  # a floor lies below the cameras
             above, below = mass(z + 0.05, np.inf), mass(-np.inf, z - 0.05)
-            slab = opaque & (np.abs(h - z) <= cfg.coverage_halfwidth_m)
+            # a glossy floor's own splats can be faint (the fit explains its shine by the room below):
+            # its flat, upward-facing Gaussians count at any opacity
+            slab = (opaque | (facing & (alpha >= cfg.faint_floor_alpha))) & (np.abs(h - z) <= cfg.coverage_halfwidth_m)
+            mirrored = mirror_share(sign, z)
+            reflection = mirrored * mass(z - cfg.mirror_depth_m, z - 0.05)
             floors.append({"sign": sign, "height": float(z), "strength": float(coverage(slab)),
-                           "open_above": float(above / max(above + below, 1e-12)),
+                           "mirrored_below": mirrored,
+                           "open_above": float(above / max(above + below - reflection, 1e-12)),
                            "furniture": float(mass(z + cfg.furniture_band[0], z + cfg.furniture_band[1]))})
     if not floors:
         raise ValueError("no floor candidate: no horizontal surface found along the up axis"
@@ -238,14 +279,22 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
     n = best["sign"] * u
     d = -best["height"]
 
-    # 3. refinement on opaque flat Gaussians near the plane, twice with a shrinking band
+    # 3. refinement on the floor's own opaque flat Gaussians near the plane (the faint ones where a
+    # glossy floor's splats faded), every floor cell weighted alike (the whole room's plane, not its
+    # densest patch), twice with a shrinking band
     band = cfg.refine_band
     for _ in range(2):
         sd = p @ n + d
-        sel = (np.abs(sd) < band) & (alpha >= cfg.refine_min_alpha) & facing
-        if sel.sum() < 100:
+        sel = np.nonzero((np.abs(sd) < band) & facing & (alpha >= cfg.faint_floor_alpha))[0]
+        if len(sel) < 100:
             break
-        n2, d2 = _plane_svd(p[sel], alpha[sel])
+        w = alpha[sel].astype(np.float64)
+        if cfg.area_balanced_refinement:
+            cells = np.floor(plane_xy[sel] / cfg.coverage_cell_m).astype(np.int64)
+            _, inv = np.unique(cells, axis=0, return_inverse=True)
+            inv = inv.reshape(-1)
+            w = w / np.bincount(inv, weights=w)[inv]
+        n2, d2 = _plane_svd(p[sel], w)
         if n2 @ n < 0:
             n2, d2 = -n2, -d2
         if _angle(n2, n) > 10:

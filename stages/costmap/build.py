@@ -74,6 +74,9 @@ class CostmapConfig:
     """Occupied voxels above this height are ignored for the support, metres."""
     floor_cell: float = 0.5
     """Cell of the local floor height field, metres."""
+    floor_flat_ratio: float = 0.8
+    """Gaussians define the local floor when their smallest scale is below this share of the middle one
+    (and their normal is within 20 deg of vertical)."""
     floor_search: float = 0.15
     """Flat horizontal Gaussians within this height of z = 0 define the local floor, metres."""
     floor_layer_min: float = 0.02
@@ -154,7 +157,7 @@ def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, d
     from navcore.gaussians.surfaces import horizontal_surfaces
 
     z = scene.means[:, 2].astype(np.float64)
-    near = horizontal_surfaces(scene, 0.5, 20.0) & (np.abs(z) < cfg.floor_search)
+    near = horizontal_surfaces(scene, cfg.floor_flat_ratio, 20.0) & (np.abs(z) < cfg.floor_search)
     cell = np.floor(scene.means[:, :2] / cfg.floor_cell).astype(np.int64)
     lo = cell.min(0)
     shape = tuple(cell.max(0) - lo + 1)

@@ -150,7 +150,7 @@ def generate_scene(seed: int, cfg: SyntheticConfig) -> SyntheticScene:
                            inst=all_inst),
                       (all_inst == 0) & (np.abs(all_means[:, 2]) < 0.01),
                       np.array([c[:3, 3] for c in _capture_path(lay, cfg.camera_height_m, np.random.default_rng(0))]),
-                      real, rrng)
+                      real, rrng, np.asarray(lay.rooms))
     all_inst = g["inst"]
     canonical = GaussianScene.from_colors(g["means"], g["quats"], g["scales"], g["alphas"], g["rgb"])
     if cfg.sh_degree > 0:

@@ -2,7 +2,11 @@
 measured on what real scenes look like (each a knob; ``level`` sets them all at once):
 
 - reflections: surface Gaussians within ``reflection_depth`` above the floor mirrored below it,
-  fainter (a shiny floor is rendered by a mirrored room seen through it);
+  fainter (a shiny floor is rendered by a mirrored room seen through it), under the glossy share
+  ``reflection_coverage`` of the floor (1 m tiles), whose own Gaussians fade to
+  ``reflection_floor_alpha`` of their opacity (the fit explains the shine by the room below);
+  ``mirror_walls`` wall mirrors copy the room in front of them behind the wall (a room behind the
+  wall, outside the layout). The ground truth (layout, mesh) is unchanged;
 - far floaters: large Gaussians 10-300 m away (sky, background, optimisation debris);
 - floor noise: floor Gaussians thick (less flat), scattered in height and slightly tilted in patches;
 - haze: large low-opacity Gaussians hugging surfaces;
@@ -39,6 +43,14 @@ class RealismConfig:
     """Height above the floor whose surfaces are mirrored, metres."""
     reflection_alpha: float = 0.5
     """Opacity factor of the mirrored Gaussians."""
+    reflection_coverage: float = 1.0
+    """Share of the floor that is glossy (1 m tiles drawn at random; 1 = all of it): reflections
+    appear under glossy tiles only."""
+    reflection_floor_alpha: float = 1.0
+    """Opacity factor of the floor's own Gaussians on glossy tiles (1 = unchanged)."""
+    mirror_walls: int = 0
+    """Wall mirrors (1.5-3 m wide, 0.3-2.2 m high) on the layout's outer walls, each copying the
+    room within reflection_depth in front of it behind the wall (opacity x reflection_alpha)."""
     far_floater_fraction: float | None = None
     """Share of extra Gaussians placed 10-300 m away (large, opaque or not)."""
     floor_noise_m: float | None = None
@@ -79,13 +91,14 @@ def up_rotation(axis: str, rng: np.random.Generator) -> tuple[np.ndarray, str]:
 
 
 def add_artefacts(g: dict, floor_mask: np.ndarray, cams_xyz: np.ndarray, cfg: RealismConfig,
-                  rng: np.random.Generator) -> dict:
+                  rng: np.random.Generator, rooms: np.ndarray | None = None) -> dict:
     """Apply the artefacts to canonical-frame arrays (z up, floor z = 0).
 
     Args:
         g: means [N, 3], quats [N, 4] wxyz, scales [N, 3] m, alphas [N], rgb [N, 3], inst [N] int32.
         floor_mask: [N] bool, the floor's surface Gaussians.
         cams_xyz: [C, 3] capture positions.
+        rooms: [R, 4] room boxes x0, y0, x1, y1 (wall mirrors go on their bounding box).
     Returns:
         the new arrays (added Gaussians have instance -1).
     """
@@ -101,15 +114,42 @@ def add_artefacts(g: dict, floor_mask: np.ndarray, cams_xyz: np.ndarray, cfg: Re
         d = cKDTree(cams_xyz[:, :2]).query(g["means"][:, :2])[0]
         keep = rng.random(n) < np.exp(-np.maximum(d - cfg.sparse_distance_m, 0) / cfg.sparse_distance_m)
         g = {k: v[keep] for k, v in g.items()}
+        floor_mask = floor_mask[keep]
         n = len(g["means"])
     extra = []
     if cfg.reflection_fraction:
         z = g["means"][:, 2]
         cand = np.nonzero((z > 0.02) & (z < cfg.reflection_depth))[0]
         pick = cand[rng.random(len(cand)) < cfg.reflection_fraction]
+        if cfg.reflection_coverage < 1.0 or cfg.reflection_floor_alpha != 1.0:
+            # glossy 1 m tiles; drawn only when asked, so that the presets' scenes stay as they were
+            tiles = np.floor(g["means"][:, :2]).astype(np.int64)
+            keys, inv = np.unique(tiles, axis=0, return_inverse=True)
+            glossy = (rng.random(len(keys)) < cfg.reflection_coverage)[inv.reshape(-1)]
+            pick = pick[glossy[pick]]
+            g["alphas"][floor_mask & glossy] *= cfg.reflection_floor_alpha
         m = g["means"][pick] * [1, 1, -1]
         q = g["quats"][pick] * [1, -1, -1, 1]  # mirror in z: R -> M R M keeps a proper rotation
         extra.append((m, q, g["scales"][pick], g["alphas"][pick] * cfg.reflection_alpha, g["rgb"][pick] * 0.8))
+    if cfg.mirror_walls and rooms is not None and len(rooms):
+        lo_b, hi_b = np.asarray(rooms)[:, :2].min(0), np.asarray(rooms)[:, 2:].max(0)
+        for _ in range(cfg.mirror_walls):
+            axis, side = int(rng.integers(2)), int(rng.integers(2))  # a wall x = const or y = const
+            wall = (lo_b, hi_b)[side][axis]
+            other = 1 - axis
+            width = rng.uniform(1.5, 3.0)
+            c = rng.uniform(lo_b[other] + width / 2, max(hi_b[other] - width / 2, lo_b[other] + width / 2))
+            p = g["means"]
+            inside = (np.abs(p[:, axis] - wall) < cfg.reflection_depth) & (np.abs(p[:, other] - c) < width / 2) & \
+                (p[:, 2] > 0.3) & (p[:, 2] < 2.2) & (np.abs(p[:, axis] - wall) > 0.03)  # not the wall itself
+            k = np.nonzero(inside)[0]
+            m = p[k].copy()
+            m[:, axis] = 2 * wall - m[:, axis]
+            flip = np.ones(3)
+            flip[axis] = -1  # mirror across the wall plane: R -> M R M with M = diag(flip)
+            qv = g["quats"][k].copy()
+            qv[:, 1:] *= -flip  # a reflection's conjugation keeps the rotation proper (as the floor's)
+            extra.append((m, qv, g["scales"][k], g["alphas"][k] * cfg.reflection_alpha, g["rgb"][k] * 0.8))
     lo, hi = g["means"].min(0), g["means"].max(0)
     if cfg.far_floater_fraction:
         k = int(n * cfg.far_floater_fraction)
