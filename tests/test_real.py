@@ -365,14 +365,15 @@ def test_glossy_tiles_and_wall_mirrors_change_the_gaussians_not_the_truth():
 def test_floor_is_the_mirror_plane_of_a_faded_glossy_floor(seed):
     """A glossy floor whose own splats faded to a fifth, over strong, deep reflections: the mirrored
     table tops below are denser than the floor, but only the floor is the plane the room below
-    mirrors (a plane off by dz puts every reflected surface 2 dz off). Floor within 5 cm, and the
-    costmap's state FP / FN against the mesh within 1 point of the scene without reflections."""
+    mirrors (a plane off by dz puts every reflected surface 2 dz off); two wall mirrors add rooms
+    behind the walls. Floor within 5 cm and 0.2 deg, and the costmap's state FP / FN against the
+    mesh within 1 point of the scene without reflections."""
     from benchmarks.spatial import run_scene
     from navcore.nav.embodiment import Embodiment
     from navcore.voxels.field import VoxelizeConfig
 
     glossy = RealismConfig(level="none", reflection_fraction=0.8, reflection_alpha=0.9, reflection_coverage=0.5,
-                           reflection_floor_alpha=0.2)
+                           reflection_floor_alpha=0.2, mirror_walls=2)
     sc = generate_scene(seed, SyntheticConfig(num_gaussians=200_000, realism=glossy))
     mask, _ = content_mask(sc.gaussians.means)
     n, d, info = fit_floor(sc.gaussians.subset(mask), AlignConfig())

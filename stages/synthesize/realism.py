@@ -140,8 +140,9 @@ def add_artefacts(g: dict, floor_mask: np.ndarray, cams_xyz: np.ndarray, cfg: Re
             width = rng.uniform(1.5, 3.0)
             c = rng.uniform(lo_b[other] + width / 2, max(hi_b[other] - width / 2, lo_b[other] + width / 2))
             p = g["means"]
-            inside = (np.abs(p[:, axis] - wall) < cfg.reflection_depth) & (np.abs(p[:, other] - c) < width / 2) & \
-                (p[:, 2] > 0.3) & (p[:, 2] < 2.2) & (np.abs(p[:, axis] - wall) > 0.03)  # not the wall itself
+            into_room = (p[:, axis] - wall) * (1.0 if side == 0 else -1.0)  # distance in front of the mirror
+            inside = (into_room > 0.03) & (into_room < cfg.reflection_depth) & (np.abs(p[:, other] - c) < width / 2) & \
+                (p[:, 2] > 0.3) & (p[:, 2] < 2.2)  # the room in front of it, not the wall itself
             k = np.nonzero(inside)[0]
             m = p[k].copy()
             m[:, axis] = 2 * wall - m[:, axis]
