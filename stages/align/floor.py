@@ -26,7 +26,12 @@ two) is a piece of surface whose normal is its smallest axis.
    relative to the best candidate): floors carry furniture, ceilings have lamps at most, and a
    reflected room below a shiny floor is fainter than the floor itself. With cameras, only
    peaks below (nearly) all cameras count, and the sign follows their up vectors.
-4. Refinement: a weighted least-squares plane through the opaque flat Gaussians near the peak.
+   Under a glossy floor the mirror symmetry decides (stages/align/design.md): the share of the
+   flat surfaces below a candidate whose reflection across it lands on a flat surface above
+   (``mirrored_below``) is reflection and leaves the candidate's "below"; a faded floor's flat
+   upward splats count towards its area at any opacity >= ``faint_floor_alpha``.
+4. Refinement: a weighted least-squares plane through the flat Gaussians facing up near the peak
+   (opacity >= ``faint_floor_alpha``), every floor cell weighted alike.
 ``alignment.json`` gets every candidate with its numbers.
 """
 from __future__ import annotations
@@ -71,7 +76,7 @@ class AlignConfig:
     refine_band: float = 0.05
     """Flat Gaussians within this distance of the floor candidate feed the refinement, metres."""
     refine_min_alpha: float = 0.5
-    """Only Gaussians at least this opaque feed the refinement."""
+    """Gaussians at least this opaque are 'opaque': a floor candidate's second histogram and its area."""
     faint_floor_alpha: float = 0.05
     """Flat Gaussians facing up count towards a floor candidate's area from this opacity on (a glossy
     floor's own splats fade; opaque ones of any shape count too)."""
@@ -205,9 +210,12 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
     e1 /= np.linalg.norm(e1)
     plane_xy = np.stack([p @ e1, p @ np.cross(u, e1)], 1)
 
+    # each Gaussian's cfg.coverage_cell_m cell of the plane, numbered once (candidate areas, refinement)
+    cell = np.unique(np.floor(plane_xy / cfg.coverage_cell_m).astype(np.int64), axis=0, return_inverse=True)[1].reshape(-1)
+
     def coverage(sel: np.ndarray) -> int:
         """Area covered by the selected Gaussians, in cfg.coverage_cell_m cells of the plane."""
-        return len(np.unique(np.floor(plane_xy[sel] / cfg.coverage_cell_m).astype(np.int64), axis=0))
+        return len(np.unique(cell[sel]))
     from scipy.spatial import cKDTree
 
     # horizontal surfaces only: a wall's reflection lands on the wall about any nearby plane, a table
@@ -216,12 +224,12 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
     pts3 = np.column_stack([plane_xy, t])
     tree = cKDTree(pts3[flat_idx]) if len(flat_idx) else None
 
-    def mirror_share(sign: float, z: float) -> float:
+    def mirror_share(h: np.ndarray, sign: float, z: float) -> float:
         """Share of the opacity within cfg.mirror_depth_m below the plane at signed height z whose
         mirror image across it lands on a Gaussian above (within cfg.mirror_tolerance_m): the
-        mirrored room a glossy floor grows is symmetric about the floor, and about no other plane."""
-        hs = sign * t
-        sel = flat_idx[(hs[flat_idx] < z - 0.05) & (hs[flat_idx] > z - cfg.mirror_depth_m)]
+        mirrored room a glossy floor grows is symmetric about the floor, and about no other plane.
+        h: the signed heights (sign * t)."""
+        sel = flat_idx[(h[flat_idx] < z - 0.05) & (h[flat_idx] > z - cfg.mirror_depth_m)]
         if len(sel) < 50 or tree is None:
             return 0.0
         if len(sel) > cfg.mirror_samples:
@@ -260,7 +268,7 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
             # a glossy floor's own splats can be faint (the fit explains its shine by the room below):
             # its flat, upward-facing Gaussians count at any opacity
             slab = (opaque | (facing & (alpha >= cfg.faint_floor_alpha))) & (np.abs(h - z) <= cfg.coverage_halfwidth_m)
-            mirrored = mirror_share(sign, z)
+            mirrored = mirror_share(h, sign, z)
             reflection = mirrored * mass(z - cfg.mirror_depth_m, z - 0.05)
             floors.append({"sign": sign, "height": float(z), "strength": float(coverage(slab)),
                            "mirrored_below": mirrored,
@@ -290,9 +298,7 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
             break
         w = alpha[sel].astype(np.float64)
         if cfg.area_balanced_refinement:
-            cells = np.floor(plane_xy[sel] / cfg.coverage_cell_m).astype(np.int64)
-            _, inv = np.unique(cells, axis=0, return_inverse=True)
-            inv = inv.reshape(-1)
+            inv = np.unique(cell[sel], return_inverse=True)[1].reshape(-1)
             w = w / np.bincount(inv, weights=w)[inv]
         n2, d2 = _plane_svd(p[sel], w)
         if n2 @ n < 0:

@@ -128,9 +128,7 @@ def add_artefacts(g: dict, floor_mask: np.ndarray, cams_xyz: np.ndarray, cfg: Re
             glossy = (rng.random(len(keys)) < cfg.reflection_coverage)[inv.reshape(-1)]
             pick = pick[glossy[pick]]
             g["alphas"][floor_mask & glossy] *= cfg.reflection_floor_alpha
-        m = g["means"][pick] * [1, 1, -1]
-        q = g["quats"][pick] * [1, -1, -1, 1]  # mirror in z: R -> M R M keeps a proper rotation
-        extra.append((m, q, g["scales"][pick], g["alphas"][pick] * cfg.reflection_alpha, g["rgb"][pick] * 0.8))
+        extra.append(_mirrored(g, pick, 2, 0.0, cfg.reflection_alpha))
     if cfg.mirror_walls and rooms is not None and len(rooms):
         lo_b, hi_b = np.asarray(rooms)[:, :2].min(0), np.asarray(rooms)[:, 2:].max(0)
         for _ in range(cfg.mirror_walls):
@@ -143,14 +141,7 @@ def add_artefacts(g: dict, floor_mask: np.ndarray, cams_xyz: np.ndarray, cfg: Re
             into_room = (p[:, axis] - wall) * (1.0 if side == 0 else -1.0)  # distance in front of the mirror
             inside = (into_room > 0.03) & (into_room < cfg.reflection_depth) & (np.abs(p[:, other] - c) < width / 2) & \
                 (p[:, 2] > 0.3) & (p[:, 2] < 2.2)  # the room in front of it, not the wall itself
-            k = np.nonzero(inside)[0]
-            m = p[k].copy()
-            m[:, axis] = 2 * wall - m[:, axis]
-            flip = np.ones(3)
-            flip[axis] = -1  # mirror across the wall plane: R -> M R M with M = diag(flip)
-            qv = g["quats"][k].copy()
-            qv[:, 1:] *= -flip  # a reflection's conjugation keeps the rotation proper (as the floor's)
-            extra.append((m, qv, g["scales"][k], g["alphas"][k] * cfg.reflection_alpha, g["rgb"][k] * 0.8))
+            extra.append(_mirrored(g, np.nonzero(inside)[0], axis, wall, cfg.reflection_alpha))
     lo, hi = g["means"].min(0), g["means"].max(0)
     if cfg.far_floater_fraction:
         k = int(n * cfg.far_floater_fraction)
@@ -173,6 +164,17 @@ def add_artefacts(g: dict, floor_mask: np.ndarray, cams_xyz: np.ndarray, cfg: Re
         g["rgb"] = np.concatenate([g["rgb"], c])
         g["inst"] = np.concatenate([g["inst"], np.full(len(m), -1, np.int32)])
     return g
+
+
+def _mirrored(g: dict, idx: np.ndarray, axis: int, plane: float, alpha_factor: float) -> tuple:
+    """Gaussians idx mirrored across the plane x[axis] = plane, fainter and darker: (means, quats,
+    scales, alphas, rgb). The rotation R becomes M R M (M the reflection), a proper rotation: the
+    quaternion keeps its w and its component along the axis and negates the other two."""
+    m = g["means"][idx].copy()
+    m[:, axis] = 2 * plane - m[:, axis]
+    sign = -np.ones(4)
+    sign[0] = sign[1 + axis] = 1.0
+    return m, g["quats"][idx] * sign, g["scales"][idx], g["alphas"][idx] * alpha_factor, g["rgb"][idx] * 0.8
 
 
 def _random_quats(rng: np.random.Generator, k: int) -> np.ndarray:
