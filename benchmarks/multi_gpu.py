@@ -27,9 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
+from navcore.io import jsonio
+
 GPU_STAGES = ("voxelize", "semantics", "goal_images", "evaluate")
-EVAL = ["evaluate.agent=oracle", "evaluate.batch_slots=64", "evaluate.episodes_per_scene=64", "evaluate.videos=0",
-        "evaluate.trajectory_plots=0", "goal_images.enabled=true", "evaluate.renderer=gsplat"]
+
+
+def gpu_work(episodes: int, renderer: str) -> list[str]:
+    """Overrides of the GPU work: goal images on, a batched oracle evaluation of `episodes` episodes
+    per scene and task on `renderer`, without videos or plots."""
+    return ["evaluate.agent=oracle", "evaluate.batch_slots=64", f"evaluate.episodes_per_scene={episodes}",
+            "evaluate.videos=0", "evaluate.trajectory_plots=0", "goal_images.enabled=true",
+            f"evaluate.renderer={renderer}"]
 
 
 def write_catalog(data: Path, real: list[Path], scenes: int, gaussians: int) -> Path:
@@ -82,13 +90,13 @@ def gpu_rates(summary: dict) -> dict:
             "failures": len(summary["failures"])}
 
 
-def release(data: Path, catalog: Path, workers: int) -> dict:
+def release(data: Path, catalog: Path, workers: int, work: list[str]) -> dict:
     from pipeline.config import DEFAULT_STAGES
     from pipeline.executor import execute
 
     stages = [*DEFAULT_STAGES, *(s for s in ("goal_images", "evaluate") if s not in DEFAULT_STAGES)]
     t0 = time.perf_counter()
-    s = execute(compose(data, catalog, f"executor.n_workers={workers}", f"stages=[{','.join(stages)}]", *EVAL))
+    s = execute(compose(data, catalog, f"executor.n_workers={workers}", f"stages=[{','.join(stages)}]", *work))
     wall = time.perf_counter() - t0
     steps = [r for r in s["results"] if r["stage"] == "evaluate" and r["status"] == "done"]
     return {"wall_s": round(wall, 1), "counts": s["counts"], "failures": s["failures"], "placement": s.get("placement"),
@@ -96,14 +104,14 @@ def release(data: Path, catalog: Path, workers: int) -> dict:
             "scenes": len({r["scene_id"] for r in s["results"] if r["scene_id"] != "*"})}
 
 
-def scaling(data: Path, catalog: Path, workers: int, n_gpus: int) -> dict:
+def scaling(data: Path, catalog: Path, workers: int, n_gpus: int, work: list[str]) -> dict:
     from pipeline.executor import execute
 
     out = {}
     for n in sorted({1, n_gpus}):
         t0 = time.perf_counter()
         s = execute(compose(data, catalog, f"executor.n_workers={workers}", f"executor.gpus={n}",
-                            f"stages=[{','.join(GPU_STAGES)}]", "force=true", *EVAL))
+                            f"stages=[{','.join(GPU_STAGES)}]", "force=true", *work))
         out[str(n)] = {**gpu_rates(s), "wall_s": round(time.perf_counter() - t0, 1),
                        "misplaced": len((s.get("placement") or {}).get("misplaced", []))}
     if len(out) > 1:
@@ -114,22 +122,15 @@ def scaling(data: Path, catalog: Path, workers: int, n_gpus: int) -> dict:
 def env_worker(args) -> None:
     """One env group on this process's GPU (CUDA_VISIBLE_DEVICES set by the parent)."""
     import torch
-    from omegaconf import OmegaConf
 
     from benchmarks.eval import steps_per_second
-    from navcore.gaussians.content import camera_scene
-    from navcore.nav.geodesic import NavGraph, eligible_cells
     from pipeline.executor import open_catalog
-    from stages.evaluate.env import SceneContext
+    from stages.evaluate.stage import scene_context
 
     cfg = compose(Path(args.data), Path(args.catalog))
     catalog, scenes, _ = open_catalog(cfg)
     scene = next(s for s in scenes if s.synthetic)
-    emb = OmegaConf.to_object(cfg.embodiment)
-    cm = catalog.dataset("costmaps", scene).load(emb.name)
-    graph = NavGraph(cm, eligible_cells(cm, OmegaConf.to_object(cfg.episodes)), cfg.episodes.geodesic_neighbourhood)
-    gs, _ = camera_scene(catalog, scene, emb.name)
-    ctx = SceneContext(cm, graph, emb, gs, "gsplat")
+    ctx = scene_context(scene, cfg, catalog, True, "gsplat")
     rng = np.random.default_rng(int(args.gpu_rank))
     steps_per_second(ctx, 640, 480, 64, 5, rng, device_obs=True)  # kernels loaded, caches warm
     barrier = Path(args.barrier)
@@ -141,8 +142,8 @@ def env_worker(args) -> None:
     i = torch.cuda.current_device()
     r.update({"started": t0, "finished": time.time(), "cuda_visible": os.environ.get("CUDA_VISIBLE_DEVICES"),
               "cuda_device": i, "gpu_uuid": str(torch.cuda.get_device_properties(i).uuid), "scene": scene.name,
-              "gaussians": int(len(gs.means))})
-    Path(args.result).write_text(json.dumps(r))
+              "gaussians": ctx.renderer.num_gaussians})
+    Path(args.result).write_text(jsonio.dumps(r))
 
 
 def env_groups(data: Path, catalog: Path, n_gpus: int, steps: int) -> dict:
@@ -273,8 +274,7 @@ def main(argv=None) -> int:
         return 0
     from pipeline.backends import visible_gpus
 
-    EVAL[-1] = f"evaluate.renderer={args.renderer}"
-    EVAL[2] = f"evaluate.episodes_per_scene={args.eval_episodes}"
+    work = gpu_work(args.eval_episodes, args.renderer)
 
     n_gpus = len(visible_gpus())
     if n_gpus < 1:
@@ -292,15 +292,15 @@ def main(argv=None) -> int:
     for phase in args.phases.split(","):
         t0 = time.perf_counter()
         if phase == "release":
-            rep["release"] = release(data, catalog, workers)
+            rep["release"] = release(data, catalog, workers, work)
         elif phase == "scaling":
-            rep["scaling"] = scaling(data, catalog, workers, n_gpus)
+            rep["scaling"] = scaling(data, catalog, workers, n_gpus, work)
         elif phase == "env":
             rep["env"] = env_groups(data, catalog, n_gpus, args.steps)
         else:
             raise SystemExit(f"unknown phase {phase!r} (release, scaling, env)")
         rep.setdefault("phase_s", {})[phase] = round(time.perf_counter() - t0, 1)
-        report_file.write_text(json.dumps(rep, indent=1, default=str))
+        report_file.write_text(jsonio.dumps(rep, indent=1, default=str))
         print(phase, json.dumps({k: v for k, v in rep[phase].items() if k not in ("placement", "failures")},
                                 default=str)[:3000], flush=True)
     return 0

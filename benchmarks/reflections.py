@@ -14,6 +14,8 @@ import json
 import time
 from pathlib import Path
 
+from navcore.io import jsonio
+
 REFLECTION_LEVELS = {
     "none": {},
     "mirrored_room": dict(reflection_fraction=0.6, reflection_alpha=0.9),
@@ -81,7 +83,7 @@ def main(argv=None) -> int:
     rep = run([int(s) for s in args.seeds.split(",")], args.gaussians)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "reflections.json").write_text(json.dumps(rep, indent=1))
+    (out / "reflections.json").write_text(jsonio.dumps(rep, indent=1))
     md = markdown(rep)
     if args.docs:
         (Path(__file__).resolve().parents[1] / "docs" / "bench_reflections.md").write_text(md)

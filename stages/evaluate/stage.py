@@ -67,15 +67,21 @@ def load_episodes(catalog, scene, ecfg: EvaluateConfig) -> list[Episode]:
     return out
 
 
-def run(scene, cfg, catalog) -> dict:
-    ecfg: EvaluateConfig = OmegaConf.to_object(cfg.evaluate)
+def scene_context(scene, cfg, catalog, render: bool, renderer: str) -> SceneContext:
+    """A scene's evaluation context: its costmap for the embodiment, the geodesic graph over the
+    episodes' eligible cells and, with render, the scene as the robot's camera sees it (less the
+    floaters it drives through) on `renderer`."""
     emb = OmegaConf.to_object(cfg.embodiment)
     cm = catalog.dataset("costmaps", scene).load(emb.name)
     graph = NavGraph(cm, eligible_cells(cm, OmegaConf.to_object(cfg.episodes)), cfg.episodes.geodesic_neighbourhood)
-    gs = None
-    if ecfg.render:
-        gs, _ = camera_scene(catalog, scene, emb.name)  # less the floaters the robot drives through
-    ctx = SceneContext(cm, graph, emb, gs, ecfg.renderer)
+    gs = camera_scene(catalog, scene, emb.name)[0] if render else None
+    return SceneContext(cm, graph, emb, gs, renderer)
+
+
+def run(scene, cfg, catalog) -> dict:
+    ecfg: EvaluateConfig = OmegaConf.to_object(cfg.evaluate)
+    ctx = scene_context(scene, cfg, catalog, ecfg.render, ecfg.renderer)
+    cm = ctx.costmap
     env_cfg = EnvConfig.of(ecfg, OmegaConf.to_object(cfg.episodes).actions)
     episodes = load_episodes(catalog, scene, ecfg)
     seed = stream_seed(ecfg.seed, scene.scene_id, "evaluate") % 2**31
