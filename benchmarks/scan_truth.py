@@ -15,24 +15,13 @@ each with its 95 % Wilson interval from the number of poses.
 from __future__ import annotations
 
 import argparse
-import math
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from navcore.io import jsonio
-
-
-def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """95 % Wilson score interval of a proportion k / n."""
-    if n == 0:
-        return (float("nan"), float("nan"))
-    p = k / n
-    d = 1 + z * z / n
-    c = (p + z * z / (2 * n)) / d
-    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
-    return (max(0.0, c - h), min(1.0, c + h))
+from stages.costmap.render_check import wilson
 
 
 def scan_blocked(xy: np.ndarray, points: np.ndarray, radius: float, h_min: float, h_max: float) -> np.ndarray:

@@ -189,7 +189,7 @@ def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_
         if res == 0.05 and render_check is not None:
             k = render_check.poses
             t0 = time.perf_counter()
-            est = check_costmap(renderable, cm, emb, render_check, xy=states[:k])
+            est = check_costmap(aligned, cm, emb, render_check, xy=states[:k])
             true = estimate_rates(ours_state[:k], ref_state[:k])
             out["render_check"] = {
                 "fp_est": est["fp_est"], "fn_est": est["fn_est"], "fp_true": true["fp_est"],

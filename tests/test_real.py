@@ -319,18 +319,35 @@ def wall_scene(rng, x_wall=1.0):
 
 
 def test_visible_clearance_known_answer_and_rates():
-    from stages.costmap.render_check import RenderCheckConfig, estimate_rates, visible_clearance
+    from stages.costmap.render_check import RenderCheckConfig, direct_evidence, estimate_rates, visible_clearance
 
     g = wall_scene(np.random.default_rng(1))
-    xy = np.array([[0.9, 0.0], [0.7, 0.3], [0.3, -0.2], [-1.0, 0.0]])
+    xy = np.array([[0.9, 0.0], [0.7, 0.3], [0.3, -0.2], [-1.0, 0.0], [0.95, 0.0]])
     v = visible_clearance(g, xy, Embodiment(), RenderCheckConfig(), backend="cpu")
-    # 10 cm from a wall of 2 cm splats the side cameras see it obliquely and expected depth reads
-    # short; the correction (1.2 sigma = 2.4 cm) makes it right near the robot radius and costs as
-    # much farther out, where no verdict depends on it
-    assert abs(v[0] - 0.1) <= 0.015 and np.allclose(v[1:3], [0.324, 0.724], atol=0.01), v
+    # per-ray hits land on the wall's surface at every distance, seen head-on or obliquely (the
+    # rasterizer's expected depth read 10 cm as 7.6 and needed a calibrated correction)
+    assert np.allclose(v[[0, 1, 2, 4]], [0.1, 0.3, 0.7, 0.05], atol=0.002), v
     assert np.isinf(v[3])  # 2 m from the wall: beyond the crop, and the floor is never a hit
+    # the direct evidence: the wall's opaque splats inside the body cylinder (radius 0.18) at 0.1 m, none at 0.3
+    ev = direct_evidence(g, xy, Embodiment(), RenderCheckConfig())
+    assert ev[0] > 100 and ev[4] > ev[0] and not ev[1:4].any()
     r = estimate_rates(np.array([True, True, False, False, True]), np.array([True, False, False, True, True]))
     assert r["fp_est"] == 0.5 and r["fn_est"] == 1 / 3 and r["render_blocked"] == 3
+    lo, hi = r["fn_ci95"]
+    assert 0.0 < lo < 1 / 3 < hi < 1.0 and estimate_rates(np.zeros(2, bool), np.zeros(2, bool))["fn_ci95"] == (0.0, 1.0)
+
+
+def test_ray_heights_keep_the_floor_fringe_outside_the_footprint():
+    """The lowest ray origin sits r tan(max elevation) above the guard height (the steepest ray
+    reaches it at the robot radius); origins cover the band at the radius."""
+    from stages.costmap.render_check import RenderCheckConfig
+
+    emb, cfg = Embodiment(), RenderCheckConfig()
+    hs = cfg.ray_heights(emb)
+    reach = emb.radius * np.tan(np.radians(cfg.max_elevation_deg))
+    assert hs[0] == pytest.approx(emb.h_min + cfg.floor_guard + reach) and hs[-1] == pytest.approx(emb.h_max - reach)
+    assert np.diff(hs).max() <= 2 * reach + 1e-12 and len(hs) == 4
+    assert np.array_equal(RenderCheckConfig(heights=[0.3]).ray_heights(emb), [0.3])
 
 
 def test_glossy_tiles_and_wall_mirrors_change_the_gaussians_not_the_truth():
