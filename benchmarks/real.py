@@ -121,6 +121,7 @@ def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) ->
 
     from navcore.gaussians.content import content_of
     from navcore.gaussians.formats import read_gaussians
+    from stages.costmap.build import obstacle_classes
     from stages.costmap.render_check import RenderCheckConfig, check_costmap
 
     t0 = time.perf_counter()
@@ -134,7 +135,9 @@ def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) ->
     gs, _ = catalog.dataset("aligned", scene).load()
     cm = catalog.dataset("costmaps", scene).load(emb.name)
     t0 = time.perf_counter()
-    rc = check_costmap(content_of(gs), cm, emb, RenderCheckConfig(poses=poses), backend="cpu")
+    content = content_of(gs)
+    _, noise, _ = obstacle_classes(content, OmegaConf.to_object(cfg.costmap))
+    rc = check_costmap(content, cm, emb, RenderCheckConfig(poses=poses), backend="cpu", noise=noise)
     rc_s = time.perf_counter() - t0
     asset = catalog.path("asset", scene)
     pics = {}
@@ -166,7 +169,7 @@ def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) ->
         .get("objectnav", {}).get("rejections", {}),
         "render_fp_est": round(rc["fp_est"], 4), "render_fn_est": round(rc["fn_est"], 4),
         "render_check": {k: rc[k] for k in ("render_free", "render_blocked", "costmap_blocked", "poses", "fp_ci95",
-                                            "fn_ci95")} | {"seconds": round(rc_s, 1)},
+                                            "fn_ci95", "fn_noise_only")} | {"seconds": round(rc_s, 1)},
         "direct_evidence": {k: rc["direct"][k] for k in ("fp_est", "fn_est", "fp_ci95", "fn_ci95", "render_blocked")},
         "render_vs_direct_agreement": round(float((rc["render_blocked_mask"] == rc["direct_blocked_mask"]).mean()), 4),
         "pictures": pics,
@@ -294,6 +297,8 @@ def markdown(rep: dict, pictures_rel: str) -> str:
          f"{s['oracle_sr']['explicit_stop']['all']}"),
         ("render check: FP est (95 % CI)", lambda s: f"{pct(s['render_fp_est'])} ({ci(s['render_check']['fp_ci95'])})"),
         ("render check: FN est (95 % CI)", lambda s: f"{pct(s['render_fn_est'])} ({ci(s['render_check']['fn_ci95'])})"),
+        ("render check: FN poses, of them blocked only by splats the costmap calls noise", lambda s:
+         f"{round(s['render_fn_est'] * s['render_check']['render_blocked'])}, {s['render_check']['fn_noise_only']}"),
         ("render check: poses, blocked in the render, seconds", lambda s: f"{s['render_check']['poses']}, "
          f"{s['render_check']['render_blocked']}, {s['render_check']['seconds']:.1f}"),
         ("direct evidence: FN (95 % CI), blocked poses", lambda s: f"{pct(s['direct_evidence']['fn_est'])} "

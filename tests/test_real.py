@@ -173,6 +173,42 @@ def test_isolated_points_is_the_exact_neighbour_count():
         within = (cdist(pts, pts) <= 0.1).sum(1) - 1  # others within the radius, brute force
         assert np.array_equal(isolated_points(pts, 0.1, k), within < k)
     assert isolated_points(pts[:3], 0.1, 4).all() and len(isolated_points(np.zeros((0, 3)), 0.1, 4)) == 0
+    r = rng.uniform(0.05, 0.3, len(pts))  # one radius per point
+    for k in (1, 4, 9):
+        within = (cdist(pts, pts) <= r[:, None]).sum(1) - 1
+        assert np.array_equal(isolated_points(pts, r, k), within < k)
+
+
+def test_isolated_rule_keeps_thin_objects_of_long_splats_and_drops_noise():
+    """A sparse hall's rope / pole made of elongated splats 0.11 m apart (each 0.12 m sigma along
+    it) has no neighbour within a fixed 0.1 m: the size-aware radius (2 sigma) keeps it and
+    the costmap blocks it; small noise splats scattered over the floor stay isolated."""
+    from stages.costmap.build import CostmapConfig, build_costmap, obstacle_classes
+
+    rng = np.random.default_rng(5)
+    floor = flat_floor(rng, 30_000, 0.0, size=4.0)
+    floor.means[:, :2] -= 2.0
+    k = 26
+    rope = GaussianScene.from_colors(np.column_stack([np.arange(k) * 0.11 - 1.375, np.zeros(k), np.full(k, 0.5)]),
+                                     np.tile([1.0, 0, 0, 0], (k, 1)), np.tile([0.12, 0.01, 0.01], (k, 1)),
+                                     np.full(k, 0.95), np.full((k, 3), 0.3))
+    m = 60
+    noise = GaussianScene.from_colors(np.column_stack([rng.uniform(-1.8, 1.8, (m, 2)) * [1, 0.4] + [0, 1.2],
+                                                       rng.uniform(0.2, 0.8, m)]), np.tile([1.0, 0, 0, 0], (m, 1)),
+                                      np.full((m, 3), 0.02), np.full(m, 0.9), np.full((m, 3), 0.8))
+    scene = concat(concat(floor, rope), noise)
+    is_rope = np.zeros(len(scene), bool)
+    is_rope[len(floor):len(floor) + k] = True
+    is_noise = np.zeros(len(scene), bool)
+    is_noise[len(floor) + k:] = True
+    fixed = CostmapConfig(resolution=0.05, outlier_sigmas=0.0)
+    for cfg, kept in ((fixed, 0), (CostmapConfig(resolution=0.05), k - 4)):  # each end's two have < 4
+        cand, iso, _ = obstacle_classes(scene, cfg)
+        assert cand[is_rope].sum() == kept and iso[is_noise].mean() > 0.9
+    for cfg, blocked in ((fixed, False), (CostmapConfig(resolution=0.05), True)):
+        layers = build_costmap(scene, Embodiment(), cfg, VoxelizeConfig())[0]
+        ij = np.floor((np.array([[0.0, 0.0], [0.7, 0.0], [-1.0, 0.0]]) - layers.origin) / layers.resolution).astype(int)
+        assert layers.raw[ij[:, 1], ij[:, 0]].all() == blocked
 
 
 def test_haze_is_not_an_obstacle_but_an_opaque_wall_is():

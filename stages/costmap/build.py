@@ -10,8 +10,9 @@ For an embodiment with radius r and body interval [h_min, h_max] above the floor
   low-opacity Gaussians in front of surfaces to explain view-dependent colour, and many of them
   together would reach tau_occ in open air. A surface is made of opaque Gaussians.
 - Isolated Gaussians (fewer than ``outlier_min_neighbours`` other non-floor centres within
-  ``outlier_radius``, an exact k-d tree count) are reconstruction noise hovering over sparse
-  floors, not objects. Everything else that reaches the body band is an obstacle.
+  their own radius, max(``outlier_radius``, ``outlier_sigmas`` x their largest sigma), an exact
+  k-d tree count) are reconstruction noise hovering over sparse floors, not objects. Everything
+  else that reaches the body band is an obstacle.
 - M_raw: a column is an obstacle when any voxel of it whose z-extent meets the body interval
   is occupied (A >= tau_occ) by the non-floor Gaussians. The body band is voxelized at a finer xy resolution
   (``raw_resolution``) than the stored map so obstacle boundaries are known to ~1 cm.
@@ -85,9 +86,20 @@ class CostmapConfig:
     """Largest half-thickness of the floor layer (2.5 local spreads, clipped to [min, max]), metres:
     anything whose centre is higher is a potential obstacle."""
     outlier_radius: float = 0.1
-    """Radius of the isolated-Gaussian test, metres (0 disables it)."""
+    """Smallest radius of the isolated-Gaussian test, metres (0 disables it)."""
+    outlier_sigmas: float = 2.0
+    """A Gaussian's own radius of the isolated test is max(outlier_radius, outlier_sigmas x its
+    largest standard deviation), at most outlier_radius_max: a sparse hall's thin objects (a
+    rope, a pole, a sign) are made of few elongated splats spaced about their own length apart, a
+    fixed 0.1 m finds none of their neighbours (0 keeps the fixed radius)."""
+    outlier_radius_max: float = 0.5
+    """Largest radius of the isolated test, metres."""
+    outlier_floor_clearance: float = 0.1
+    """Gaussians centred less than this above the floor layer's top keep the fixed outlier_radius,
+    metres: a trained floor's blurred texture is made of long streak splats lying a few
+    centimetres above it, which the size-aware radius would turn into obstacles."""
     outlier_min_neighbours: int = 4
-    """Non-floor Gaussians with fewer other centres within outlier_radius are noise, not obstacles."""
+    """Non-floor Gaussians with fewer other centres within their radius are noise, not obstacles."""
     min_obstacle_alpha: float = 0.25
     """Gaussians with a lower opacity are never obstacles (haze of trained scenes; 0 keeps all).
     At synthetic.realism.level=moderate (1 M Gaussians) haze alone puts about a third of the free
@@ -148,8 +160,9 @@ def supersample_factor(res: float, raw_res: float) -> int:
     return s if s % 2 == 1 else s + 1
 
 
-def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, dict]:
-    """[N] bool: Gaussians of the floor layer or below it (never obstacles), and a summary.
+def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, np.ndarray, dict]:
+    """[N] bool: Gaussians of the floor layer or below it (never obstacles), [N] the floor layer's
+    top under each Gaussian (metres), and a summary.
 
     The local floor height is the median height of the flat, horizontal Gaussians within
     ``floor_search`` of z = 0 in each ``floor_cell`` (3x3-cell median-filtered; 0 where none),
@@ -184,7 +197,7 @@ def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, d
             "floor_height_p5_p95_m": np.percentile(height[height != 0], [5, 95]).round(3).tolist()
             if (height != 0).any() else [0.0, 0.0],
             "floor_half_thickness_median_m": round(float(np.median(half)), 4)}
-    return mask, info
+    return mask, top, info
 
 
 def obstacle_candidates(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, dict]:
@@ -196,14 +209,18 @@ def obstacle_candidates(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.nd
 def obstacle_classes(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, np.ndarray, dict]:
     """([N] obstacle candidates, [N] isolated noise: opaque enough, not floor, too few neighbours;
     a summary)."""
-    floor, info = floor_layer(scene, cfg)
+    floor, top, info = floor_layer(scene, cfg)
     faint = scene.alphas < cfg.min_obstacle_alpha
     cand = ~floor & ~faint
     isolated = np.zeros(len(cand), bool)
     info["faint_dropped"] = int((faint & ~floor).sum())
     if cfg.outlier_radius > 0 and cand.sum() > cfg.outlier_min_neighbours:
         idx = np.nonzero(cand)[0]
-        isolated[idx] = isolated_points(scene.means[idx], cfg.outlier_radius, cfg.outlier_min_neighbours)
+        radius = np.clip(cfg.outlier_sigmas * scene.scales[idx].max(1), cfg.outlier_radius,
+                         max(cfg.outlier_radius, cfg.outlier_radius_max))
+        # near the floor, long splats are the floor's own streaks (trained floors' blurred texture)
+        radius[scene.means[idx, 2] - top[idx] < cfg.outlier_floor_clearance] = cfg.outlier_radius
+        isolated[idx] = isolated_points(scene.means[idx], radius, cfg.outlier_min_neighbours)
         cand &= ~isolated
         info["isolated_dropped"] = int(isolated.sum())
     return cand, isolated, info
@@ -254,16 +271,23 @@ def hidden_splats(scene: GaussianScene, noise: np.ndarray, layers: "CostmapLayer
     return idx[hit].astype(np.int64)
 
 
-def isolated_points(points: np.ndarray, radius: float, min_neighbours: int) -> np.ndarray:
-    """[N] bool: points with fewer than ``min_neighbours`` other points within ``radius`` (exact:
-    a k-d tree query of the min_neighbours + 1 nearest, the point itself included)."""
+def isolated_points(points: np.ndarray, radius, min_neighbours: int) -> np.ndarray:
+    """[N] bool: points with fewer than ``min_neighbours`` other points within ``radius`` (a scalar
+    or one per point; exact: a k-d tree query of the min_neighbours + 1 nearest within the
+    smallest radius, then a count within their own radius for the points that query left alone)."""
     from scipy.spatial import cKDTree
 
     pts = np.asarray(points, np.float64)
     if len(pts) == 0:
         return np.zeros(0, bool)
-    d, _ = cKDTree(pts).query(pts, k=min_neighbours + 1, distance_upper_bound=radius)
-    return ~np.isfinite(d.reshape(len(pts), -1)[:, -1])  # the farthest of the k is beyond the radius
+    radius = np.broadcast_to(np.asarray(radius, np.float64), (len(pts),))
+    tree = cKDTree(pts)
+    d, _ = tree.query(pts, k=min_neighbours + 1, distance_upper_bound=float(radius.min()))
+    alone = ~np.isfinite(d.reshape(len(pts), -1)[:, -1])  # the farthest of the k is beyond the radius
+    wider = np.flatnonzero(alone & (radius > radius.min()))
+    if len(wider):
+        alone[wider] = tree.query_ball_point(pts[wider], radius[wider], return_length=True) < min_neighbours + 1
+    return alone
 
 
 def map_extent(scene: GaussianScene, cfg: CostmapConfig) -> tuple[tuple[float, float], tuple[int, int]]:

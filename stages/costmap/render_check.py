@@ -281,17 +281,27 @@ def estimate_rates(costmap_blocked: np.ndarray, render_blocked: np.ndarray) -> d
 
 
 def check_costmap(scene, costmap, emb, cfg: RenderCheckConfig, xy: np.ndarray | None = None,
-                  backend: str = "auto") -> dict:
+                  backend: str = "auto", noise: np.ndarray | None = None) -> dict:
     """Compare a costmap with what the scene shows at sampled (or given) poses: the render check's
     rates, and the direct evidence's (``direct``: the same rates with "blocked" meaning an opaque
-    Gaussian centred in the body cylinder)."""
+    Gaussian centred in the body cylinder). With ``noise`` ([N] bool, the Gaussians the costmap
+    judged noise: `stages.costmap.build.obstacle_classes`), ``fn_noise_only`` counts the poses the
+    render blocks and the costmap accepts that the render would accept without those Gaussians:
+    the estimate's FN that is a disagreement about noise (floating blobs, blur), not about a
+    surface the costmap missed."""
     xy = sample_poses(costmap, cfg.poses, cfg.seed) if xy is None else xy
     floor = local_floor(scene, xy, emb, cfg, backend)
     vis = visible_clearance(scene, xy, emb, cfg, backend, floor)
     blocked_render = vis < emb.radius
     blocked_map = ~costmap.are_states_valid(xy)
     blocked_direct = direct_evidence(scene, xy, emb, cfg, floor) > 0
-    return {**estimate_rates(blocked_map, blocked_render), "visible_clearance": vis, "xy": xy, "floor": floor,
-            "direct": estimate_rates(blocked_map, blocked_direct),
-            "costmap_blocked_mask": blocked_map, "render_blocked_mask": blocked_render,
-            "direct_blocked_mask": blocked_direct}
+    out = {**estimate_rates(blocked_map, blocked_render), "visible_clearance": vis, "xy": xy, "floor": floor,
+           "direct": estimate_rates(blocked_map, blocked_direct),
+           "costmap_blocked_mask": blocked_map, "render_blocked_mask": blocked_render,
+           "direct_blocked_mask": blocked_direct}
+    if noise is not None:
+        fn = np.flatnonzero(blocked_render & ~blocked_map)
+        clean = visible_clearance(scene.subset(~np.asarray(noise, bool)), xy[fn], emb, cfg, backend, floor[fn]) if \
+            len(fn) else np.zeros(0)
+        out["fn_noise_only"] = int((clean >= emb.radius).sum())
+    return out
