@@ -119,8 +119,8 @@ class IngestConfig:
     whose files are all present."""
     store: str = "auto"
     """The canonical store: reference (the source's path and a checksum; the Gaussians are read
-    from the source by every stage: no second copy), copy (a compressed Zarr copy) or auto
-    (reference, except for formats slow to decode, SOG: ~6 s a read at 1.5 M Gaussians)."""
+    from the source by every stage: no second copy), copy (a compressed Zarr copy: for sources on
+    slow or remote storage) or auto (reference: the 1.5 M SOG room decodes in 1.6 s)."""
 
 
 @dataclass
@@ -136,11 +136,13 @@ class AssetConfig:
     linked under source/ with their own names and files.source_ply is null; a symbolic link where a
     hard link cannot be made), convert (source.ply in the INRIA layout whatever the format, for
     strict V1 readers: a compressed source's PLY is ~10x its bytes) or none."""
-    aligned_format: str = "ply"
+    aligned_format: str = "auto"
     """File of the aligned model: ply (aligned.ply, INRIA binary: what the V1 asset requires; 248
-    bytes a Gaussian at SH degree 3) or spz (aligned.spz, Niantic SPZ v4: 8-bit quantised attributes,
-    24-bit positions at 1/4096 m, ZSTD streams; 10.8x smaller than the PLY for the real fungi room).
-    The manifest's files.aligned names it either way; files.aligned_ply is null for spz."""
+    bytes a Gaussian at SH degree 3), spz (aligned.spz, Niantic SPZ v4: 8-bit quantised attributes,
+    24-bit positions at 1/4096 m, ZSTD streams; 10.8x smaller than the PLY for the real fungi room)
+    or auto (spz when the original is compressed: SPZ, SOG, .splat, SuperSplat PLY; ply otherwise,
+    so a PLY dataset's assets are strict V1). The manifest's files.aligned names it either way;
+    files.aligned_ply is null for spz, and NavArena's tools load either."""
     labels: str = "model_predicted"
     """labels.json from: model_predicted (the semantics stage's instances) | ground_truth (synthetic
     scenes) | none."""

@@ -65,7 +65,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("synthesize", synthesize.run, (), ("synthetic",), only_synthetic=True),
     Stage("ingest", ingest.run, ("synthesize",), ("ingest",), version="3"),
     Stage("voxelize", voxelize.run, ("ingest",), ("voxelize",), version="3", gpu=True, memory_gb=3.0,
-          storage=(("voxelize", "store_opacity", True),)),
+          storage=(("voxelize", "store_opacity", False),)),
     Stage("align", align.run, ("voxelize",), ("align",), version="4"),
     Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="4",
           inputs=costmap.hashed_inputs),

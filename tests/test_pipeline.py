@@ -96,9 +96,9 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
 
 
 def test_voxel_opacity_field_is_a_storage_key(tmp_path, make_cfg):
-    # voxelize.store_opacity=false drops 02_voxels/A; V (all any later stage reads) is the same, so
-    # voxelize alone re-runs and no later stage's hash changes; the default leaves every hash as
-    # it was before the key existed
+    # 02_voxels/A is kept only with voxelize.store_opacity=true; V (all any later stage reads) is
+    # the same, so voxelize alone re-runs and no later stage's hash changes; the default leaves
+    # every hash as it was before the key existed
     from omegaconf import OmegaConf
 
     from pipeline.graph import config_hashes
@@ -111,21 +111,22 @@ def test_voxel_opacity_field_is_a_storage_key(tmp_path, make_cfg):
     old._set_value({**{k: old[k] for k in old}, "voxelize": OmegaConf.create(vox)})
     assert "store_opacity" not in old.voxelize
     h, h_old = config_hashes(cfg), config_hashes(old)
-    h_off = config_hashes(make_cfg(tmp_path, "voxelize.store_opacity=false"))
+    h_on = config_hashes(make_cfg(tmp_path, "voxelize.store_opacity=true"))
     assert h == h_old
-    assert {k for k in h if h[k] != h_off[k]} == {"voxelize"}
+    assert {k for k in h if h[k] != h_on[k]} == {"voxelize"}
     s1 = execute(cfg)
     sid = s1["results"][0]["scene_id"]
     vox = tmp_path / "02_voxels" / f"{sid}.zarr"
     g = zarr.open_group(str(vox), mode="r")
-    v_before, a = np.asarray(g["V"][...]), np.asarray(g["A"][...])
-    a, tau = a * g.attrs["A_scale"], g.attrs["tau_occ"]  # V thresholds the exact A, stored rounded
-    assert v_before.any() and not (v_before & (a < tau - 0.5 / 255)).any() and v_before[a > tau + 0.5 / 255].all()
-    s2 = execute(make_cfg(tmp_path, "stages=[costmap]", "voxelize.store_opacity=false"))
+    v_before = np.asarray(g["V"][...])
+    assert "A" not in g and "A_scale" not in g.attrs and v_before.any()
+    s2 = execute(make_cfg(tmp_path, "stages=[costmap]", "voxelize.store_opacity=true"))
     assert statuses(s2) == {"synthesize": "cached", "ingest": "cached", "voxelize": "done", "align": "cached",
                             "costmap": "cached"}
     g = zarr.open_group(str(vox), mode="r")
-    assert "A" not in g and "A_scale" not in g.attrs and np.array_equal(np.asarray(g["V"][...]), v_before)
+    a, tau = np.asarray(g["A"][...]) * g.attrs["A_scale"], g.attrs["tau_occ"]  # V thresholds the exact A
+    assert np.array_equal(np.asarray(g["V"][...]), v_before)
+    assert not (v_before & (a < tau - 0.5 / 255)).any() and v_before[a > tau + 0.5 / 255].all()
 
 
 @pytest.mark.parametrize("cross_device", [False, True])

@@ -42,10 +42,10 @@ class VoxelizeConfig:
     """Voxels per x-block (bounds memory: 4 bytes each for the accumulator)."""
     device: str = "auto"
     """'cpu', 'cuda' or 'auto' (CUDA through torch when available)."""
-    store_opacity: bool = True
+    store_opacity: bool = False
     """Keep the opacity field A in 02_voxels beside V (uint8, for re-thresholding and inspection;
-    no stage reads it). False halves a sparse hall's voxel store; a storage key: changing it
-    re-runs voxelize alone."""
+    no stage reads it; 17 MB for the real hall, as much as its SPZ source). A storage key:
+    changing it re-runs voxelize alone."""
 
 
 @dataclass

@@ -15,7 +15,7 @@ import numpy as np
 from navcore.gaussians.formats import source_files, write_inria_ply, write_splat, write_spz
 from navcore.gaussians.formats.ply import is_inria_ply
 from navcore.instances import ground_truth_labels, load_instances, table_to_labels
-from navcore.io.asset_files import aligned_file
+from navcore.io.asset_files import COMPRESSED_SOURCES, aligned_file
 from navcore.io.stamps import build_time
 
 NORMALIZER_VERSION = "navarena-0.1"
@@ -61,6 +61,16 @@ def asset_labels(scene, cfg, catalog) -> list[dict] | None:
     raise ValueError(f"asset.labels={src!r}; choose model_predicted | ground_truth | none")
 
 
+def compressed_source(report: dict) -> bool:
+    """Whether the scene's original (the ingest report's source and format) is a compressed
+    format (SPZ, SOG, .splat, SuperSplat's PLY): its asset then keeps the aligned model as SPZ
+    under asset.aligned_format=auto, not as a PLY 6-13x the original."""
+    fmt = report["format"]
+    if fmt == "ply":  # either flavour: the header tells
+        return not is_inria_ply(Path(report["source"]))
+    return fmt in COMPRESSED_SOURCES
+
+
 def asset_source(tmp, mode: str, report: dict, catalog, scene) -> tuple[str | None, list[str]]:
     """The asset's copy of the original (asset.source; report: the ingest report): (files.source_ply,
     the files that hold the original, relative to the asset)."""
@@ -94,7 +104,7 @@ def run(scene, cfg, catalog) -> dict:
     labels_file = None
     report = catalog.dataset("ingest_report", scene).load()
     with out.writing() as tmp:
-        aligned_name = aligned_file(cfg.asset.aligned_format)
+        aligned_name = aligned_file(cfg.asset.aligned_format, compressed_source(report))
         files = {"source_ply": None, "aligned_ply": aligned_name if aligned_name.endswith(".ply") else None,
                  "aligned": aligned_name, "nav_map": "nav_map.pgm",
                  "nav_map_config": "nav_map.yaml", "nav_mask": "nav_mask.png", "labels": None, "structure": None,

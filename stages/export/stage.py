@@ -227,7 +227,8 @@ def run(scene, cfg, catalog) -> dict:
     if "navarena" in ecfg.formats:
         out += export_navarena(scene, catalog, ecfg, created)
     if "habitat" in ecfg.formats:
-        out += export_habitat(scene, catalog, aligned_file(cfg.asset.aligned_format))
+        m = catalog.dataset("asset", scene).read_json("manifest.json") or {}
+        out += export_habitat(scene, catalog, m.get("files", {}).get("aligned") or aligned_file(cfg.asset.aligned_format))
     return {"outputs": out}
 
 

@@ -10,10 +10,6 @@ from omegaconf import OmegaConf
 from navcore.gaussians.content import CONTENT_KEY, content_mask
 from navcore.gaussians.validate import read_validated
 
-# formats whose decoding costs seconds a read (SOG: WebP images): copied under store=auto, since
-# every later stage reads the scene again
-SLOW_TO_DECODE = ("sog",)
-
 
 def source_path(scene, catalog):
     """Where a scene's source file is (synthetic scenes: the synthesize stage's output)."""
@@ -32,7 +28,7 @@ def run(scene, cfg, catalog) -> dict:
     mask, content = content_mask(clean.means, icfg.content)
     clean.extras[CONTENT_KEY] = mask
     out = catalog.dataset("scene", scene)
-    ref = icfg.store == "reference" or (icfg.store == "auto" and fmt not in SLOW_TO_DECODE)
+    ref = icfg.store in ("reference", "auto")
     source = {"path": str(path), "format": fmt, "level": icfg.lod_level, "scale": icfg.scale,
               "limits": dataclasses.asdict(icfg.limits)} if ref else None
     out.save(clean, {"scene_id": scene.scene_id, "source": str(path), "format": fmt}, source)
