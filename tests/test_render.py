@@ -474,8 +474,9 @@ def test_ray_hit_depth_known_answers():
 
 
 def test_ray_hit_depth_numba_matches_the_torch_reference():
-    """The compiled kernel (angular cull, float64) and the brute-force PyTorch one (every Gaussian
-    against every ray) agree to rounding on a random scene of thin and round splats, groups sharing
+    """The compiled kernel (angular cull, float64), the brute-force PyTorch one (every Gaussian
+    against every ray) and PyTorch's culled pair lists (the CUDA path) agree to rounding on a
+    random scene of thin and round splats, groups sharing
     different subsets (an empty one too)."""
     from navcore.render.ray_hits import panorama_hit_depth_cpu, panorama_hit_depth_torch, ray_gaussians
 
@@ -491,7 +492,13 @@ def test_ray_hit_depth_numba_matches_the_torch_reference():
     offsets = np.array([0, n, n, n + 700, n + 1600])
     args = (g, centres, offsets, index, 72, 12, -0.7, 0.9, 0.0, 1.5)
     a = panorama_hit_depth_cpu(*args)
-    b = panorama_hit_depth_torch(*args, device="cpu")
+    b = panorama_hit_depth_torch(*args, device="cpu", cull=False)
     assert a.shape == (4, 2, 12, 72) and np.isinf(a[1]).all()
     assert 0.1 < np.isfinite(a).mean() < 0.9 and np.array_equal(np.isfinite(a), np.isfinite(b))
     assert np.allclose(a[np.isfinite(a)], b[np.isfinite(b)], atol=1e-9)
+    # the GPU path's pair lists (the cull, in PyTorch): all groups in one batch, or one group a
+    # batch in passes of 1,024 pairs, give the same
+    for kw in ({}, {"chunk": 1, "max_bins": 1}):
+        c = panorama_hit_depth_torch(*args, device="cpu", **kw)
+        assert np.array_equal(np.isfinite(c), np.isfinite(b)) and np.allclose(c[np.isfinite(c)], b[np.isfinite(b)],
+                                                                              atol=1e-9)

@@ -24,15 +24,15 @@ gsplat's opacity-aware extent, sqrt(2 ln(255 o)) largest sigmas, beyond which al
 the cull is exact. Centres come in groups that share a subset of the Gaussians (e.g. the heights of
 one robot pose and the Gaussians around it).
 
-Two implementations that agree to the bin: `panorama_hit_depth_cpu` (numba, parallel over groups,
-float64) and `panorama_hit_depth_torch` (PyTorch, every Gaussian of a group against every ray in
+Two implementations that agree to rounding: `panorama_hit_depth_cpu` (numba, parallel over groups,
+float64; its kernel in ray_hits_kernel.py, imported on first use so that the CUDA path needs no
+numba) and `panorama_hit_depth_torch` (PyTorch, every Gaussian of a group against every ray in
 chunks, for CUDA; on the CPU it is the independent reference the tests compare with).
 """
 from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
 ALPHA_MIN = 1.0 / 255.0
@@ -86,94 +86,25 @@ def panorama_hit_depth_cpu(g: dict, centres, offsets, index, n_az: int, n_el: in
     [G, C, 3], group k seeing the Gaussians index[offsets[k]:offsets[k + 1]] of g (`ray_gaussians`)."""
     centres, offsets, index, n_bins = _check(g, centres, offsets, index, n_az, n_el, el_min, el_max, near, far,
                                              bin_m, threshold)
+    import numba
+
+    from navcore.render.ray_hits_kernel import _panorama
+
     dirs = panorama_dirs(n_az, el_min, el_max, n_el)
     return _panorama(g["means"], g["rt"], g["inv_s"], g["opac"], g["radius"], centres, offsets, index, dirs,
                      el_min, (el_max - el_min) / n_el, near, far, bin_m, n_bins, math.log1p(-threshold),
                      numba.get_num_threads())
 
 
-@numba.njit(cache=True, fastmath=False)
-def _group(means, rt, inv_s, opac, radius, o, idx, dirs, el_min, d_el, near, far, bin_m, n_bins, log_t, acc, out):
-    n_el, n_az = dirs.shape[0], dirs.shape[1]
-    d_az = 2 * math.pi / n_az
-    acc[:] = 0.0
-    for i in idx:
-        mx, my, mz = means[i, 0] - o[0], means[i, 1] - o[1], means[i, 2] - o[2]
-        dist = math.sqrt(mx * mx + my * my + mz * mz)
-        r = radius[i]
-        if dist - r > far:
-            continue
-        if dist <= r:
-            e0, e1, a_lo, n_a = 0, n_el - 1, 0, n_az
-        else:
-            a = math.asin(r / dist)
-            ec = math.asin(mz / dist)
-            e0 = max(0, int(math.floor((ec - a - el_min) / d_el)))
-            e1 = min(n_el - 1, int(math.floor((ec + a - el_min) / d_el)))
-            if e0 > e1:
-                continue
-            if abs(ec) + a >= 0.5 * math.pi - 1e-9:
-                a_lo, n_a = 0, n_az
-            else:
-                half = math.asin(min(1.0, math.sin(a) / math.cos(ec)))
-                azc = math.atan2(my, mx)
-                a_lo = int(math.floor((azc - half) / d_az - 0.5))
-                n_a = min(n_az, int(math.floor((azc + half) / d_az - 0.5)) - a_lo + 2)
-        # m' = R^T m / s
-        lx = (rt[i, 0, 0] * mx + rt[i, 0, 1] * my + rt[i, 0, 2] * mz) * inv_s[i, 0]
-        ly = (rt[i, 1, 0] * mx + rt[i, 1, 1] * my + rt[i, 1, 2] * mz) * inv_s[i, 1]
-        lz = (rt[i, 2, 0] * mx + rt[i, 2, 1] * my + rt[i, 2, 2] * mz) * inv_s[i, 2]
-        op = opac[i]
-        for e in range(e0, e1 + 1):
-            for k in range(n_a):
-                j = (a_lo + k) % n_az
-                dx, dy, dz = dirs[e, j, 0], dirs[e, j, 1], dirs[e, j, 2]
-                px = (rt[i, 0, 0] * dx + rt[i, 0, 1] * dy + rt[i, 0, 2] * dz) * inv_s[i, 0]
-                py = (rt[i, 1, 0] * dx + rt[i, 1, 1] * dy + rt[i, 1, 2] * dz) * inv_s[i, 1]
-                pz = (rt[i, 2, 0] * dx + rt[i, 2, 1] * dy + rt[i, 2, 2] * dz) * inv_s[i, 2]
-                dd = px * px + py * py + pz * pz
-                t = (px * lx + py * ly + pz * lz) / dd
-                if t < near or t > far:
-                    continue
-                cx, cy, cz = ly * pz - lz * py, lz * px - lx * pz, lx * py - ly * px
-                alpha = op * math.exp(-0.5 * (cx * cx + cy * cy + cz * cz) / dd)
-                if alpha < ALPHA_MIN:
-                    continue
-                b = min(int(t / bin_m), n_bins - 1)
-                w = math.log1p(-min(alpha, ALPHA_MAX))
-                acc[e, j, b, 0] += w
-                acc[e, j, b, 1] += w * t
-    for e in range(n_el):
-        for j in range(n_az):
-            s = 0.0
-            for b in range(n_bins):
-                s += acc[e, j, b, 0]
-                if s <= log_t:
-                    out[e, j] = acc[e, j, b, 1] / acc[e, j, b, 0]
-                    break
-
-
-@numba.njit(parallel=True, cache=True)
-def _panorama(means, rt, inv_s, opac, radius, centres, offsets, index, dirs, el_min, d_el, near, far, bin_m, n_bins,
-              log_t, nth):
-    n_g, n_c = centres.shape[0], centres.shape[1]
-    n_el, n_az = dirs.shape[0], dirs.shape[1]
-    out = np.full((n_g, n_c, n_el, n_az), np.inf)
-    for w in numba.prange(nth):  # worker w takes groups w, w + nth, ... (groups cost unevenly)
-        acc = np.zeros((n_el, n_az, n_bins, 2))
-        for gi in range(w, n_g, nth):
-            idx = index[offsets[gi]:offsets[gi + 1]]
-            for c in range(n_c):
-                _group(means, rt, inv_s, opac, radius, centres[gi, c], idx, dirs, el_min, d_el, near, far, bin_m,
-                       n_bins, log_t, acc, out[gi, c])
-    return out
-
-
 def panorama_hit_depth_torch(g: dict, centres, offsets, index, n_az: int, n_el: int, el_min: float, el_max: float,
                              near: float, far: float, bin_m: float = 0.01, threshold: float = 0.5,
-                             device: str = "cuda", dtype=None, chunk: int = 4096) -> np.ndarray:
-    """The same as `panorama_hit_depth_cpu`, every Gaussian of a group against every ray in
-    chunks of ``chunk`` Gaussians (PyTorch; float32 on CUDA, float64 on the CPU by default)."""
+                             device: str = "cuda", dtype=None, cull: bool = True, chunk: int = 4096,
+                             max_bins: int = 1 << 27) -> np.ndarray:
+    """The same as `panorama_hit_depth_cpu` in PyTorch (float32 on CUDA, float64 on the CPU by
+    default). cull=True: each Gaussian against the rays of its cap's rectangle only (the CPU
+    kernel's rule, as (Gaussian, ray) pair lists, chunk x 1024 pairs a pass, as many groups at once
+    as max_bins depth bins hold); cull=False: every Gaussian of a group against every ray,
+    ``chunk`` Gaussians at a time (the brute-force reference the tests compare with)."""
     import torch
 
     centres, offsets, index, n_bins = _check(g, centres, offsets, index, n_az, n_el, el_min, el_max, near, far,
@@ -182,33 +113,74 @@ def panorama_hit_depth_torch(g: dict, centres, offsets, index, n_az: int, n_el: 
     tt = lambda a: torch.as_tensor(np.asarray(a), device=device, dtype=dtype)  # noqa: E731
     dirs = tt(panorama_dirs(n_az, el_min, el_max, n_el).reshape(-1, 3))  # [R, 3]
     n_r = len(dirs)
-    means, rt, inv_s, opac = tt(g["means"]), tt(g["rt"]), tt(g["inv_s"]), tt(g["opac"])
-    log_t = math.log1p(-threshold)
+    means, rt, inv_s, opac, radius = tt(g["means"]), tt(g["rt"]), tt(g["inv_s"]), tt(g["opac"]), tt(g["radius"])
     n_g, n_c = centres.shape[:2]
     out = np.full((n_g, n_c, n_r), np.inf)
     cen = tt(centres)
-    for gi in range(n_g):
-        idx = torch.as_tensor(index[offsets[gi]:offsets[gi + 1]], device=device)
-        acc = torch.zeros(n_c * n_r * n_bins, device=device, dtype=dtype)
+    per_group = n_c * n_r * n_bins
+    step = 1 if not cull else max(1, max_bins // per_group)
+    for g0 in range(0, n_g, step):
+        g1 = min(n_g, g0 + step)
+        acc = torch.zeros((g1 - g0) * per_group, device=device, dtype=dtype)
         acc_t = torch.zeros_like(acc)
-        for s in range(0, len(idx), chunk):
-            k = idx[s:s + chunk]
-            d_loc = torch.einsum("nij,rj->rni", rt[k], dirs) * inv_s[k][None]  # [R, n, 3]
+
+        def add(gauss, origin, slot, ray):  # hits of Gaussians on rays from origins, into bins of (slot, ray)
+            d_loc = torch.einsum("pij,pj->pi", rt[gauss], dirs[ray]) * inv_s[gauss]
+            m_loc = torch.einsum("pij,pj->pi", rt[gauss], means[gauss] - origin) * inv_s[gauss]
             dd = (d_loc * d_loc).sum(-1)
-            for c in range(n_c):
-                m_loc = torch.einsum("nij,nj->ni", rt[k], means[k] - cen[gi, c]) * inv_s[k]  # [n, 3]
-                t = (d_loc * m_loc[None]).sum(-1) / dd
-                d2 = torch.linalg.cross(m_loc[None].expand_as(d_loc), d_loc).square().sum(-1) / dd
-                alpha = opac[k][None] * torch.exp(-0.5 * d2)
-                ok = (alpha >= ALPHA_MIN) & (t >= near) & (t <= far)
-                b = torch.clamp((t / bin_m).floor(), max=n_bins - 1).long()
-                flat = (c * n_r + torch.arange(n_r, device=device)[:, None]) * n_bins + b
-                w = torch.log1p(-alpha[ok].clamp(max=ALPHA_MAX))
-                acc.index_add_(0, flat[ok], w)
-                acc_t.index_add_(0, flat[ok], w * t[ok])
-        acc, acc_t = acc.view(n_c, n_r, n_bins), acc_t.view(n_c, n_r, n_bins)
-        cum = acc.cumsum(-1) <= log_t
+            t = (d_loc * m_loc).sum(-1) / dd
+            alpha = opac[gauss] * torch.exp(-0.5 * torch.linalg.cross(m_loc, d_loc).square().sum(-1) / dd)
+            ok = (alpha >= ALPHA_MIN) & (t >= near) & (t <= far)
+            b = torch.clamp((t[ok] / bin_m).floor(), max=n_bins - 1).long()
+            flat = (slot[ok] * n_r + ray[ok]) * n_bins + b
+            w = torch.log1p(-alpha[ok].clamp(max=ALPHA_MAX))
+            acc.index_add_(0, flat, w)
+            acc_t.index_add_(0, flat, w * t[ok])
+
+        idx = torch.as_tensor(index[offsets[g0]:offsets[g1]], device=device)
+        grp = torch.as_tensor(np.repeat(np.arange(g1 - g0), np.diff(offsets[g0:g1 + 1])), device=device)
+        if not cull:
+            rays = torch.arange(n_r, device=device)
+            for s in range(0, len(idx), chunk):
+                for c in range(n_c):
+                    gg, rr = torch.meshgrid(idx[s:s + chunk], rays, indexing="ij")
+                    slot = torch.full((gg.numel(),), c, device=device)
+                    add(gg.reshape(-1), cen[g0, c][None], slot, rr.reshape(-1))
+        elif len(idx):
+            # each (centre, Gaussian)'s rectangle of the grid, as in the CPU kernel; cells [C, n]
+            org = cen[g0:g1][grp].transpose(0, 1)  # [C, n, 3] the centre each cell's rays leave
+            m = means[idx][None] - org
+            dist = m.norm(dim=-1)
+            r = radius[idx][None].expand_as(dist)
+            inside = dist <= r
+            a = torch.asin(torch.clamp(r / dist.clamp(min=1e-12), max=1.0))
+            ec = torch.asin(torch.clamp(m[..., 2] / dist.clamp(min=1e-12), -1.0, 1.0))
+            d_el = (el_max - el_min) / n_el
+            e0 = torch.where(inside, 0, torch.floor((ec - a - el_min) / d_el).clamp(min=0).long())
+            e1 = torch.where(inside, n_el - 1, torch.floor((ec + a - el_min) / d_el).clamp(max=n_el - 1).long())
+            full = inside | (ec.abs() + a >= 0.5 * math.pi - 1e-9)
+            half = torch.asin(torch.clamp(torch.sin(a) / torch.cos(ec).clamp(min=1e-12), max=1.0))
+            azc = torch.atan2(m[..., 1], m[..., 0])
+            d_az = 2 * math.pi / n_az
+            a_lo = torch.where(full, 0, torch.floor((azc - half) / d_az - 0.5).long()).reshape(-1)
+            n_a = torch.where(full, n_az, torch.clamp(torch.floor((azc + half) / d_az - 0.5).long()
+                                                      - torch.floor((azc - half) / d_az - 0.5).long() + 2,
+                                                      max=n_az)).reshape(-1)
+            count = (torch.clamp(e1 - e0 + 1, min=0) * (dist - r <= far)).reshape(-1) * n_a
+            e0 = e0.reshape(-1)
+            starts = torch.cumsum(count, 0) - count
+            total, n = int(count.sum()), len(idx)
+            for s in range(0, total, max(1, chunk * 1024)):
+                q = torch.arange(s, min(total, s + chunk * 1024), device=device)
+                cell = torch.searchsorted(starts, q, right=True) - 1
+                local = q - starts[cell]
+                na = n_a[cell]
+                ray = (e0[cell] + local // na) * n_az + torch.remainder(a_lo[cell] + local % na, n_az)
+                c, i = cell // n, cell % n
+                add(idx[i], org[c, i], grp[i] * n_c + c, ray)
+        acc, acc_t = acc.view(g1 - g0, n_c, n_r, n_bins), acc_t.view(g1 - g0, n_c, n_r, n_bins)
+        cum = acc.cumsum(-1) <= math.log1p(-threshold)
         b = cum.to(torch.uint8).argmax(-1, keepdim=True)
         depth = (acc_t.gather(-1, b) / acc.gather(-1, b).clamp(max=-1e-300 if dtype == torch.float64 else -1e-30))[..., 0]
-        out[gi] = torch.where(cum.any(-1), depth, torch.full((), float("inf"), device=device, dtype=dtype)).cpu().numpy()
+        out[g0:g1] = torch.where(cum.any(-1), depth, torch.full((), float("inf"), device=device, dtype=dtype)).cpu().numpy()
     return out.reshape(n_g, n_c, n_el, n_az)

@@ -334,11 +334,19 @@ def support_mask(scene: GaussianScene, origin, shape, cfg: CostmapConfig, vcfg: 
     keep_lab = np.nonzero(counts >= cfg.min_cluster_fraction * counts.max())[0]
     kept = idx[np.isin(labels, keep_lab)]
     info.update(clusters=int(len(counts)), kept_clusters=int(len(keep_lab)), dropped_voxels=int(len(idx) - len(kept)))
-    cells = np.unique(kept[:, :2], axis=0)  # (ix, iy) ground projection
+    ground = np.zeros(nxy, bool)
+    ground[kept[:, 0], kept[:, 1]] = True
+    cells = np.argwhere(ground)  # (ix, iy) ground projection, lexicographic
     pts = (cells + 0.5) * res  # metres from the map origin
     mc = np.minimum((pts / cfg.resolution).astype(np.int64), [shape[1] - 1, shape[0] - 1])
     sup[mc[:, 1], mc[:, 0]] = True
-    if len(cells) >= 3:
+    # the alpha shape of the projection's edge cells (those with a 4-neighbour outside it): a
+    # Delaunay triangle of all cells whose vertices are edge cells is one of the edge cells'
+    # (removing points keeps a triangle's empty circle empty), and the triangles with an inner
+    # vertex lie among cells already set; 25 k triangles instead of 932 k for the real hall
+    edge = ground & ~ndimage.binary_erosion(ground, structure=[[0, 1, 0], [1, 1, 1], [0, 1, 0]], border_value=0)
+    pts = (np.argwhere(edge) + 0.5) * res
+    if len(pts) >= 3:
         tri = Delaunay(pts)
         p = pts[tri.simplices]  # [T, 3, 2]
         a = np.linalg.norm(p[:, 1] - p[:, 2], axis=1)

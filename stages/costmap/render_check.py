@@ -117,10 +117,15 @@ def hit_backend(backend: str = "auto") -> str:
     return backend
 
 
-def _hit_depth(backend: str, *args) -> np.ndarray:
-    from navcore.render.ray_hits import panorama_hit_depth_cpu, panorama_hit_depth_torch
+def _hit_depth(backend: str, scene, centres, offsets, index, *args) -> np.ndarray:
+    """`panorama_hit_depth_*` on the rows of the scene that index uses (their arrays built and,
+    for CUDA, moved once, not the whole scene's)."""
+    from navcore.render.ray_hits import panorama_hit_depth_cpu, panorama_hit_depth_torch, ray_gaussians
 
-    return panorama_hit_depth_cpu(*args) if hit_backend(backend) == "cpu" else panorama_hit_depth_torch(*args)
+    rows, local = np.unique(index, return_inverse=True)
+    g = ray_gaussians(scene.subset(rows))
+    f = panorama_hit_depth_cpu if hit_backend(backend) == "cpu" else panorama_hit_depth_torch
+    return f(g, centres, offsets, local.reshape(-1).astype(np.int64), *args)
 
 
 VERIFY = 32  # low hits whose floor is looked at per pose and round
@@ -136,7 +141,6 @@ def local_floor(scene, xy: np.ndarray, emb, cfg: RenderCheckConfig, backend: str
     with none. Trained floors are uneven and thick (a hall's floor rises and sinks 10 cm where its
     splats pile up); the body band is measured from the floor under the robot, as the costmap's
     floor layer follows its local floor."""
-    from navcore.render.ray_hits import ray_gaussians
 
     xy = np.asarray(xy, np.float64).reshape(-1, 2)
     pts = np.concatenate([r * np.c_[np.cos(2 * np.pi * np.arange(n) / n), np.sin(2 * np.pi * np.arange(n) / n)]
@@ -145,7 +149,7 @@ def local_floor(scene, xy: np.ndarray, emb, cfg: RenderCheckConfig, backend: str
     offsets, index = local_gaussians(scene, xy, FLOOR_RINGS[-1][0] + 0.3, -2 * cfg.floor_search, top,
                                      cfg.min_splat_alpha)
     centres = np.concatenate([xy[:, None, :] + pts[None], np.full((len(xy), len(pts), 1), top)], 2)
-    depth = _hit_depth(backend, ray_gaussians(scene), centres, offsets, index, 1, 1, -np.pi / 2, -np.pi / 2 + 1e-3,
+    depth = _hit_depth(backend, scene, centres, offsets, index, 1, 1, -np.pi / 2, -np.pi / 2 + 1e-3,
                        0.0, top + 2 * cfg.floor_search, cfg.bin_m, cfg.min_alpha)[:, :, 0, 0]
     z = top - depth  # -inf where nothing is hit
     out = np.zeros((len(xy), 3))
@@ -180,7 +184,7 @@ def visible_clearance(scene, xy: np.ndarray, emb, cfg: RenderCheckConfig, backen
         backend: auto, cpu (numba) or cuda (PyTorch).
         floor: [P, 3] the floor plane around each pose (None: `local_floor`).
     """
-    from navcore.render.ray_hits import panorama_dirs, ray_gaussians
+    from navcore.render.ray_hits import panorama_dirs
 
     xy = np.asarray(xy, np.float64).reshape(-1, 2)
     floor = local_floor(scene, xy, emb, cfg, backend) if floor is None else np.asarray(floor, np.float64)
@@ -191,7 +195,7 @@ def visible_clearance(scene, xy: np.ndarray, emb, cfg: RenderCheckConfig, backen
     el = np.radians(cfg.max_elevation_deg)
     n_el = cfg.elevations()
     far = cfg.crop_m / np.cos(el) + cfg.bin_m
-    depth = _hit_depth(backend, ray_gaussians(scene), centres, offsets, index, cfg.azimuths, n_el, -el, el, 0.0, far,
+    depth = _hit_depth(backend, scene, centres, offsets, index, cfg.azimuths, n_el, -el, el, 0.0, far,
                        cfg.bin_m, cfg.min_alpha)
     dirs = panorama_dirs(cfg.azimuths, -el, el, n_el)  # [E, A, 3]
     hit = np.isfinite(depth)
@@ -207,7 +211,6 @@ def visible_clearance(scene, xy: np.ndarray, emb, cfg: RenderCheckConfig, backen
     # at each (vertical ray at the hit, within floor_step of the plane) decides, nearest first
     maybe = hit & (zf >= lo - cfg.floor_step) & ~sure & (zf <= emb.h_max) & (horiz < np.minimum(vis, emb.radius + 0.05)[:, None])
     todo = [np.flatnonzero(m)[np.argsort(horiz[i, m], kind="stable")] for i, m in enumerate(maybe)]
-    g = ray_gaussians(scene)
     offsets, index = local_gaussians(scene, xy, emb.radius + 0.4, -2 * cfg.floor_search, emb.h_max + cfg.floor_search,
                                      cfg.min_splat_alpha)
     for r in range(0, max((len(c) for c in todo), default=0), VERIFY):
@@ -218,7 +221,7 @@ def visible_clearance(scene, xy: np.ndarray, emb, cfg: RenderCheckConfig, backen
         p = np.take_along_axis(pts[rows], batch[..., None], 1)  # [k, VERIFY, 3] hit points
         sub_off = np.concatenate([[0], np.cumsum(np.diff(offsets)[rows])])
         sub_idx = np.concatenate([index[offsets[i]:offsets[i + 1]] for i in rows])
-        dv = _hit_depth(backend, g, p, sub_off, sub_idx, 1, 1, -np.pi / 2, -np.pi / 2 + 1e-3, 0.0,
+        dv = _hit_depth(backend, scene, p, sub_off, sub_idx, 1, 1, -np.pi / 2, -np.pi / 2 + 1e-3, 0.0,
                         emb.h_max + 3 * cfg.floor_search, cfg.bin_m, cfg.min_alpha)[:, :, 0, 0]
         plane = floor_height(floor[rows], xy[rows], p[..., :2])
         under = np.where(np.isfinite(dv), p[..., 2] - dv, plane)  # no floor below: a hole, the plane holds
