@@ -160,10 +160,28 @@ def test_asset_refers_to_a_compressed_original_without_copying_it(tmp_path, real
         asset_source(out, "copy", {"source": str(spz)}, None, None)
 
 
+def test_compressed_sources_keep_the_aligned_model_as_spz_by_default():
+    """asset.aligned_format=auto: SPZ for compressed originals (SPZ, SOG, .splat, SuperSplat's
+    PLY: the PLY flavour read from the header), an INRIA PLY otherwise."""
+    from navcore.io.asset_files import aligned_file
+    from stages.asset.stage import compressed_source
+
+    real = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+    for fmt, src, want in (("spz", "x.spz", True), ("sog", "x/lod-meta.json", True), ("splat", "x.splat", True),
+                           ("inria_ply", "x.ply", False), ("npy_folder", "x", False)):
+        assert compressed_source({"format": fmt, "source": src}) == want
+        assert aligned_file("auto", want) == ("aligned.spz" if want else "aligned.ply")
+    if real.is_dir():
+        assert compressed_source({"format": "ply", "source": str(real / "supersplat_guitar.compressed.ply")})
+        assert not compressed_source({"format": "ply", "source": str(real / "inria_sh0_donut.ply")})
+    assert aligned_file("ply", True) == "aligned.ply" and aligned_file("spz", False) == "aligned.spz"
+
+
 def test_asset_aligned_model_as_spz(tmp_path, make_cfg):
     # asset.aligned_format=spz: the aligned model as a Niantic SPZ v4 (8-bit attributes, 24-bit fixed
     # point positions at 1/4096 m) in place of the V1 PLY, named by the manifest
     from navcore.gaussians.formats import read_gaussians
+    from navcore.io.asset_files import aligned_model
     from navcore.io.datasets import AlignedGaussianDataset, GaussianDataset
 
     s = execute(make_cfg(tmp_path, "stages=[asset]", "asset.aligned_format=spz"))
@@ -171,7 +189,7 @@ def test_asset_aligned_model_as_spz(tmp_path, make_cfg):
     asset = next((tmp_path / "09_assets").glob(f"*/{sid}"))
     man = json.loads((asset / "manifest.json").read_text())
     assert man["files"]["aligned"] == "aligned.spz" and man["files"]["aligned_ply"] is None
-    assert not (asset / "aligned.ply").exists()
+    assert not (asset / "aligned.ply").exists() and aligned_model(asset) == asset / "aligned.spz"
     aligned, _ = AlignedGaussianDataset(tmp_path / "01_scenes" / sid / "alignment.json",
                                         GaussianDataset(tmp_path / "01_scenes" / sid / "gaussians.zarr")).load()
     spz = read_gaussians(asset / "aligned.spz")

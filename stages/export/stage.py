@@ -20,7 +20,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from navcore.io.asset_files import aligned_file
+from navcore.io.asset_files import aligned_model
 from navcore.io.episode_schema import TRAJECTORY_WRITE
 
 FORMAT_VERSION = "1.0"
@@ -227,8 +227,7 @@ def run(scene, cfg, catalog) -> dict:
     if "navarena" in ecfg.formats:
         out += export_navarena(scene, catalog, ecfg, created)
     if "habitat" in ecfg.formats:
-        m = catalog.dataset("asset", scene).read_json("manifest.json") or {}
-        out += export_habitat(scene, catalog, m.get("files", {}).get("aligned") or aligned_file(cfg.asset.aligned_format))
+        out += export_habitat(scene, catalog, aligned_model(catalog.path("asset", scene)).name)
     return {"outputs": out}
 
 
