@@ -9,7 +9,7 @@ ARGS ?=
 CUDA ?=
 WHEELS ?=
 
-.PHONY: setup-gpu test-gpu bench-gpu bench-multi-gpu setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -44,6 +44,15 @@ REAL_INDOOR ?= ../shared/data/real_indoor/fungi_room_lod3.spz ../shared/data/rea
 bench-multi-gpu:
 	$(BIN)/python -m benchmarks.multi_gpu --real $(REAL_INDOOR) --out data/08_reports $(ARGS)
 	$(BIN)/python -m benchmarks.multi_gpu --markdown --out data/08_reports
+
+# the render check's per-ray hits with every backend here (numba; PyTorch on CUDA when present)
+# at bench-real's poses (make bench-real first: its data root gives the poses and alignments)
+bench-render-check: $(STAMP)
+	$(BIN)/python -m benchmarks.render_check_gpu prepare --data data --out data/08_reports/render_check_poses
+	$(BIN)/python -m benchmarks.render_check_gpu run data/08_reports/render_check_poses \
+		--source fungi_room=$(word 1,$(REAL_INDOOR)) --source wangsha_hall=$(word 2,$(REAL_INDOOR)) \
+		--out data/08_reports/render_check_gpu.json $(ARGS)
+	$(BIN)/python -m benchmarks.render_check_gpu compare data/08_reports/render_check_gpu.json
 
 dataset: $(STAMP)
 	$(BIN)/python -m pipeline $(ARGS)
