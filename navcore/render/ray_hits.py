@@ -92,8 +92,8 @@ def panorama_hit_depth_cpu(g: dict, centres, offsets, index, n_az: int, n_el: in
 
     dirs = panorama_dirs(n_az, el_min, el_max, n_el)
     return _panorama(g["means"], g["rt"], g["inv_s"], g["opac"], g["radius"], centres, offsets, index, dirs,
-                     el_min, (el_max - el_min) / n_el, near, far, bin_m, n_bins, math.log1p(-threshold),
-                     numba.get_num_threads())
+                     el_min, (el_max - el_min) / n_el, near, far, bin_m, n_bins, math.log1p(-threshold), ALPHA_MIN,
+                     ALPHA_MAX, numba.get_num_threads())
 
 
 def panorama_hit_depth_torch(g: dict, centres, offsets, index, n_az: int, n_el: int, el_min: float, el_max: float,

@@ -9,11 +9,10 @@ import math
 import numba
 import numpy as np
 
-from navcore.render.ray_hits import ALPHA_MAX, ALPHA_MIN
-
 
 @numba.njit(cache=True, fastmath=False)
-def _group(means, rt, inv_s, opac, radius, o, idx, dirs, el_min, d_el, near, far, bin_m, n_bins, log_t, acc, out):
+def _group(means, rt, inv_s, opac, radius, o, idx, dirs, el_min, d_el, near, far, bin_m, n_bins, log_t, alpha_min,
+           alpha_max, acc, out):
     n_el, n_az = dirs.shape[0], dirs.shape[1]
     d_az = 2 * math.pi / n_az
     acc[:] = 0.0
@@ -57,10 +56,10 @@ def _group(means, rt, inv_s, opac, radius, o, idx, dirs, el_min, d_el, near, far
                     continue
                 cx, cy, cz = ly * pz - lz * py, lz * px - lx * pz, lx * py - ly * px
                 alpha = op * math.exp(-0.5 * (cx * cx + cy * cy + cz * cz) / dd)
-                if alpha < ALPHA_MIN:
+                if alpha < alpha_min:
                     continue
                 b = min(int(t / bin_m), n_bins - 1)
-                w = math.log1p(-min(alpha, ALPHA_MAX))
+                w = math.log1p(-min(alpha, alpha_max))
                 acc[e, j, b, 0] += w
                 acc[e, j, b, 1] += w * t
     for e in range(n_el):
@@ -75,7 +74,7 @@ def _group(means, rt, inv_s, opac, radius, o, idx, dirs, el_min, d_el, near, far
 
 @numba.njit(parallel=True, cache=True)
 def _panorama(means, rt, inv_s, opac, radius, centres, offsets, index, dirs, el_min, d_el, near, far, bin_m, n_bins,
-              log_t, nth):
+              log_t, alpha_min, alpha_max, nth):
     n_g, n_c = centres.shape[0], centres.shape[1]
     n_el, n_az = dirs.shape[0], dirs.shape[1]
     out = np.full((n_g, n_c, n_el, n_az), np.inf)
@@ -85,5 +84,5 @@ def _panorama(means, rt, inv_s, opac, radius, centres, offsets, index, dirs, el_
             idx = index[offsets[gi]:offsets[gi + 1]]
             for c in range(n_c):
                 _group(means, rt, inv_s, opac, radius, centres[gi, c], idx, dirs, el_min, d_el, near, far, bin_m,
-                       n_bins, log_t, acc, out[gi, c])
+                       n_bins, log_t, alpha_min, alpha_max, acc, out[gi, c])
     return out

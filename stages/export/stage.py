@@ -227,7 +227,7 @@ def run(scene, cfg, catalog) -> dict:
     if "navarena" in ecfg.formats:
         out += export_navarena(scene, catalog, ecfg, created)
     if "habitat" in ecfg.formats:
-        out += export_habitat(scene, catalog, aligned_model(catalog.path("asset", scene)).name)
+        out += export_habitat(scene, catalog, aligned_model(catalog.dataset("asset", scene).path).name)
     return {"outputs": out}
 
 
