@@ -439,3 +439,33 @@ def test_floor_is_the_mirror_plane_of_a_faded_glossy_floor(seed):
                       timing=False)["res"]["0.05"]
         rates[name] = (r["fp_state"] / max(r["neg_state"], 1), r["fn_state"] / max(r["pos_state"], 1))
     assert abs(rates["glossy"][0] - rates["clean"][0]) <= 0.01 and abs(rates["glossy"][1] - rates["clean"][1]) <= 0.01
+
+
+def test_blur_and_hole_regions_are_injected_where_their_truth_says(tmp_path):
+    """synthetic.realism blur_regions / hole_regions: no Gaussian below 2.5 m inside a hole region,
+    the blurred region's Gaussians isotropic and at least 3x the scene's median size, nothing
+    outside the regions touched, the layout unchanged, and the regions written as ground truth."""
+    import json
+
+    from stages.synthesize.generate import write_synthetic
+
+    base = realistic(40, 40_000, level="none")
+    sc = realistic(40, 40_000, level="none", blur_regions=1, hole_regions=1, defect_radius_m=0.7)
+    assert base.layout.rooms == sc.layout.rooms and [d["kind"] for d in sc.defects] == ["blur", "hole"]
+    canon = lambda g: (g.means.astype(float) - sc.transform[:3, 3]) @ sc.transform[:3, :3]  # noqa: E731
+    m0 = canon(base.gaussians)
+    hole, blur = (d for d in sorted(sc.defects, key=lambda d: d["kind"] != "hole"))
+    rooms = np.asarray(sc.layout.rooms)
+    within = lambda d: (np.hypot(*(m0[:, :2] - d["center"]).T) < d["radius"]) & (m0[:, 2] < 2.5)  # noqa: E731
+    for d in sc.defects:
+        assert any(x0 <= d["center"][0] <= x1 and y0 <= d["center"][1] <= y1 for x0, y0, x1, y1 in rooms)
+        assert within(d).sum() > 100
+    kept = ~within(hole)  # sc's Gaussians are base's kept ones, in order
+    assert len(sc.gaussians) == kept.sum() and np.allclose(canon(sc.gaussians), m0[kept], atol=1e-4)
+    blurred = within(blur)[kept]
+    want = np.minimum(3 * base.gaussians.scales[kept][blurred].max(1), 0.4)
+    assert np.allclose(sc.gaussians.scales[blurred], want[:, None], rtol=1e-5)
+    assert np.array_equal(sc.gaussians.log_scales[~blurred], base.gaussians.log_scales[kept][~blurred])
+    write_synthetic(tmp_path, sc, "defects")
+    truth = json.loads(next(tmp_path.rglob("defects.json")).read_text())
+    assert truth["frame"] == "canonical" and truth["regions"] == sc.defects

@@ -55,6 +55,7 @@ class SyntheticScene:
     layout: Layout
     transform: np.ndarray  # [4, 4] canonical -> source
     cameras: list[dict]
+    defects: list[dict] = field(default_factory=list)  # injected blur / hole regions (canonical frame)
 
 
 def random_rigid_transform(rng: np.random.Generator, max_tilt_deg: float, max_offset_m: float) -> np.ndarray:
@@ -151,7 +152,7 @@ def generate_scene(seed: int, cfg: SyntheticConfig) -> SyntheticScene:
                       (all_inst == 0) & (np.abs(all_means[:, 2]) < 0.01),
                       np.array([c[:3, 3] for c in _capture_path(lay, cfg.camera_height_m, np.random.default_rng(0))]),
                       real, rrng, np.asarray(lay.rooms))
-    all_inst = g["inst"]
+    all_inst, defects = g["inst"], g["defects"]
     canonical = GaussianScene.from_colors(g["means"], g["quats"], g["scales"], g["alphas"], g["rgb"])
     if cfg.sh_degree > 0:
         k = (cfg.sh_degree + 1) ** 2
@@ -164,7 +165,7 @@ def generate_scene(seed: int, cfg: SyntheticConfig) -> SyntheticScene:
     transform[:3, 3] = up_rot @ transform[:3, 3]
     cams = [transform @ c for c in _capture_path(lay, cfg.camera_height_m, rng)]
     cameras = [{"position": c[:3, 3].tolist(), "quat_wxyz": rotmat_to_quat(c[:3, :3]).tolist()} for c in cams]
-    return SyntheticScene(canonical.transformed(transform), all_inst, lay, transform, cameras)
+    return SyntheticScene(canonical.transformed(transform), all_inst, lay, transform, cameras, defects)
 
 
 def object_records(layout: Layout) -> list[dict]:
@@ -200,6 +201,8 @@ def write_synthetic(out: FolderWriter | str | Path, s: SyntheticScene, name: str
                                     "height": 480, "hfov_deg": 90.0, "poses": s.cameras}, indent=None)
     out.json(f"{gt}/floor.json", {"frame": "canonical", "rooms": s.layout.rooms, "doors": s.layout.doors,
                                   "wall_height": s.layout.wall_height, "name": name})
+    if s.defects:  # injected reconstruction defects (synthetic.realism blur_regions / hole_regions)
+        out.json(f"{gt}/defects.json", {"frame": "canonical", "regions": s.defects})
 
 
 def load_ground_truth(src_dir: str | Path) -> dict:

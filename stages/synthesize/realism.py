@@ -11,7 +11,12 @@ measured on what real scenes look like (each a knob; ``level`` sets them all at 
 - floor noise: floor Gaussians thick (less flat), scattered in height and slightly tilted in patches;
 - haze: large low-opacity Gaussians hugging surfaces;
 - sparse coverage: surfaces thinned with their distance from the capture path;
-- up axis: the scene's up direction before the random tilt (+-x, +-y, +-z; "random" from the seed).
+- up axis: the scene's up direction before the random tilt (+-x, +-y, +-z; "random" from the seed);
+- defects (for screening): ``blur_regions`` discs of ``defect_radius_m`` inside rooms whose
+  Gaussians (up to 2.5 m) are blurred: 3x their largest scale, isotropic (at most 0.4 m), 70 % of
+  the region's mean colour, as a fit leaves a place few views saw; ``hole_regions`` discs whose
+  Gaussians are removed, floor included (an incomplete reconstruction). The regions are returned
+  as ground truth (``defects``: kind, canonical centre, radius).
 Levels (``none`` / ``moderate`` / ``heavy``) are the presets in LEVELS; a knob set explicitly wins.
 """
 from __future__ import annotations
@@ -62,6 +67,14 @@ class RealismConfig:
     exp(-(d - this) / this); 0 keeps everything."""
     up_axis: str | None = None
     """Up direction of the written scene before the random tilt: +x, -x, +y, -y, +z, -z or random."""
+    blur_regions: int = 0
+    """Blurred regions (discs of defect_radius_m inside rooms, up to 2.5 m high): their Gaussians
+    grow to 3x their largest scale, isotropic (at most 0.4 m), and take 70 % of the region's mean
+    colour."""
+    hole_regions: int = 0
+    """Regions whose Gaussians are removed, floor included (incomplete reconstruction)."""
+    defect_radius_m: float = 0.8
+    """Radius of the blurred and hole regions, metres."""
 
     def resolved(self) -> "RealismConfig":
         """A copy with every None knob taken from the level's preset."""
@@ -163,7 +176,36 @@ def add_artefacts(g: dict, floor_mask: np.ndarray, cams_xyz: np.ndarray, cfg: Re
         g["alphas"] = np.concatenate([g["alphas"], a])
         g["rgb"] = np.concatenate([g["rgb"], c])
         g["inst"] = np.concatenate([g["inst"], np.full(len(m), -1, np.int32)])
+    g["defects"] = _defects(g, cfg, rng, rooms) if (cfg.blur_regions or cfg.hole_regions) else []
     return g
+
+
+DEFECT_TOP_M = 2.5  # the defect regions reach this high
+
+
+def _defects(g: dict, cfg: RealismConfig, rng: np.random.Generator, rooms: np.ndarray | None) -> list[dict]:
+    """Blur and remove Gaussians in discs inside the rooms (in place); the regions' ground truth."""
+    if rooms is None or not len(rooms):
+        raise ValueError("synthetic.realism blur_regions / hole_regions need the layout's rooms")
+    rooms = np.asarray(rooms, np.float64)
+    r = cfg.defect_radius_m
+    area = np.maximum((rooms[:, 2] - rooms[:, 0]) * (rooms[:, 3] - rooms[:, 1]), 1e-9)
+    out, drop = [], np.zeros(len(g["means"]), bool)
+    for kind in ["blur"] * cfg.blur_regions + ["hole"] * cfg.hole_regions:
+        box = rooms[rng.choice(len(rooms), p=area / area.sum())]
+        lo, hi = box[:2] + np.minimum(r, (box[2:] - box[:2]) / 2), box[2:] - np.minimum(r, (box[2:] - box[:2]) / 2)
+        c = rng.uniform(lo, np.maximum(hi, lo))
+        inside = (np.hypot(*(g["means"][:, :2] - c).T) < r) & (g["means"][:, 2] < DEFECT_TOP_M)
+        if kind == "hole":
+            drop |= inside
+        elif inside.any():
+            big = np.minimum(3.0 * g["scales"][inside].max(1), 0.4)
+            g["scales"][inside] = big[:, None]
+            g["rgb"][inside] = 0.3 * g["rgb"][inside] + 0.7 * g["rgb"][inside].mean(0)
+        out.append({"kind": kind, "center": [float(c[0]), float(c[1])], "radius": float(r)})
+    for k in ("means", "quats", "scales", "alphas", "rgb", "inst"):
+        g[k] = g[k][~drop]
+    return out
 
 
 def _mirrored(g: dict, idx: np.ndarray, axis: int, plane: float, alpha_factor: float) -> tuple:
