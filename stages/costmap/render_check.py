@@ -2,26 +2,27 @@
 the costmap says where it may go; on a real scene they must agree.
 
 For each sampled pose, rays leave the robot's axis at heights spread over the body band [h_min,
-h_max] (`RenderCheckConfig.ray_heights`), all around (``azimuths``) and within ``max_elevation_deg``
-of horizontal; each ray's hit is
-where its accumulated opacity first reaches ``min_alpha``, every Gaussian evaluated at its maximum
-response along that ray (`navcore.render.ray_hits`: per-ray depth, not a rasterizer's one depth
-per splat, which read oblique splats near the camera short and needed a calibrated correction).
-The nearest hit inside the body band (from ``floor_guard`` above h_min) gives the pose's visible
-clearance (horizontal distance, metres). The band is measured from the floor under the robot
-(`local_floor`: a plane through vertical rays' hits around the pose), not from z = 0: trained floors are uneven
-and thick, and the costmap's floor layer follows them the same way. The scene is the aligned
-content (what ingest called floaters is not geometry). Only Gaussians within ``crop_m`` of the pose whose
-vertical extent (3 sigma) reaches into the band and whose opacity is at least ``min_splat_alpha``
-take part: what lies wholly below or above the band can neither be touched nor hide anything the
-band holds from a ray that starts in it, and haze and floaters accumulate along a ray into a fog
-no body would touch (the costmap ignores them the same way). A pose is blocked by the render when
-its visible clearance is below the robot radius, blocked by the costmap when its clearance query
-says so; the estimated rates are
+h_max] (`RenderCheckConfig.ray_heights`), all around (``azimuths``) and within
+``max_elevation_deg`` of horizontal; each ray's hit is where its accumulated opacity first
+reaches ``min_alpha``, every Gaussian evaluated at its maximum response along that ray
+(`navcore.render.ray_hits`: per-ray depth, not a rasterizer's one depth per splat, which read
+oblique splats near the camera short and needed a calibrated correction). The nearest hit inside
+the body band (from ``floor_guard`` above h_min) gives the pose's visible clearance (horizontal
+distance, metres). The band is measured from the floor under the robot (`local_floor`: a plane
+through vertical rays' hits around the pose; low hits checked against the floor beneath them),
+not from z = 0: trained floors are uneven and thick, and the costmap's floor layer follows them
+the same way. The scene is the aligned content (what ingest called floaters is not geometry).
+Only Gaussians within ``crop_m`` of the pose whose vertical extent (3 sigma) reaches into the
+band and whose opacity is at least ``min_splat_alpha`` take part: what lies wholly below or
+above the band can neither be touched nor hide anything the band holds from a ray that starts in
+it, and haze and floaters accumulate along a ray into a fog no body would touch (the costmap
+ignores them the same way). A pose is blocked by the render when its visible clearance is below
+the robot radius, blocked by the costmap when its clearance query says so; the estimated rates are
   FP = costmap-blocked and render-free / render-free,  FN = costmap-free and render-blocked / render-blocked,
 the definitions bench-spatial uses against the mesh, each with a 95 % Wilson interval from the
 number of poses. What no ray reaches (hidden behind a nearer surface) the estimate cannot know;
-bench-real validates it on synthetic scenes against the mesh at the same poses.
+bench-real validates it on synthetic scenes against the mesh at the same poses
+(stages/costmap/design.md has the figures).
 
 `direct_evidence` is the plainest independent look: the opaque Gaussians whose centres lie inside
 the body cylinder at a pose. bench-real reports its FN beside the render check's.
