@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+from navcore.io import jsonio
+
 
 def prepare(data: str, out: Path, poses: int) -> None:
     from omegaconf import OmegaConf
@@ -40,7 +42,7 @@ def prepare(data: str, out: Path, poses: int) -> None:
         cm = catalog.dataset("costmaps", scene).load(emb.name)
         align = catalog.dataset("alignment", scene).load()
         xy = sample_poses(cm, poses, RenderCheckConfig().seed)
-        (out / f"{scene.name}.json").write_text(json.dumps({
+        (out / f"{scene.name}.json").write_text(jsonio.dumps({
             "scene": scene.name, "transform": align["source_to_aligned"], "xy": xy.tolist(), "embodiment": vars(emb)}))
         print(f"{scene.name}: {len(xy)} poses")
 
@@ -104,7 +106,7 @@ def run(folder: Path, sources: dict[str, str], repeats: int, out: Path) -> dict:
                        [None if not np.isfinite(v) else float(v) for v in vis], "floor": floor.tolist()}
             print(f"{name} {be}: {row[be]['median_s']:.2f} s median of {repeats} ({len(xy)} poses)", flush=True)
         rep["scenes"][name] = row
-    out.write_text(json.dumps(rep))
+    out.write_text(jsonio.dumps(rep))
     return rep
 
 

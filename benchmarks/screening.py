@@ -18,9 +18,8 @@ from navcore.io import jsonio
 
 
 def synthetic(seed: int, level: str, n: int, regions: int, radius: float) -> dict:
-    from navcore.gaussians.content import CONTENT_KEY, content_mask, content_of
+    from benchmarks.spatial import align_synthetic
     from navcore.voxels.field import VoxelizeConfig
-    from stages.align.floor import AlignConfig, fit_floor, floor_transform
     from stages.costmap.build import CostmapConfig, map_extent, support_mask
     from stages.costmap.quality import QualityConfig, quality_layers, validate
     from stages.synthesize.generate import SyntheticConfig, generate_scene
@@ -28,24 +27,19 @@ def synthetic(seed: int, level: str, n: int, regions: int, radius: float) -> dic
 
     sc = generate_scene(seed, SyntheticConfig(num_gaussians=n, realism=RealismConfig(
         level=level, blur_regions=regions, hole_regions=regions, defect_radius_m=radius)))
-    g = sc.gaussians
-    g.extras[CONTENT_KEY] = content_mask(g.means)[0]
-    nrm, d, _ = fit_floor(content_of(g), AlignConfig())
-    t = floor_transform(nrm, d)
-    aligned = content_of(g.transformed(t))
+    _, t, _, aligned = align_synthetic(sc)
     ccfg = CostmapConfig()
     origin, shape = map_extent(aligned, ccfg)
     support, _ = support_mask(aligned, origin, shape, ccfg, VoxelizeConfig())
     layers = quality_layers(aligned, origin, shape, ccfg.resolution, QualityConfig())
-    can_to_al = t @ sc.transform
+    can_to_al = t @ sc.transform  # the regions' centres, canonical -> aligned
+    regs = [r | {"center": (can_to_al[:3, :3] @ [*r["center"], 0.0] + can_to_al[:3, 3])[:2].tolist()}
+            for r in sc.defects]
     all_cells = np.ones(shape, bool)  # holes: wherever they are (their inside is unsupported)
     out = {"seed": seed}
     for kind in ("blur", "hole"):
-        regs = [{"center": (can_to_al[:3, :3] @ [*r["center"], 0.0] + can_to_al[:3, 3])[:2].tolist(),
-                 "radius": r["radius"]} for r in sc.defects if r["kind"] == kind]
-        out[kind] = validate(layers[kind], origin, ccfg.resolution, regs, support if kind == "blur" else all_cells)
-    regs = [{"center": (can_to_al[:3, :3] @ [*r["center"], 0.0] + can_to_al[:3, 3])[:2].tolist(),
-             "radius": r["radius"]} for r in sc.defects]
+        out[kind] = validate(layers[kind], origin, ccfg.resolution, [r for r in regs if r["kind"] == kind],
+                             support if kind == "blur" else all_cells)
     out["flagged"] = validate(layers["flagged"], origin, ccfg.resolution, regs, support | layers["hole"])
     return out
 

@@ -114,6 +114,18 @@ def time_batch(fn, arg, n: int, repeats: int = 7) -> float:
     return float(np.median(out))
 
 
+def align_synthetic(sc) -> tuple[np.ndarray, np.ndarray, "object", "object"]:
+    """A generated scene through content and floor alignment as the pipeline does them: (floor
+    normal in the source frame, source -> aligned transform, all Gaussians aligned, the aligned
+    content)."""
+    g = sc.gaussians
+    g.extras[CONTENT_KEY] = content_mask(g.means)[0]
+    n, d, _ = fit_floor(content_of(g), AlignConfig())
+    t_align = floor_transform(n, d)
+    renderable = g.transformed(t_align)
+    return n, t_align, renderable, content_of(renderable)
+
+
 def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_states: int,
               n_motions: int, realism: "str | RealismConfig" = "none", resolutions=RESOLUTIONS, timing: bool = True,
               render_check: RenderCheckConfig | None = None, ablations: dict | None = None) -> dict:
@@ -123,13 +135,7 @@ def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_
     overrides whose 0.05 m state FP / FN are reported beside the default's."""
     real = realism if isinstance(realism, RealismConfig) else RealismConfig(level=realism)
     sc = generate_scene(seed, SyntheticConfig(num_gaussians=n_gauss, realism=real))
-    g = sc.gaussians
-    mask, _ = content_mask(g.means)
-    g.extras[CONTENT_KEY] = mask
-    n, d, _ = fit_floor(content_of(g), AlignConfig())
-    t_align = floor_transform(n, d)
-    renderable = g.transformed(t_align)
-    aligned = content_of(renderable)
+    n, t_align, renderable, aligned = align_synthetic(sc)
     # alignment error against the ground truth: normal angle, and height of the true floor
     up_src = sc.transform[:3, :3] @ [0, 0, 1.0]
     tilt = float(np.degrees(np.arccos(np.clip(n @ up_src, -1, 1))))
@@ -150,7 +156,7 @@ def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_
     ref = FclReference(mesh, emb, np.linalg.inv(can_to_al))
     ref_state = np.array([ref.state(x, y) for x, y in states])
     ref_motion = np.array([ref.motion(*s) for s in segs])
-    out = {"seed": seed, "n_gaussians": len(g), "align_tilt_deg": tilt, "align_height_m": height,
+    out = {"seed": seed, "n_gaussians": len(renderable), "align_tilt_deg": tilt, "align_height_m": height,
            "fcl_state_positive": int(ref_state.sum()), "fcl_motion_positive": int(ref_motion.sum()), "res": {}}
     for res in resolutions:
         t0 = time.perf_counter()

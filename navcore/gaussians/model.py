@@ -37,6 +37,15 @@ def quat_to_rotmat(q: np.ndarray) -> np.ndarray:
     return r
 
 
+def axis_sigmas(quats: np.ndarray, log_scales: np.ndarray) -> np.ndarray:
+    """[N, 3] float64 standard deviations of Gaussians along the world x, y, z axes (the square
+    roots of their covariances' diagonals), from quaternions [N, 4] (normalised here) and log
+    scales [N, 3]."""
+    q = np.asarray(quats, np.float64)
+    rot = quat_to_rotmat(q / np.linalg.norm(q, axis=1, keepdims=True))
+    return np.sqrt(np.einsum("nij,nj->ni", rot ** 2, np.exp(2.0 * np.asarray(log_scales, np.float64))))
+
+
 def rotmat_to_quat(r: np.ndarray) -> np.ndarray:
     """Unit quaternions (w, x, y, z), w >= 0, from rotation matrices [..., 3, 3] (Shepperd's method)."""
     r = np.asarray(r, dtype=np.float64)

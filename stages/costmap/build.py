@@ -243,15 +243,13 @@ def hidden_splats(scene: GaussianScene, noise: np.ndarray, layers: "CostmapLayer
         scene: all Gaussians of the aligned scene (the indices are into it).
         noise: [N] bool, the Gaussians the map treats as noise.
     """
-    from navcore.gaussians.model import quat_to_rotmat
+    from navcore.gaussians.model import axis_sigmas
 
     idx = np.nonzero(noise)[0]
     free = ~layers.occ
     if not len(idx) or not free.any():
         return np.zeros(0, np.int64)
-    q = scene.quats[idx].astype(np.float64)
-    rot = quat_to_rotmat(q / np.linalg.norm(q, axis=1, keepdims=True))
-    sd = np.sqrt(np.einsum("nij,nj->ni", rot ** 2, np.exp(2.0 * scene.log_scales[idx].astype(np.float64))))
+    sd = axis_sigmas(scene.quats[idx], scene.log_scales[idx])
     m = scene.means[idx].astype(np.float64)
     res = layers.resolution
     dist = ndimage.distance_transform_edt(~free) * res  # cell centre -> the nearest free cell centre

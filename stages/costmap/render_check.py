@@ -94,10 +94,9 @@ def local_gaussians(scene, xy: np.ndarray, crop: float, z_lo: float, z_hi: float
     vertical 3-sigma extent meets [z_lo, z_hi] and whose opacity is at least min_alpha (CSR)."""
     from scipy.spatial import cKDTree
 
-    from navcore.gaussians.model import quat_to_rotmat
+    from navcore.gaussians.model import axis_sigmas
 
-    rot = quat_to_rotmat(scene.quats.astype(np.float64))
-    sz = np.sqrt(np.einsum("nk,nk->n", rot[:, 2, :] ** 2, scene.scales.astype(np.float64) ** 2))  # vertical sigma
+    sz = axis_sigmas(scene.quats, scene.log_scales)[:, 2]
     z = scene.means[:, 2]
     cand = np.flatnonzero((scene.alphas >= min_alpha) & (z + 3 * sz >= z_lo) & (z - 3 * sz <= z_hi))
     lists = cKDTree(scene.means[cand, :2]).query_ball_point(np.asarray(xy, float), crop) if len(cand) else \
@@ -129,6 +128,12 @@ def _hit_depth(backend: str, scene, centres, offsets, index, *args) -> np.ndarra
     return f(g, centres, offsets, local.reshape(-1).astype(np.int64), *args)
 
 
+def _down_depth(backend: str, scene, centres, offsets, index, far: float, cfg: RenderCheckConfig) -> np.ndarray:
+    """[G, C] hit depth of the rays cast straight down from centres [G, C, 3] (`_hit_depth`)."""
+    return _hit_depth(backend, scene, centres, offsets, index, 1, 1, -np.pi / 2, -np.pi / 2 + 1e-3, 0.0, far,
+                      cfg.bin_m, cfg.min_alpha)[:, :, 0, 0]
+
+
 VERIFY = 32  # low hits whose floor is looked at per pose and round
 FLOOR_RINGS = ((0.0, 1), (0.15, 6), (0.3, 12), (0.45, 18))  # (radius m, points) of the floor's vertical rays
 
@@ -150,17 +155,16 @@ def local_floor(scene, xy: np.ndarray, emb, cfg: RenderCheckConfig, backend: str
     offsets, index = local_gaussians(scene, xy, FLOOR_RINGS[-1][0] + 0.3, -2 * cfg.floor_search, top,
                                      cfg.min_splat_alpha)
     centres = np.concatenate([xy[:, None, :] + pts[None], np.full((len(xy), len(pts), 1), top)], 2)
-    depth = _hit_depth(backend, scene, centres, offsets, index, 1, 1, -np.pi / 2, -np.pi / 2 + 1e-3,
-                       0.0, top + 2 * cfg.floor_search, cfg.bin_m, cfg.min_alpha)[:, :, 0, 0]
-    z = top - depth  # -inf where nothing is hit
+    z = top - _down_depth(backend, scene, centres, offsets, index, top + 2 * cfg.floor_search, cfg)  # -inf: no hit
     out = np.zeros((len(xy), 3))
     design = np.c_[np.ones(len(pts)), pts]
     for i in range(len(xy)):
         ok = np.abs(z[i]) <= cfg.floor_search
         if ok.sum() >= 6:
-            for _ in range(3):
+            coef = np.linalg.lstsq(design[ok], z[i, ok], rcond=None)[0]
+            for _ in range(2):  # refitted without the hits 3 cm off the plane
+                ok &= np.abs(design @ coef - z[i]) <= 0.03
                 coef = np.linalg.lstsq(design[ok], z[i, ok], rcond=None)[0]
-                ok = ok & (np.abs(design @ coef - z[i]) <= 0.03) if _ < 2 else ok
             out[i] = coef
         elif ok.any():
             out[i, 0] = np.median(z[i, ok])
@@ -222,8 +226,7 @@ def visible_clearance(scene, xy: np.ndarray, emb, cfg: RenderCheckConfig, backen
         p = np.take_along_axis(pts[rows], batch[..., None], 1)  # [k, VERIFY, 3] hit points
         sub_off = np.concatenate([[0], np.cumsum(np.diff(offsets)[rows])])
         sub_idx = np.concatenate([index[offsets[i]:offsets[i + 1]] for i in rows])
-        dv = _hit_depth(backend, scene, p, sub_off, sub_idx, 1, 1, -np.pi / 2, -np.pi / 2 + 1e-3, 0.0,
-                        emb.h_max + 3 * cfg.floor_search, cfg.bin_m, cfg.min_alpha)[:, :, 0, 0]
+        dv = _down_depth(backend, scene, p, sub_off, sub_idx, emb.h_max + 3 * cfg.floor_search, cfg)
         plane = floor_height(floor[rows], xy[rows], p[..., :2])
         under = np.where(np.isfinite(dv), p[..., 2] - dv, plane)  # no floor below: a hole, the plane holds
         local = np.clip(under, plane - cfg.floor_step, plane + cfg.floor_step)
