@@ -162,9 +162,9 @@ def panorama_hit_depth_torch(g: dict, centres, offsets, index, n_az: int, n_el: 
             half = torch.asin(torch.clamp(torch.sin(a) / torch.cos(ec).clamp(min=1e-12), max=1.0))
             azc = torch.atan2(m[..., 1], m[..., 0])
             d_az = 2 * math.pi / n_az
-            a_lo = torch.where(full, 0, torch.floor((azc - half) / d_az - 0.5).long()).reshape(-1)
-            n_a = torch.where(full, n_az, torch.clamp(torch.floor((azc + half) / d_az - 0.5).long()
-                                                      - torch.floor((azc - half) / d_az - 0.5).long() + 2,
+            lo_j = torch.floor((azc - half) / d_az - 0.5).long()
+            a_lo = torch.where(full, 0, lo_j).reshape(-1)
+            n_a = torch.where(full, n_az, torch.clamp(torch.floor((azc + half) / d_az - 0.5).long() - lo_j + 2,
                                                       max=n_az)).reshape(-1)
             count = (torch.clamp(e1 - e0 + 1, min=0) * (dist - r <= far)).reshape(-1) * n_a
             e0 = e0.reshape(-1)
