@@ -1,4 +1,4 @@
-"""The reconstruction-quality layer (stages/costmap/quality.py) against injected defects:
+"""The reconstruction-quality layer (stages/screen/quality.py, every cue as the stage computes it) against injected defects:
 realistic synthetic scenes with blurred and hole regions (synthetic.realism blur_regions /
 hole_regions), the layer's recall and precision per kind (cells inside the supported map), and
 the real scenes' flagged share with a top-down picture (kept under data/08_reports/screening/,
@@ -17,42 +17,72 @@ import numpy as np
 from navcore.io import jsonio
 
 
-def synthetic(seed: int, level: str, n: int, regions: int, radius: float) -> dict:
+def synthetic(seed: int, level: str, n: int, regions: int, radius: float, **layer) -> dict:
+    """One realistic synthetic scene with injected blurred and hole regions through content ->
+    align -> costmap -> the quality layer (every cue, as the stage computes it): recall and
+    precision per kind against the injected regions. layer: QualityConfig overrides."""
     from benchmarks.spatial import align_synthetic
+    from navcore.nav.costmap import Costmap
+    from navcore.nav.embodiment import Embodiment
     from navcore.voxels.field import VoxelizeConfig
-    from stages.costmap.build import CostmapConfig, map_extent, support_mask
-    from stages.costmap.quality import QualityConfig, quality_layers, validate
+    from stages.costmap.build import CostmapConfig, build_costmap
+    from stages.screen.quality import QualityConfig, screen_layers, validate
     from stages.synthesize.generate import SyntheticConfig, generate_scene
     from stages.synthesize.realism import RealismConfig
 
     sc = generate_scene(seed, SyntheticConfig(num_gaussians=n, realism=RealismConfig(
         level=level, blur_regions=regions, hole_regions=regions, defect_radius_m=radius)))
-    _, t, _, aligned = align_synthetic(sc)
-    ccfg = CostmapConfig()
-    origin, shape = map_extent(aligned, ccfg)
-    support, _ = support_mask(aligned, origin, shape, ccfg, VoxelizeConfig())
-    layers = quality_layers(aligned, origin, shape, ccfg.resolution, QualityConfig())
+    _, t, renderable, aligned = align_synthetic(sc)
+    emb = Embodiment()
+    lay, _ = build_costmap(aligned, emb, CostmapConfig(), VoxelizeConfig())
+    cm = Costmap(lay.clearance, lay.origin, lay.resolution, lay.radius, lay.margin, lay.components)
+    valid = ~cm.occupancy & lay.support
+    q = screen_layers(aligned, renderable, valid, lay.origin, lay.resolution, emb, QualityConfig(**layer))
     can_to_al = t @ sc.transform  # the regions' centres, canonical -> aligned
     regs = [r | {"center": (can_to_al[:3, :3] @ [*r["center"], 0.0] + can_to_al[:3, 3])[:2].tolist()}
             for r in sc.defects]
-    all_cells = np.ones(shape, bool)  # holes: wherever they are (their inside is unsupported)
-    out = {"seed": seed}
-    for kind in ("blur", "hole"):
-        out[kind] = validate(layers[kind], origin, ccfg.resolution, [r for r in regs if r["kind"] == kind],
-                             support if kind == "blur" else all_cells)
-    out["flagged"] = validate(layers["flagged"], origin, ccfg.resolution, regs, support | layers["hole"])
+    all_cells = np.ones(valid.shape, bool)  # holes: wherever they are (their inside is unsupported)
+    out = {"seed": seed, "views_rendered": q["views"]}
+    blur = q["blur"] | q["view_blur"]
+    for kind, layer in (("blur", blur), ("hole", q["hole"])):
+        out[kind] = validate(layer, lay.origin, lay.resolution, [r for r in regs if r["kind"] == kind],
+                             lay.support if kind == "blur" else all_cells)
+    out["flagged"] = validate(q["flagged"], lay.origin, lay.resolution, regs, lay.support | q["hole"])
+    out["flagged_share_of_valid"] = float((q["flagged"] & valid).sum() / max(valid.sum(), 1))
     return out
 
 
-def real(data: str, folder: Path) -> list[dict]:
+def sharpness(scene, emb, poses: np.ndarray) -> np.ndarray:
+    """[P] share of a 160 x 120 view's 20 x 20 patches whose Laplacian (grey, 0..1) has a standard
+    deviation below 0.01: image sharpness, independent of the layer's cues."""
+    from scipy import ndimage
+
+    from navcore.render import cpu_fast
+    from navcore.render.camera import embodiment_camera
+
+    g = cpu_fast.prepare(scene)
+    vm, K, w, h = embodiment_camera(emb, poses, 160, 120)
+    out = np.zeros(len(poses))
+    for p in range(len(poses)):
+        rgb, _, _ = cpu_fast.render_one(g, vm[p], K[p], w, h, 0)
+        lap = ndimage.laplace(rgb.mean(2).astype(np.float64))
+        out[p] = float((lap.reshape(6, 20, 8, 20).std(axis=(1, 3)) < 0.01).mean())
+    return out
+
+
+def real(data: str, folder: Path, poses: int = 200) -> list[dict]:
+    """The stage's layer on each scene of a data root (run `python -m pipeline stages=[screen]
+    scenes=real_indoor data_root=DATA` first): score, shares, the picture (copied to folder), and
+    the cross-check with image sharpness: views from random valid poses (random headings), the
+    share of blurry patches of those in flagged cells against those in clean cells."""
+    import shutil
+
     from omegaconf import OmegaConf
-    from PIL import Image
 
     from benchmarks.real import compose
-    from navcore.gaussians.content import content_of
+    from navcore.gaussians.content import camera_scene
     from navcore.io.catalog import Catalog
     from pipeline.config import CONF_DIR
-    from stages.costmap.quality import QualityConfig, quality_layers
 
     cfg = compose(data)
     catalog = Catalog(CONF_DIR.parent / cfg.scenes.catalog, data)
@@ -60,21 +90,28 @@ def real(data: str, folder: Path) -> list[dict]:
     folder.mkdir(parents=True, exist_ok=True)
     rows = []
     for scene in catalog.select():
-        gs = content_of(catalog.dataset("aligned", scene).load()[0])
-        layers, eattrs, _ = catalog.dataset("costmaps", scene).load_layers(emb.name)
-        sup, occ = np.asarray(layers["support"]), np.asarray(layers["occ"])
-        q = quality_layers(gs, eattrs["origin"], sup.shape, float(eattrs["resolution"]), QualityConfig())
-        free = sup & ~occ
-        img = np.full(sup.shape + (3,), 255, np.uint8)
-        img[~sup] = (230, 190, 190)
-        img[occ & sup] = (60, 60, 60)
-        img[q["hole"] & free] = (80, 120, 255)
-        img[q["blur"] & free] = (255, 0, 255)
+        layers, attrs = catalog.dataset("quality", scene).load_layers()
+        cm = catalog.dataset("costmaps", scene).load(emb.name)
+        sup = catalog.dataset("costmaps", scene).load_layers(emb.name)[0]["support"]
+        valid = ~cm.occupancy & sup
+        rng = np.random.default_rng(0)
+        cells = np.argwhere(valid)
+        cells = cells[rng.choice(len(cells), min(poses, len(cells)), replace=False)]
+        xy = cm.cell_centers(cells)
+        pose = np.c_[xy, rng.uniform(-np.pi, np.pi, len(xy))]
+        cam, _ = camera_scene(catalog, scene, emb.name, view_dependent=False)
+        blurry = sharpness(cam, emb, pose)
+        flagged = layers["flagged"][cells[:, 0], cells[:, 1]]
         name = f"{scene.name}_quality_topdown.png"
-        Image.fromarray(img[::-1]).save(folder / name)
-        rows.append({"scene": scene.name, "free_cells": int(free.sum()),
-                     "blur_share_of_free": float((q["blur"] & free).sum() / max(free.sum(), 1)),
-                     "hole_share_of_free": float((q["hole"] & free).sum() / max(free.sum(), 1)), "picture": name})
+        shutil.copyfile(catalog.dataset("quality_picture", scene).path, folder / name)
+        keys = [k for k in attrs if k.endswith("_share") or k in ("score", "valid_area_m2", "views_rendered")]
+        rows.append({"scene": scene.name, **{k: attrs[k] for k in keys},
+                     "poses": len(pose), "poses_flagged": int(flagged.sum()),
+                     "blurry_patches_flagged_median": float(np.median(blurry[flagged])) if flagged.any() else None,
+                     "blurry_patches_clean_median": float(np.median(blurry[~flagged])) if (~flagged).any() else None,
+                     "blurry_patches_flagged_mean": float(blurry[flagged].mean()) if flagged.any() else None,
+                     "blurry_patches_clean_mean": float(blurry[~flagged].mean()) if (~flagged).any() else None,
+                     "picture": name})
         print(json.dumps(rows[-1]), flush=True)
     return rows
 
@@ -90,11 +127,11 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="data/08_reports")
     args = ap.parse_args(argv)
     rows = []
-    for s in (int(x) for x in args.seeds.split(",")):
+    for s in (int(x) for x in args.seeds.split(",") if x):
         rows.append(synthetic(s, args.level, args.gaussians, args.regions, args.radius))
         print(json.dumps(rows[-1]), flush=True)
     rep = {"synthetic": rows, **{f"{k}_{m}_min": min(r[k][m] for r in rows) for k in ("blur", "hole", "flagged")
-                                 for m in ("recall", "precision")}}
+                                 for m in ("recall", "precision") if rows}}
     if args.real_data:
         rep["real"] = real(args.real_data, Path(args.out) / "screening")
     Path(args.out).mkdir(parents=True, exist_ok=True)

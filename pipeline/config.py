@@ -18,6 +18,7 @@ from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.evaluate.config import EvaluateConfig
 from stages.export.stage import ExportConfig
 from stages.goal_images.stage import GoalImagesConfig
+from stages.screen.config import ScreenConfig
 from stages.semantics.config import SemanticsConfig
 from stages.synthesize.generate import SyntheticConfig
 
@@ -167,6 +168,9 @@ class NavArenaConfig:
     voxelize: VoxelizeConfig = field(default_factory=VoxelizeConfig)
     align: AlignConfig = field(default_factory=AlignConfig)
     costmap: CostmapConfig = field(default_factory=CostmapConfig)
+    screen: ScreenConfig = field(default_factory=ScreenConfig)
+    """Scene and region screening: the quality layer (stage `screen`, `screen.layer`), the verdict
+    and what episodes avoid."""
     semantics: SemanticsConfig = field(default_factory=SemanticsConfig)
     """ObjectNav goal candidates lifted from multi-view masks (stage `semantics`)."""
     asset: AssetConfig = field(default_factory=AssetConfig)

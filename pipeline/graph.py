@@ -16,6 +16,7 @@ from stages.evaluate import stage as evaluate
 from stages.export import stage as export
 from stages.goal_images import stage as goal_images
 from stages.ingest import stage as ingest
+from stages.screen import stage as screen
 from stages.semantics import stage as semantics
 from stages.synthesize import stage as synthesize
 from stages.voxelize import stage as voxelize
@@ -29,7 +30,8 @@ class Stage:
         name: stage name (config key `stages`, marker folder, and its package stages/<name>/).
         run: its run(scene, cfg, catalog) -> dict.
         needs: upstream stages (per scene).
-        config: config sections that determine its output (their change recomputes it).
+        config: config sections that determine its output (their change recomputes it); a
+            dotted name is a subsection (screen.layer).
         version: bump when the stage's code changes its output (stored outputs of another
             version are recomputed; v2 of voxelize: the bound exact over the voxel height).
         only_synthetic: the stage applies to synthetic scenes only (others pass through).
@@ -69,11 +71,12 @@ STAGES: tuple[Stage, ...] = (
     Stage("align", align.run, ("voxelize",), ("align",), version="4"),
     Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="4",
           inputs=costmap.hashed_inputs),
+    Stage("screen", screen.run, ("costmap",), ("screen.layer", "embodiment")),
     Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), version="2", gpu=True,
           memory_gb=3.0),
     Stage("asset", asset.run, ("costmap", "semantics"), ("asset",), version="4"),
-    Stage("episodes", episodes.run, ("costmap", "semantics"), ("episodes", "task", "planner", "embodiment"),
-          version="4"),
+    Stage("episodes", episodes.run, ("costmap", "semantics", "screen"),
+          ("episodes", "task", "planner", "embodiment", "screen"), version="5"),
     Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",), gpu=True, memory_gb=2.0),
     Stage("export", export.run, ("episodes", "asset", "goal_images"), ("export",), finalize=export.finalize),
     Stage("evaluate", evaluate.run, ("episodes",), ("evaluate", "episodes", "task", "embodiment"),
@@ -139,7 +142,7 @@ def config_hashes(cfg) -> dict[str, str]:
     for s in STAGES:
         part = {}
         for k in s.config:
-            part[k] = OmegaConf.to_container(cfg[k], resolve=True)
+            part[k] = OmegaConf.to_container(OmegaConf.select(cfg, k), resolve=True)
             for sec, key, _ in storage:
                 if sec == k:
                     part[k].pop(key, None)

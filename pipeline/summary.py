@@ -1,4 +1,4 @@
-"""The run summary: counts per stage and status, failures, shortfalls and warnings, written to
+"""The run summary: counts per stage and status, failures, shortfalls, warnings and scene screening, written to
 data/_runs (one file per run and latest.json) and printed as tables."""
 from __future__ import annotations
 
@@ -23,7 +23,9 @@ def build_summary(results: list[dict], started: dt.datetime, cat_file, shard: li
                "counts": {}, "failures": [r for r in results if r["status"] in FAILED],
                "shortfalls": [r for r in results if r.get("shortfall")],
                "warnings": [r for r in results if r.get("warnings")],
-               "goal_mappings": [r for r in results if r.get("goal_mapping")], "results": results}
+               "goal_mappings": [r for r in results if r.get("goal_mapping")],
+               "screening": [{"scene_id": r["scene_id"], "scene": r["scene"], **r["screening"]}
+                             for r in results if r.get("screening")], "results": results}
     placed = placement(results)
     if placed:
         summary["placement"] = placed
@@ -128,6 +130,16 @@ def print_summary(summary: dict, console: Console) -> None:
         for r in summary["goal_mappings"]:
             for goal, classes in sorted(r["goal_mapping"].items()):
                 f.add_row(f"{r['scene_id']} ({r['scene']})", goal, ", ".join(f"{c} {n}" for c, n in sorted(classes.items())))
+        console.print(f)
+    if summary.get("screening"):
+        f = Table(title="scene screening (quality score: share of valid cells not flagged)")
+        for col in ("scene", "score", "blobs", "floor holes", "views: blur", "views: holes", "verdict", "episodes"):
+            f.add_column(col, overflow="fold")
+        style = {"pass": "green", "warn": "yellow", "reject": "red"}
+        for r in summary["screening"]:
+            f.add_row(f"{r['scene_id']} ({r['scene']})", f"{r['score']:.2f}",
+                      *(f"{100 * r[k]:.1f} %" for k in ("blur_share", "hole_share", "view_blur_share", "view_hole_share")),
+                      f"[{style[r['verdict']]}]{r['verdict']}[/]", "kept" if r["kept"] else "rejected (screen.reject)")
         console.print(f)
     placed = summary.get("placement")
     if placed and any(w["gpu"] for w in placed["workers"].values()):

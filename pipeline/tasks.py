@@ -99,9 +99,10 @@ def notes(info: dict) -> dict:
     """What a stage's result says the run summary must show: shortfalls (outputs it could not
     yield), warnings (e.g. a scene whose scale is implausible for metres), and where a scene's
     ObjectNav goal categories came from (goal_mapping: goal category -> {dataset class: instances});
+    a scene's screening (score, verdict, whether its episodes are kept: the episodes stage);
     and the work a GPU task did (steps: closed-loop environment steps; images: goal images rendered),
     for rates per GPU."""
-    return {k: info[k] for k in ("shortfall", "warnings", "goal_mapping", "steps", "images") if info.get(k)}
+    return {k: info[k] for k in ("shortfall", "warnings", "goal_mapping", "steps", "images", "screening") if info.get(k)}
 
 
 def finalize_due(stage, results: list[dict], catalog: Catalog) -> bool:

@@ -653,3 +653,105 @@ def test_success_regions_footprint_and_centre_known_answers(room_with_door):
     paper = Episode.from_row({**row, "goals_json": json.dumps([goal])})  # stored before the rule: the centre
     assert foot.in_region(*p) and foot.distance_to_goal(*p) == pytest.approx(0.9)
     assert not paper.in_region(*p) and paper.distance_to_goal(*p) == pytest.approx(1.9)
+
+
+# ---- screening: episodes keep out of the quality layer -----------------------------------------
+
+def test_verdict_and_margin_known_answers():
+    from navcore.nav.screening import grow, verdict
+
+    assert [verdict(s, 0.9, 0.5) for s in (1.0, 0.9, 0.89, 0.5, 0.49)] == ["pass", "pass", "warn", "warn", "reject"]
+    with pytest.raises(ValueError, match="reject_below"):
+        verdict(0.7, 0.5, 0.9)
+    m = np.zeros((21, 21), bool)
+    m[10, 10] = True
+    g = grow(m, 0.25, 0.05)  # a disc of 5 cells
+    assert g.sum() == (np.hypot(*np.mgrid[-5:6, -5:6]) <= 5).sum() and g[10, 15] and not g[10, 16]
+    assert (grow(m, 0.0, 0.05) == m).all()
+
+
+def test_defect_views_known_answers(room_with_door):
+    """DefectViews (navcore.render.view_quality): facing a large opaque blob a metre ahead, the
+    view is mostly blur; facing the room's wall of small splats, none; with nothing to render, all
+    holes; floor pixels never count as blur."""
+    from navcore.render.view_quality import DefectViews
+
+    emb = Embodiment(radius=room_with_door.radius)
+    d = DefectViews(_blob_scene([[1.2, 1.5, 1.0]], sigma=0.6), emb, blur_sigma=0.5, blur_angle=0.25)
+    r = d.measure(np.array([[0.3, 1.5, 0.0], [1.0, 0.4, -math.pi / 2]]))
+    assert r.blur[0] > 0.5 and r.blur[1] == 0.0 and r.hole[1] == 0.0  # "mostly blur"; the wall: neither
+    empty = DefectViews(_blob_scene([]).subset(np.zeros(len(_blob_scene([]).means), bool)), emb).measure(
+        np.array([[1.0, 1.5, 0.0]]))
+    assert empty.hole[0] == 1.0 and empty.blur[0] == 0.0
+    x, y = (a.ravel() for a in np.meshgrid(np.arange(2.5, 8, 0.5), np.arange(-2, 5, 0.5)))
+    n = len(x)
+    floor = GaussianScene(np.c_[x, y, np.zeros(n)], np.tile([1.0, 0, 0, 0], (n, 1)), np.log(np.tile([0.6, 0.6, 0.01], (n, 1))),
+                          np.full(n, 4.0), np.zeros((n, 1, 3)))
+    lifted = GaussianScene(floor.means + [0, 0, 0.5], floor.quats, floor.log_scales, floor.opacity_logits, floor.sh)
+    assert DefectViews(floor, emb, blur_sigma=0.5).measure(np.array([[1.0, 1.5, 0.0]])).blur[0] == 0.0
+    assert DefectViews(lifted, emb, blur_sigma=0.5).measure(np.array([[1.0, 1.5, 0.0]])).blur[0] > 0.2
+
+
+@pytest.mark.parametrize("task", ["pointnav", "imagenav", "objectnav"])
+def test_episodes_keep_out_of_screened_cells(task, room_with_door):
+    """A screened disc (a flagged region grown by the margin) in the left room, around one of two
+    chairs: no start, goal, ObjectNav view point or expert pose lies in it, and the rejections say
+    why; without the layer some episodes cross it. The geodesic graph is the costmap's either way."""
+    cm = room_with_door
+    g = NavGraph(cm, ~cm.occupancy)
+    yy, xx = np.mgrid[0:cm.clearance.shape[0], 0:cm.clearance.shape[1]]
+    screened = np.hypot((xx + 0.5) * cm.resolution - 1.0, (yy + 0.5) * cm.resolution - 0.6) < 1.0
+    ecfg = EpisodesConfig()
+    ecfg.difficulty.balance = False
+    tcfg = TaskConfig(type=task, episodes_per_scene=24, success_radius=0.5 if task == "pointnav" else 1.0,
+                      min_geodesic=1.0, max_geodesic=8.0, trivial_ratio=0.0, starts_per_goal=4)
+    inst = [{"instance_id": 4, "category": "chair", "center_x": 3.5, "center_y": 2.5, "center_z": 0.4,
+             "min_x": 3.3, "min_y": 2.3, "min_z": 0.0, "max_x": 3.7, "max_y": 2.7, "max_z": 0.8},
+            {"instance_id": 5, "category": "chair", "center_x": 1.0, "center_y": 0.6, "center_z": 0.4,
+             "min_x": 0.9, "min_y": 0.5, "min_z": 0.0, "max_x": 1.1, "max_y": 0.7, "max_z": 0.8}]
+    emb = Embodiment(radius=cm.radius)
+    touched = {}
+    for layer in (screened, None):
+        gen = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), emb, "t/scene", 5, inst, screened=layer)
+        res = gen.generate()
+        assert len(res.episodes) == 24, res.rejections
+        xy = np.c_[np.concatenate(res.trajectories["position_x"]), np.concatenate(res.trajectories["position_y"])]
+        cells = cm.cells_of(xy)
+        touched[layer is None] = int(screened[cells[:, 0], cells[:, 1]].sum())
+        if layer is not None:
+            ends = np.array([[e[f"{p}position_x"], e[f"{p}position_y"]] for e in res.episodes for p in ("start_", "goal_")])
+            c = cm.cells_of(ends)
+            assert not screened[c[:, 0], c[:, 1]].any()
+            if task == "objectnav":  # the chair inside the disc has no view point left
+                assert res.rejections["instance_screened"] == 1
+                assert {e["goal_object_id"] for e in res.episodes} == {4}
+            else:
+                assert res.rejections["path_screened"] + res.rejections["goal_screened"] > 0, res.rejections
+    assert touched[False] == 0 and touched[True] > 0
+
+
+def test_imagenav_goal_views_mostly_blur_are_never_produced(room_with_door):
+    """Large blobs at camera height in the rooms: every stored ImageNav goal view is at most half
+    blur (measured again), the rejections count the blurred draws; without the test some are
+    mostly blur."""
+    from navcore.render.view_quality import DefectViews
+
+    cm = room_with_door
+    g = NavGraph(cm, ~cm.occupancy)
+    emb = Embodiment(radius=cm.radius)
+    r = np.random.default_rng(2)
+    gs = _blob_scene(np.c_[r.uniform(0.4, 3.6, 12), r.uniform(0.4, 2.6, 12), r.uniform(0.8, 1.2, 12)], sigma=0.6)
+    ecfg = EpisodesConfig()
+    ecfg.difficulty.balance = False
+    tcfg = TaskConfig(type="imagenav", episodes_per_scene=20, min_geodesic=0.5, max_geodesic=6.0, trivial_ratio=0.0,
+                      starts_per_goal=2, goal_view_min_depth=0.0)
+    views = DefectViews(gs, emb, blur_sigma=0.5, blur_angle=0.25)
+    worst = {}
+    for gv in ((views, 0.5), None):
+        res = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), emb, "t/scene", 7, goal_views=gv).generate()
+        assert len(res.episodes) == 20, res.rejections
+        poses = np.array([[e["goal_position_x"], e["goal_position_y"], e["goal_yaw"]] for e in res.episodes])
+        worst[gv is None] = views.measure(poses).defect.max()
+        if gv is not None:
+            assert res.rejections["goal_view_blurred"] > 0
+    assert worst[False] <= 0.5 < worst[True]

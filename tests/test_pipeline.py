@@ -658,3 +658,47 @@ def test_tasks_refer_to_one_config_that_outlives_workers(tmp_path, make_cfg, mon
     assert not s["failures"] and len(seen) == 4  # synthesize + ingest for 2 scenes
     assert len(plugins) == 1 and isinstance(plugins[0], RunContext)
     assert all(a[2] == plugins[0].run_id and isinstance(a[2], str) for a in seen)  # the run's id, not the config
+
+
+def test_screening_through_the_pipeline_and_screen_reject(tmp_path, make_cfg):
+    """A generated scene with injected blurred and hole regions: the screen stage writes its layer
+    and picture, the run summary has the scene's score and verdict, the stored episodes keep out
+    of the layer grown by the margin; screen.reject with the scene's verdict reject empties its
+    shards and recomputes the episodes only (the layer's config is screen.layer)."""
+    import pyarrow.parquet as pq
+
+    from navcore.nav.screening import grow
+
+    over = ["stages=[episodes]", "task=[pointnav,imagenav]", "task.pointnav.episodes_per_scene=12",
+            "task.imagenav.episodes_per_scene=6", "synthetic.realism.level=moderate",
+            "synthetic.realism.blur_regions=2", "synthetic.realism.hole_regions=2"]
+    s1 = execute(make_cfg(tmp_path, *over))
+    assert not s1["failures"], s1["failures"]
+    sid = s1["results"][0]["scene_id"]
+    (entry,) = s1["screening"]
+    assert entry["scene_id"] == sid and entry["verdict"] in ("pass", "warn", "reject") and entry["kept"]
+    layer = zarr.open_group(str(tmp_path / "03_costmaps" / f"{sid}_quality.zarr"), mode="r")
+    flagged = np.asarray(layer["flagged"][...])
+    assert 0 < entry["score"] < 1 and abs(entry["score"] - layer.attrs["score"]) < 1e-12 and flagged.any()
+    assert (tmp_path / "03_costmaps" / f"{sid}_quality.png").is_file()
+    res = layer.attrs["resolution"]
+    keep_out = grow(flagged, 0.25, res)  # screen.margin_m's default
+    origin = np.asarray(layer.attrs["origin"])
+    rows = 0
+    for task in ("pointnav", "imagenav"):
+        t = pq.read_table(tmp_path / "06_trajectories" / f"task={task}" / f"scene_id={sid}" / "part-0.parquet")
+        xy = np.c_[t["position_x"].to_numpy(), t["position_y"].to_numpy()]
+        ij = np.floor((xy - origin) / res).astype(int)
+        assert not keep_out[ij[:, 1], ij[:, 0]].any(), task
+        rows += len(xy)
+    assert rows > 0
+    info = json.loads((tmp_path / "_markers" / "episodes" / f"{sid}.json").read_text())["info"]
+    rejections = {k for t in info["tasks"].values() for k in t["rejections"]}
+    assert rejections & {"goal_screened", "path_screened"}, rejections
+    s2 = execute(make_cfg(tmp_path, *over, "screen.reject=true", "screen.warn_below=1.0", "screen.reject_below=1.0"))
+    st = statuses(s2)
+    assert st["screen"] == "cached" and st["episodes"] == "done"
+    (entry,) = s2["screening"]
+    assert entry["verdict"] == "reject" and not entry["kept"]
+    for task in ("pointnav", "imagenav"):
+        assert pq.read_table(tmp_path / "05_episodes" / f"task={task}" / f"scene_id={sid}" / "part-0.parquet").num_rows == 0

@@ -472,7 +472,7 @@ def test_blur_and_hole_regions_are_injected_where_their_truth_says(tmp_path):
 
 
 def test_quality_layer_finds_injected_blur_and_holes():
-    """The reconstruction-quality layer (stages/costmap/quality.py) on a moderate synthetic scene
+    """The reconstruction-quality layer (stages.screen.quality.py) on a moderate synthetic scene
     with two blurred and two hole regions: recall >= 90 % and precision >= 80 % per kind (issue
     35's targets), and nothing flagged on the same scene without them beyond a few cells."""
     from benchmarks.screening import synthetic

@@ -222,6 +222,29 @@ class CostmapDataset(ZarrDataset):
         return g
 
 
+QUALITY_LAYERS = ("blur", "hole", "view_blur", "view_hole", "flagged")
+"""Arrays of a scene's quality store (stage `screen`), [ny, nx] bool on its costmap grid."""
+
+
+class QualityDataset(ZarrDataset):
+    """The reconstruction-quality layer of one scene: QUALITY_LAYERS, the rendered lattice poses
+    (view_poses [P, 2], view_blur_share / view_hole_share [P]) and attrs (origin, resolution,
+    score, shares, the main embodiment)."""
+
+    def load_layers(self) -> tuple[dict[str, np.ndarray], dict]:
+        """(layers by name, attrs)."""
+        root = super().load()
+        return {k: np.asarray(root[k][...]) for k in QUALITY_LAYERS if k in root}, dict(root.attrs)
+
+    @staticmethod
+    def write(root, layers: dict[str, np.ndarray], attrs: dict) -> None:
+        """Every array of layers (chunked whole) and the attrs, into a root opened by writing()."""
+        for name, arr in layers.items():
+            arr = np.asarray(arr)
+            root.create_array(name, data=arr, chunks=tuple(max(d, 1) for d in arr.shape))
+        root.attrs.update({"layout": COSTMAP_GRID, **attrs})
+
+
 class ImageDataset(Dataset):
     """A PNG: saved from an [H, W(, C)] uint8 array or a matplotlib figure."""
 
@@ -352,7 +375,7 @@ class FileDataset(Dataset):
 TYPES: dict[str, type[Dataset]] = {
     "json": JSONDataset, "json_gz": JSONGzDataset, "text": TextDataset, "parquet": ParquetDataset,
     "zarr": ZarrDataset, "gaussians": GaussianDataset, "aligned_gaussians": AlignedGaussianDataset,
-    "costmap": CostmapDataset, "image": ImageDataset, "folder": FolderDataset, "file": FileDataset,
+    "costmap": CostmapDataset, "quality": QualityDataset, "image": ImageDataset, "folder": FolderDataset, "file": FileDataset,
     "synthetic_source": SyntheticSourceDataset,
 }
 """Dataset type names of the layout file."""

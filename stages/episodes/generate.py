@@ -94,12 +94,19 @@ class EpisodeGenerator:
         scene_path: "{group}/{scene_id}". seed: the (scene, task) stream seed.
         instances: ObjectNav instance table rows (dicts of INSTANCE_SCHEMA), else None.
         views: stages.episodes.views.NearViews of the scene, or None (no blind-view test).
+        screened: [ny, nx] bool cells episodes keep out of (the quality layer grown by the
+            screening margin: starts, goals, ObjectNav view points and every expert pose), or None.
+        goal_views: navcore.render.view_quality.DefectViews of the scene and the largest share
+            of blur and hole pixels an ImageNav goal view may have, or None.
     """
 
     def __init__(self, costmap, graph, task: TaskConfig, ecfg: EpisodesConfig, pcfg: PlannerConfig, emb,
-                 scene_path: str, seed: int, instances: list[dict] | None = None, views=None):
+                 scene_path: str, seed: int, instances: list[dict] | None = None, views=None,
+                 screened: np.ndarray | None = None, goal_views: tuple | None = None):
         self.cm, self.graph, self.task, self.ecfg, self.emb = costmap, graph, task, ecfg, emb
         self.views = views
+        self.screened = screened
+        self.goal_views = goal_views
         self.scene_path, self.seed = scene_path, seed
         self.rng = np.random.default_rng(seed)
         self.limits = Limits.of(emb)
@@ -137,6 +144,12 @@ class EpisodeGenerator:
             xy = self.cm.cell_centers(cells)
             near = region_distance(xy, region[None]) <= t.success_radius - t.view_point_margin
             cells, xy = cells[near], xy[near]
+            if self.screened is not None and len(cells):
+                clean = ~self.screened[cells[:, 0], cells[:, 1]]
+                cells, xy = cells[clean], xy[clean]
+                if not len(cells):
+                    self.rejections["instance_screened"] += 1
+                    continue
             if not len(cells):
                 self.rejections["instance_without_view_points"] += 1
                 continue
@@ -165,6 +178,9 @@ class EpisodeGenerator:
             return None
         geo = float(fld.node_dist[node])
         path_cells = fld.path_cells(self.graph.cells[node])
+        if self._screened(path_cells):  # the geodesic crosses blur or a hole: the expert would too
+            self.rejections["path_screened"] += 1
+            return None
         if goal.kind == "object":
             # the goal instance is the one whose view point ends the geodesic
             inst = next(v for v in goal.instances if (v["cells"] == path_cells[-1]).all(1).any())
@@ -207,6 +223,9 @@ class EpisodeGenerator:
                                self.ecfg.dt, success, goal_yaw if goal.kind == "image" else None, tol)
         if why:
             self.rejections[f"invalid_{why}"] += 1
+            return None
+        if self._screened(cm.cells_of(np.stack([ro["x"], ro["y"]], 1))):
+            self.rejections["path_screened"] += 1  # the expert would drive through blur or a hole
             return None
         travelled = float(np.hypot(np.diff(ro["x"]), np.diff(ro["y"])).sum())
         from_expert = travelled < geo - 1e-6
@@ -259,19 +278,35 @@ class EpisodeGenerator:
             row["goals_json"] = goal.goals_json
         return row
 
-    def _goal_yaw(self, xy: np.ndarray) -> float | None:
+    def _screened(self, cells: np.ndarray) -> bool:
+        """Whether any of these (row, col) cells is screened out (cells off the grid are not)."""
+        if self.screened is None or not len(cells):
+            return False
+        ny, nx = self.screened.shape
+        on = (cells[:, 0] >= 0) & (cells[:, 0] < ny) & (cells[:, 1] >= 0) & (cells[:, 1] < nx)
+        return bool(self.screened[cells[on, 0], cells[on, 1]].any())
+
+    def _goal_yaw(self, xy: np.ndarray) -> tuple[float | None, str]:
         """An ImageNav goal yaw whose camera sees at least goal_view_min_depth (median over its
-        field of view; see TaskConfig) and is not blind (`views`), from up to goal_view_tries
-        uniform draws; None if none."""
+        field of view; see TaskConfig), is not blind (`views`) and not mostly blur or holes
+        (`goal_views`), from up to goal_view_tries uniform draws; (None, reason) if none: reason
+        goal_view_blurred when a draw failed for blur, else goal_view_blocked."""
         t = self.task
+        reason = "goal_view_blocked"
         for _ in range(max(1, t.goal_view_tries)):
             yaw = float(self.rng.uniform(-math.pi, math.pi))
             if t.goal_view_min_depth > 0 and \
                     self.cm.fov_depth(xy, yaw, self.emb.hfov_deg, 4 * t.goal_view_min_depth) < t.goal_view_min_depth:
                 continue
-            if not (self.views and self.views.blind(xy, yaw)):
-                return yaw
-        return None
+            if self.views and self.views.blind(xy, yaw):
+                continue
+            if self.goal_views is not None:
+                views, most = self.goal_views
+                if views.measure(np.array([[xy[0], xy[1], yaw]])).defect[0] > most:
+                    reason = "goal_view_blurred"
+                    continue
+            return yaw, ""
+        return None, reason
 
     def _start_yaw(self, xy: np.ndarray) -> float | None:
         """A start yaw, uniform; with the blind-view test, the first of up to view_tries draws whose
@@ -288,7 +323,7 @@ class EpisodeGenerator:
         weights). Starts lie within the geodesic limits; PointNav / ImageNav weight them with
         Habitat's near-straight keep probability: the same distribution as its rejection
         sampling, without the rejected draws. Starts inside the goal's success region are left
-        out. Without balancing, one pool with bin -1."""
+        out, and so are screened cells. Without balancing, one pool with bin -1."""
         t, dc = self.task, self.ecfg.difficulty
         d = fld.node_dist
         nodes = np.flatnonzero((d >= t.min_geodesic) & (d <= t.max_geodesic))
@@ -300,6 +335,9 @@ class EpisodeGenerator:
         regions = np.array([v["region"] for v in goal.instances]) if goal.kind == "object" else point_regions(goal.xy[None])
         near = region_distance(self.cm.cell_centers(self.graph.cells[nodes]), regions)
         keep = (w > 0) & (near > t.success_radius)  # no start inside its own success region
+        if self.screened is not None:  # nor in a screened cell (the stage reports their share)
+            cells = self.graph.cells[nodes]
+            keep &= ~self.screened[cells[:, 0], cells[:, 1]]
         nodes, w = nodes[keep], w[keep]
         if not dc.balance:
             return [(-1, nodes, np.cumsum(w))] if len(nodes) else []
@@ -349,11 +387,15 @@ class EpisodeGenerator:
             else:
                 node = int(self.rng.integers(len(self.graph.cells)))
                 cell = self.graph.cells[node]
+                if self._screened(cell[None]):
+                    attempts += 1
+                    self.rejections["goal_screened"] += 1
+                    continue
                 xy = self.cm.cell_centers(cell[None])[0]
-                yaw = self._goal_yaw(xy) if t.type == "imagenav" else None
+                yaw, why = self._goal_yaw(xy) if t.type == "imagenav" else (None, "")
                 if t.type == "imagenav" and yaw is None:
                     attempts += 1
-                    self.rejections["goal_view_blocked"] += 1
+                    self.rejections[why] += 1
                     continue
                 goal = Goal("image" if t.type == "imagenav" else "position", cell[None], xy=xy, yaw=yaw)
                 fld = self.graph.field(goal.sources, t.max_geodesic)

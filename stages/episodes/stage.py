@@ -12,6 +12,8 @@ from navcore.gaussians.content import camera_scene
 from navcore.instances import load_instances
 from navcore.io.episode_schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA, TRAJECTORY_WRITE
 from navcore.nav.geodesic import NavGraph, eligible_cells
+from navcore.nav.screening import grow, verdict
+from navcore.render.view_quality import DefectViews
 from navcore.seeds import stream_seed
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.episodes.generate import EpisodeGenerator, scene_split
@@ -36,24 +38,51 @@ def remove_scene_partitions(catalog, scene) -> None:
             ds.delete()
 
 
+def screening(scene, cfg, catalog, cm) -> tuple[dict, np.ndarray | None]:
+    """The scene's screening entry for the run summary (score, shares, verdict, whether its
+    episodes are kept) and the cells episodes keep out of (None with screen.avoid false)."""
+    sc = cfg.screen
+    layers, attrs = catalog.dataset("quality", scene).load_layers()
+    flagged = layers["flagged"]
+    if flagged.shape != cm.clearance.shape or not np.allclose(attrs["origin"], cm.origin) \
+            or attrs["resolution"] != cm.resolution:
+        raise ValueError(f"scene {scene.scene_id!r} ({scene.name}): the quality layer's grid {flagged.shape} at "
+                         f"{attrs['origin']} differs from the costmap's {cm.clearance.shape} at {list(cm.origin)} "
+                         "(rerun stages=[screen])")
+    v = verdict(float(attrs["score"]), sc.warn_below, sc.reject_below)
+    entry = {"score": attrs["score"], "verdict": v, "kept": not (sc.reject and v == "reject"),
+             **{k: attrs[k] for k in ("blur_share", "hole_share", "view_blur_share", "view_hole_share")}}
+    return entry, (grow(flagged, sc.margin_m, cm.resolution) if sc.avoid else None)
+
+
 def run(scene, cfg, catalog) -> dict:
     cpu0 = time.process_time()
     ecfg: EpisodesConfig = OmegaConf.to_object(cfg.episodes)
     pcfg: PlannerConfig = OmegaConf.to_object(cfg.planner)
     emb = OmegaConf.to_object(cfg.embodiment)
     cm = catalog.dataset("costmaps", scene).load(emb.name)
+    screen, screened = screening(scene, cfg, catalog, cm)
     graph = NavGraph(cm, eligible_cells(cm, ecfg), ecfg.geodesic_neighbourhood)
-    views = None
+    views = goal_views = cam = None
     if ecfg.view_near_m > 0:
         cam, _ = camera_scene(catalog, scene, emb.name, view_dependent=False)
         views = NearViews(cam, cm, emb, ecfg.view_near_m)
+    if cfg.screen.avoid and screen["kept"] and any(cfg.task[n].type == "imagenav" for n in cfg.task):
+        if cam is None:
+            cam, _ = camera_scene(catalog, scene, emb.name, view_dependent=False)
+        q = cfg.screen.layer
+        goal_views = (DefectViews(cam, emb, q.view_width, q.view_width * 3 // 4, q.blur_angle, q.blur_sigma_m),
+                      cfg.screen.goal_view_blur_max)
     setup_s = time.process_time() - cpu0  # per scene, whatever the number of episodes
     remove_scene_partitions(catalog, scene)
     held_out = scene_split(scene.scene_id, ecfg.scene_splits)
     if held_out:
         ecfg.splits = {held_out: 1.0}
+    if screened is not None:
+        screen["screened_share_of_graph"] = round(float(screened[graph.cells[:, 0], graph.cells[:, 1]].mean()), 4) \
+            if len(graph.cells) else 0.0
     result = {"outputs": [], "tasks": {}, "graph_nodes": len(graph.cells), "graph_edges": graph.num_edges,
-              "split": held_out, "setup_cpu_s": round(setup_s, 3)}
+              "split": held_out, "setup_cpu_s": round(setup_s, 3), "screening": screen}
     shortfalls = []
     for name in sorted(cfg.task):
         tcfg: TaskConfig = OmegaConf.to_object(cfg.task[name])
@@ -61,8 +90,15 @@ def run(scene, cfg, catalog) -> dict:
         if tcfg.type == "objectnav":
             instances = load_instances(scene, catalog, tcfg.instance_source).to_pylist()
         seed = stream_seed(ecfg.seed, scene.scene_id, name)
+        if not screen["kept"]:  # screen.reject: the scene's verdict is reject; its shards stay empty
+            for ds, schema in (("episodes", EPISODE_SCHEMA), ("trajectories", TRAJECTORY_SCHEMA)):
+                out = catalog.dataset(ds, scene, task=name)
+                write_table([], schema, out)
+                result["outputs"].append(str(out.path))
+            result["tasks"][name] = {"episodes": 0, "requested": tcfg.episodes_per_scene, "screened_out": True}
+            continue
         gen = EpisodeGenerator(cm, graph, tcfg, ecfg, pcfg, emb, f"{scene.group}/{scene.scene_id}", seed, instances,
-                               views)
+                               views, screened, goal_views)
         res = gen.generate()
         for ds, data, schema, options in (("episodes", res.episodes, EPISODE_SCHEMA, {}),
                                           ("trajectories", res.trajectories, TRAJECTORY_SCHEMA, TRAJECTORY_WRITE)):
@@ -81,5 +117,6 @@ def run(scene, cfg, catalog) -> dict:
     if shortfalls:
         result["shortfall"] = shortfalls
     result["view_checks"] = views.checks if views else 0
+    result["goal_view_renders"] = goal_views[0].views if goal_views else 0
     result["cpu_s"] = round(time.process_time() - cpu0, 3)  # the whole stage, all threads
     return result

@@ -1,0 +1,106 @@
+"""What a robot's camera sees of a reconstruction's defects: per rendered view, the share of its
+pixels that are blur or holes (issue 35, section 4; the screen stage's render cue and the
+episodes stage's ImageNav goal-view test).
+
+- blur: an opaque pixel drawn mostly (half its opacity or more) by oversized Gaussians off the
+  floor: largest standard deviation at least ``blur_sigma`` metres and (their alpha-weighted
+  mean) over the pixel's depth at least ``blur_angle`` radians. A trained reconstruction smears a region few captures saw into a few
+  large splats (on the real hall the pink sofas a metre ahead: splats of sigma 1.1 m, 28 pixels
+  of a 160-pixel-wide view); the absolute size keeps plain surfaces seen up close (a wall of
+  0.1 m splats at 0.4 m) out, the angle keeps large splats far away out. Floor pixels are left
+  out (means within FLOOR_Z of z = 0): trained floors are drawn with large flat splats that a
+  grazing view stretches, and a smooth floor is no defect.
+- holes: a pixel whose accumulated opacity stays below 0.5 (the view looks through the
+  reconstruction).
+
+The renders are the compiled CPU renderer's (`navcore.render.cpu_fast`): the decisions must not
+depend on the machine. A view costs about 30 ms on one core of the 2-core CI machine for the 1.25 M
+hall (the cull over every Gaussian dominates; the image size barely matters).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from navcore.render.camera import embodiment_camera
+
+FLOOR_Z = 0.1
+"""Gaussians whose mean lies within this height of the floor (metres, aligned frame) are floor."""
+OPAQUE = 0.5
+"""Accumulated opacity below which a pixel is a hole."""
+
+
+@dataclass
+class ViewDefects:
+    """Per view: share of its pixels that are blur and share that are holes; with points, where
+    the pixels land on the map (x, y of their surface; a hole pixel where its ray meets the floor
+    plane, none for a hole pixel looking up): seen (every opaque pixel and every located hole
+    pixel), blur and hole, each [K, 2] over all the views."""
+
+    blur: np.ndarray
+    hole: np.ndarray
+    seen: np.ndarray | None = None
+    blur_xy: np.ndarray | None = None
+    hole_xy: np.ndarray | None = None
+
+    @property
+    def defect(self) -> np.ndarray:
+        return self.blur + self.hole
+
+
+class DefectViews:
+    """Renders views of one scene and measures their defects.
+
+    Args:
+        scene: the Gaussians the camera renders (`navcore.gaussians.content.camera_scene`).
+        emb: the embodiment (camera height, pitch, field of view).
+        width, height: the test image (the share barely depends on it: 64 x 48 and 160 x 120
+            agree within 2 points on the real hall).
+        blur_angle: radians, see the module doc.
+    """
+
+    def __init__(self, scene, emb, width: int = 64, height: int = 48, blur_angle: float = 0.15,
+                 blur_sigma: float = 0.0):
+        from navcore.render import cpu_fast
+
+        self.emb, self.size, self.blur_angle = emb, (int(width), int(height)), float(blur_angle)
+        self.blur_sigma = float(blur_sigma)
+        self._g = cpu_fast.prepare(scene)
+        sigma = np.exp(np.asarray(scene.log_scales, np.float64).max(1))
+        big = (sigma >= self.blur_sigma) & (np.abs(np.asarray(scene.means)[:, 2]) > FLOOR_Z)  # floor splats never blur
+        self._feats = np.c_[big, big * sigma].astype(np.float32)  # per pixel: their opacity, x their sigma
+        self._render = cpu_fast.render_one
+        self.views = 0
+
+    def measure(self, poses: np.ndarray, points: bool = False) -> ViewDefects:
+        """poses [P, 3] (x, y, yaw) -> the defect shares of their views (and, with points, where
+        their pixels land)."""
+        poses = np.asarray(poses, np.float64).reshape(-1, 3)
+        vm, K, w, h = embodiment_camera(self.emb, poses, *self.size)
+        blur, hole = np.zeros(len(poses)), np.zeros(len(poses))
+        seen, bxy, hxy = [], [], []
+        u, v = np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5)
+        for p in range(len(poses)):
+            feats, depth, alpha = self._render(self._g, vm[p], K[p], w, h, 0, features=self._feats)
+            self.views += 1
+            opaque = alpha >= OPAQUE
+            sigma = feats[..., 1] / np.maximum(feats[..., 0], 1e-6)  # the big splats' mean sigma
+            bad = opaque & (feats[..., 0] >= 0.5 * alpha) & (sigma / np.maximum(depth, 1e-3) >= self.blur_angle)
+            blur[p], hole[p] = float(bad.mean()), float((~opaque).mean())
+            if points:
+                c2w = np.linalg.inv(vm[p].astype(np.float64))
+                rays = np.stack([(u - K[p][0, 2]) / K[p][0, 0], (v - K[p][1, 2]) / K[p][1, 1], np.ones_like(u)], -1)
+                rays = rays @ c2w[:3, :3].T  # world directions, camera z = 1
+                o = c2w[:3, 3]
+                surf = o + rays * depth[..., None]
+                t_floor = -o[2] / np.where(rays[..., 2] < -1e-6, rays[..., 2], np.nan)  # rays down to z = 0
+                gap = ~opaque & np.isfinite(t_floor)
+                floor_hit = o[:2] + rays[..., :2] * np.nan_to_num(t_floor)[..., None]
+                seen += [surf[opaque][:, :2], floor_hit[gap]]
+                bxy.append(surf[bad][:, :2])
+                hxy.append(floor_hit[gap])
+        if not points:
+            return ViewDefects(blur, hole)
+        cat = lambda a: np.concatenate(a) if a else np.zeros((0, 2))  # noqa: E731
+        return ViewDefects(blur, hole, cat(seen), cat(bxy), cat(hxy))

@@ -1,0 +1,57 @@
+"""Stage `screen`: per scene, the reconstruction-quality layer on the main embodiment's costmap
+grid (stages/screen/quality.py) -> 03_costmaps/{scene_id}_quality.zarr, its top-down picture, and
+the scene's quality score (the episodes stage gives the verdict and keeps episodes out of the
+flagged cells)."""
+from __future__ import annotations
+
+import numpy as np
+from omegaconf import OmegaConf
+
+from navcore.gaussians.content import camera_scene, content_of
+from stages.screen.quality import QualityConfig, scene_score, screen_layers
+
+# top-down picture colours: outside the supported map, obstacles, blur, holes (free cells white)
+_OUTSIDE, _OBSTACLE, _BLUR, _HOLE, _VIEW = (230, 190, 190), (60, 60, 60), (255, 0, 255), (80, 120, 255), (255, 150, 0)
+
+
+def picture(layers: dict, support: np.ndarray, valid: np.ndarray, view: dict | None, origin, resolution: float) -> np.ndarray:
+    """[ny, nx, 3] uint8, north up: obstacles dark, blobs magenta, floor holes blue, cells flagged
+    by the rendered views orange, the lattice poses whose views failed as black dots."""
+    img = np.full(support.shape + (3,), 255, np.uint8)
+    img[~support] = _OUTSIDE
+    img[support & ~valid] = _OBSTACLE
+    img[layers["view_blur"] & valid] = _VIEW
+    img[layers["view_hole"] & valid] = _VIEW
+    img[layers["hole"] & valid] = _HOLE
+    img[layers["blur"] & valid] = _BLUR
+    if view is not None and len(view["poses"]):
+        cells = np.floor((view["poses"] - np.asarray(origin)) / resolution).astype(int)
+        for (j, i), b in zip(cells, view["blur"]):
+            img[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2] = (0, 0, 0) if b >= 0.5 else (0, 160, 0)
+    return img[::-1]
+
+
+def run(scene, cfg, catalog) -> dict:
+    qcfg: QualityConfig = OmegaConf.to_object(cfg.screen.layer)
+    emb = OmegaConf.to_object(cfg.embodiment)
+    costmaps = catalog.dataset("costmaps", scene)
+    cm = costmaps.load(emb.name)
+    raw, _, _ = costmaps.load_layers(emb.name)
+    support = np.asarray(raw["support"], bool)
+    valid = ~cm.occupancy & support
+    content = content_of(catalog.dataset("aligned", scene).load(view_dependent=False)[0])
+    camera, _ = camera_scene(catalog, scene, emb.name, view_dependent=False)
+    out = screen_layers(content, camera, valid, cm.origin, cm.resolution, emb, qcfg)
+    view = out.pop("view")
+    rendered = out.pop("views")
+    score = scene_score(out, valid, cm.resolution)
+    arrays = dict(out)
+    if view is not None:
+        arrays |= {"view_poses": view["poses"], "view_blur_share": view["blur"], "view_hole_share": view["hole"]}
+    ds = catalog.dataset("quality", scene)
+    with ds.writing() as root:
+        ds.write(root, arrays, {"origin": list(map(float, cm.origin)), "resolution": cm.resolution,
+                                "embodiment": emb.name, **score, "views_rendered": rendered})
+    pic = catalog.dataset("quality_picture", scene)
+    pic.save(picture(out, support, valid, view, cm.origin, cm.resolution))
+    return {"outputs": [str(ds.path), str(pic.path)], "quality": score, "views_rendered": rendered}
