@@ -682,7 +682,11 @@ def test_defect_views_known_answers(room_with_door):
     assert r.blur[0] > 0.5 and r.blur[1] == 0.0 and r.hole[1] == 0.0  # "mostly blur"; the wall: neither
     empty = DefectViews(_blob_scene([]).subset(np.zeros(len(_blob_scene([]).means), bool)), emb).measure(
         np.array([[1.0, 1.5, 0.0]]))
-    assert empty.hole[0] == 1.0 and empty.blur[0] == 0.0
+    # nothing rendered: the holes are the rows whose rays meet the floor within 0.8 x 8 m (level
+    # camera: row v's centre v + 0.5 lies (v + 0.5 - 24) / f below the horizon, f = 32 px)
+    assert emb.camera_pitch_deg == 0
+    rows = sum(v + 0.5 - 24 > 0 and emb.camera_height * 32 / (v + 0.5 - 24) < 6.4 for v in range(48))
+    assert empty.hole[0] == rows / 48 and empty.blur[0] == 0.0 and rows == 20
     x, y = (a.ravel() for a in np.meshgrid(np.arange(2.5, 8, 0.5), np.arange(-2, 5, 0.5)))
     n = len(x)
     floor = GaussianScene(np.c_[x, y, np.zeros(n)], np.tile([1.0, 0, 0, 0], (n, 1)), np.log(np.tile([0.6, 0.6, 0.01], (n, 1))),
@@ -755,3 +759,21 @@ def test_imagenav_goal_views_mostly_blur_are_never_produced(room_with_door):
         if gv is not None:
             assert res.rejections["goal_view_blurred"] > 0
     assert worst[False] <= 0.5 < worst[True]
+
+
+def test_paths_crossing_matches_walking_each_path(room_with_door):
+    """DistanceField.paths_crossing (pointer jumping) against walking every node's path and
+    sampling its segments densely."""
+    cm = room_with_door
+    g = NavGraph(cm, ~cm.occupancy)
+    f = g.field(g.cells[[5]])
+    mask = np.zeros(cm.clearance.shape, bool)
+    mask[20:30, 50:55] = True
+    fast = f.paths_crossing(mask)
+    r = np.random.default_rng(3)
+    for node in r.choice(len(g.cells), 300, replace=False):
+        path = f.path_cells(g.cells[node]).astype(float)
+        pts = [path[:1]] + [a + np.linspace(0, 1, 50)[:, None] * (b - a) for a, b in zip(path[:-1], path[1:])]
+        ij = np.rint(np.concatenate(pts)).astype(int)
+        assert fast[node] == mask[ij[:, 0], ij[:, 1]].any(), node
+    assert 0 < fast.mean() < 1

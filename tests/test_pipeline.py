@@ -682,7 +682,7 @@ def test_screening_through_the_pipeline_and_screen_reject(tmp_path, make_cfg):
     assert 0 < entry["score"] < 1 and abs(entry["score"] - layer.attrs["score"]) < 1e-12 and flagged.any()
     assert (tmp_path / "03_costmaps" / f"{sid}_quality.png").is_file()
     res = layer.attrs["resolution"]
-    keep_out = grow(flagged, 0.25, res)  # screen.margin_m's default
+    keep_out = grow(flagged, 0.1, res)  # screen.margin_m's default
     origin = np.asarray(layer.attrs["origin"])
     rows = 0
     for task in ("pointnav", "imagenav"):

@@ -145,7 +145,7 @@ def without_splats(scene: GaussianScene, indices: np.ndarray) -> GaussianScene:
     return scene.subset(keep)
 
 
-def camera_scene(catalog, scene, embodiment: str, **load_kw) -> tuple[GaussianScene, dict]:
+def camera_scene(catalog, scene, embodiment: str, loaded: tuple | None = None, **load_kw) -> tuple[GaussianScene, dict]:
     """The aligned scene as an embodiment's camera sees it: all Gaussians but the noise splats its
     costmap hid (floaters and isolated splats in the space its body may occupy, which the robot
     drives through: `stages.costmap.build.hidden_splats`). Every renderer of the pipeline loads
@@ -154,9 +154,10 @@ def camera_scene(catalog, scene, embodiment: str, **load_kw) -> tuple[GaussianSc
     Args:
         catalog: the pipeline's catalog (its "aligned" and "costmaps" datasets).
         scene: the catalog's scene entry.
+        loaded: the aligned dataset's (scene, attrs) when the caller has loaded it already.
         load_kw: passed to the aligned dataset's load (view_dependent).
     """
-    gs, attrs = catalog.dataset("aligned", scene).load(**load_kw)
+    gs, attrs = loaded or catalog.dataset("aligned", scene).load(**load_kw)
     hidden = catalog.dataset("costmaps", scene).hidden(embodiment)
     if not len(hidden):
         return gs, attrs

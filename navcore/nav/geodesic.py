@@ -132,6 +132,28 @@ class DistanceField:
             out.append(u)
         return self.graph.cells[out]
 
+    def paths_crossing(self, mask: np.ndarray) -> np.ndarray:
+        """[n] bool per graph node: its shortest path to the sources touches a cell of mask
+        ([ny, nx] bool), at a vertex or along a segment (sampled every half cell). Pointer
+        jumping over the predecessor tree: log2(path length) vectorised rounds."""
+        n = len(self.pred)
+        cells = self.graph.cells
+        bad = np.asarray(mask, bool)[cells[:, 0], cells[:, 1]].copy()
+        has = self.pred >= 0
+        u = np.flatnonzero(has)
+        a, b = cells[u].astype(np.float64), cells[self.pred[u]].astype(np.float64)
+        steps = int(np.ceil(2 * np.abs(b - a).max(initial=0.0))) + 1
+        for t in np.linspace(0.0, 1.0, steps):
+            ij = np.rint(a + t * (b - a)).astype(np.int64)
+            bad[u] |= mask[ij[:, 0], ij[:, 1]]
+        up = np.where(has, self.pred, np.arange(n)).astype(np.int64)
+        while True:
+            bad |= bad[up]
+            nxt = up[up]
+            if np.array_equal(nxt, up):
+                return bad
+            up = nxt
+
     def path_xy(self, cell) -> np.ndarray:
         """As path_cells, in metres: [M, 2] (x, y)."""
         return self.graph.costmap.cell_centers(self.path_cells(cell))

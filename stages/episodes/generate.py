@@ -178,9 +178,6 @@ class EpisodeGenerator:
             return None
         geo = float(fld.node_dist[node])
         path_cells = fld.path_cells(self.graph.cells[node])
-        if self._screened(path_cells):  # the geodesic crosses blur or a hole: the expert would too
-            self.rejections["path_screened"] += 1
-            return None
         if goal.kind == "object":
             # the goal instance is the one whose view point ends the geodesic
             inst = next(v for v in goal.instances if (v["cells"] == path_cells[-1]).all(1).any())
@@ -323,7 +320,9 @@ class EpisodeGenerator:
         weights). Starts lie within the geodesic limits; PointNav / ImageNav weight them with
         Habitat's near-straight keep probability: the same distribution as its rejection
         sampling, without the rejected draws. Starts inside the goal's success region are left
-        out, and so are screened cells. Without balancing, one pool with bin -1."""
+        out, and so are the nodes whose geodesic to the goal crosses a screened cell (the taut
+        expert may still touch one: checked after the rollout). Without balancing, one pool with
+        bin -1."""
         t, dc = self.task, self.ecfg.difficulty
         d = fld.node_dist
         nodes = np.flatnonzero((d >= t.min_geodesic) & (d <= t.max_geodesic))
@@ -335,9 +334,8 @@ class EpisodeGenerator:
         regions = np.array([v["region"] for v in goal.instances]) if goal.kind == "object" else point_regions(goal.xy[None])
         near = region_distance(self.cm.cell_centers(self.graph.cells[nodes]), regions)
         keep = (w > 0) & (near > t.success_radius)  # no start inside its own success region
-        if self.screened is not None:  # nor in a screened cell (the stage reports their share)
-            cells = self.graph.cells[nodes]
-            keep &= ~self.screened[cells[:, 0], cells[:, 1]]
+        if self.screened is not None:  # nor where the geodesic to the goal crosses a screened cell
+            keep &= ~fld.paths_crossing(self.screened)[nodes]
         nodes, w = nodes[keep], w[keep]
         if not dc.balance:
             return [(-1, nodes, np.cumsum(w))] if len(nodes) else []

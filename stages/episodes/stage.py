@@ -71,7 +71,7 @@ def run(scene, cfg, catalog) -> dict:
         if cam is None:
             cam, _ = camera_scene(catalog, scene, emb.name, view_dependent=False)
         q = cfg.screen.layer
-        goal_views = (DefectViews(cam, emb, q.view_width, q.view_width * 3 // 4, q.blur_angle, q.blur_sigma_m),
+        goal_views = (DefectViews(cam, emb, q.view_width, q.view_width * 3 // 4, q.blur_angle, q.blur_sigma_m, q.view_range_m),
                       cfg.screen.goal_view_blur_max)
     setup_s = time.process_time() - cpu0  # per scene, whatever the number of episodes
     remove_scene_partitions(catalog, scene)

@@ -17,7 +17,7 @@ class ScreenConfig:
     """Episodes keep out of flagged cells: starts, goals, ObjectNav view points and every pose of
     the expert trajectory (rejections counted by reason); ImageNav goal views mostly blur are
     redrawn."""
-    margin_m: float = 0.25
+    margin_m: float = 0.1
     """Episodes keep this far from flagged cells, metres."""
     goal_view_blur_max: float = 0.5
     """ImageNav: a goal view with more than this share of blur or hole pixels is never produced."""

@@ -27,7 +27,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
-from scipy.spatial import cKDTree
 
 from navcore.nav.screening import disk, grow
 
@@ -67,6 +66,8 @@ class QualityConfig:
     """Lattice spacing of the rendered poses, metres."""
     view_yaws: int = 4
     """Headings rendered per lattice pose."""
+    view_range_m: float = 8.0
+    """Views are rendered up to this far, metres (navcore.render.view_quality)."""
     view_width: int = 64
     """Width of a rendered view, pixels (height: 3/4 of it)."""
     blur_sigma_m: float = 0.5
@@ -200,7 +201,8 @@ def screen_layers(content, camera, valid: np.ndarray, origin, resolution: float,
     layers = quality_layers(content, origin, valid.shape, resolution, cfg)
     view, rendered = None, 0
     if cfg.views and valid.any():
-        views = DefectViews(camera, emb, cfg.view_width, cfg.view_width * 3 // 4, cfg.blur_angle, cfg.blur_sigma_m)
+        views = DefectViews(camera, emb, cfg.view_width, cfg.view_width * 3 // 4, cfg.blur_angle, cfg.blur_sigma_m,
+                            cfg.view_range_m)
         view = view_layers(views, valid, origin, resolution, cfg)
         layers["view_blur"], layers["view_hole"] = view.pop("view_blur"), view.pop("view_hole")
         rendered = views.views

@@ -39,8 +39,9 @@ def run(scene, cfg, catalog) -> dict:
     raw, _, _ = costmaps.load_layers(emb.name)
     support = np.asarray(raw["support"], bool)
     valid = ~cm.occupancy & support
-    content = content_of(catalog.dataset("aligned", scene).load(view_dependent=False)[0])
-    camera, _ = camera_scene(catalog, scene, emb.name, view_dependent=False)
+    aligned = catalog.dataset("aligned", scene).load(view_dependent=False)
+    content = content_of(aligned[0])
+    camera, _ = camera_scene(catalog, scene, emb.name, loaded=aligned)
     out = screen_layers(content, camera, valid, cm.origin, cm.resolution, emb, qcfg)
     view = out.pop("view")
     rendered = out.pop("views")
