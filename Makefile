@@ -9,7 +9,7 @@ ARGS ?=
 CUDA ?=
 WHEELS ?=
 
-.PHONY: setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -107,6 +107,13 @@ eval: $(STAMP)
 # render-based costmap check, and the realistic synthetic scenes against the mesh
 bench-real: $(STAMP)
 	$(BIN)/python -m benchmarks.real $(ARGS)
+
+# scene and region screening: the quality layer against injected blur and holes on realistic
+# synthetic scenes, and on the real indoor scenes (their screen stage run first; pictures and the
+# sharpness cross-check) -> data/08_reports/screening.json, docs/bench_screening.md
+bench-screening: $(STAMP)
+	$(BIN)/python -m pipeline stages=[screen] scenes=real_indoor data_root=data/real_indoor
+	$(BIN)/python -m benchmarks.screening --real-data data/real_indoor --docs $(ARGS)
 
 # issue 13's proof (about two hours on two cores): storage of the default and real datasets, the
 # release cost (one-core sample runs of a real and a synthetic 1.5 M-Gaussian scene at 1/10 of the
