@@ -22,6 +22,7 @@ def synthetic(seed: int, level: str, n: int, regions: int, radius: float, **laye
     align -> costmap -> the quality layer (every cue, as the stage computes it): recall and
     precision per kind against the injected regions. layer: QualityConfig overrides."""
     from benchmarks.spatial import align_synthetic
+    from navcore.gaussians.cameras import cameras_from_json
     from navcore.nav.costmap import Costmap
     from navcore.nav.embodiment import Embodiment
     from navcore.voxels.field import VoxelizeConfig
@@ -37,7 +38,9 @@ def synthetic(seed: int, level: str, n: int, regions: int, radius: float, **laye
     lay, _ = build_costmap(aligned, emb, CostmapConfig(), VoxelizeConfig())
     cm = Costmap(lay.clearance, lay.origin, lay.resolution, lay.radius, lay.margin, lay.components)
     valid = ~cm.occupancy & lay.support
-    q = screen_layers(aligned, renderable, valid, lay.origin, lay.resolution, emb, QualityConfig(**layer))
+    c2w, ks = cameras_from_json({"hfov_deg": 90.0, "poses": sc.cameras}, 64, 48)  # the capture path
+    q = screen_layers(aligned, renderable, valid, lay.origin, lay.resolution, emb, QualityConfig(**layer),
+                      (t @ c2w, ks, 64, 48))
     can_to_al = t @ sc.transform  # the regions' centres, canonical -> aligned
     regs = [r | {"center": (can_to_al[:3, :3] @ [*r["center"], 0.0] + can_to_al[:3, 3])[:2].tolist()}
             for r in sc.defects]
@@ -47,8 +50,10 @@ def synthetic(seed: int, level: str, n: int, regions: int, radius: float, **laye
     for kind, layer in (("blur", blur), ("hole", q["hole"])):
         out[kind] = validate(layer, lay.origin, lay.resolution, [r for r in regs if r["kind"] == kind],
                              lay.support if kind == "blur" else all_cells)
-    out["flagged"] = validate(q["flagged"], lay.origin, lay.resolution, regs, lay.support | q["hole"])
+    defects = blur | q["hole"] | q["view_hole"]  # the cues of injectable defects; unseen is reported beside
+    out["flagged"] = validate(defects, lay.origin, lay.resolution, regs, lay.support | q["hole"])
     out["flagged_share_of_valid"] = float((q["flagged"] & valid).sum() / max(valid.sum(), 1))
+    out["unseen_share_of_valid"] = float((q["unseen"] & valid).sum() / max(valid.sum(), 1))
     return out
 
 
@@ -104,7 +109,8 @@ def real(data: str, folder: Path, poses: int = 200) -> list[dict]:
         flagged = layers["flagged"][cells[:, 0], cells[:, 1]]
         name = f"{scene.name}_quality_topdown.png"
         shutil.copyfile(catalog.dataset("quality_picture", scene).path, folder / name)
-        keys = [k for k in attrs if k.endswith("_share") or k in ("score", "valid_area_m2", "views_rendered")]
+        keys = [k for k in attrs if k.endswith("_share") or k in ("score", "valid_area_m2", "views_rendered",
+                                                                    "capture_cameras")]
         rows.append({"scene": scene.name, **{k: attrs[k] for k in keys},
                      "poses": len(pose), "poses_flagged": int(flagged.sum()),
                      "blurry_patches_flagged_median": float(np.median(blurry[flagged])) if flagged.any() else None,
@@ -166,12 +172,13 @@ def markdown(rep: dict, args) -> str:
                 "Cross-check with image sharpness, which no cue uses: views from random valid poses (random "
                 "headings, 160 x 120), the share of their 20 x 20 patches whose Laplacian is flat (std < 0.01), "
                 "for poses in flagged cells and in clean ones.", "",
-                "| scene | valid m2 | score | blobs | floor holes | views: blur | views: holes | views rendered |"
-                " poses flagged / all | blurry patches, flagged poses (mean) | clean poses (mean) |",
-                "|---|---|---|---|---|---|---|---|---|---|---|"]
+                "| scene | valid m2 | score | blobs | floor holes | views: blur | views: holes | unseen (capture cameras) |"
+                " views rendered | poses flagged / all | blurry patches, flagged poses (mean) | clean poses (mean) |",
+                "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in rep["real"]:
             out.append(f"| {r['scene']} | {r['valid_area_m2']} | {r['score']:.3f} | {pc(r['blur_share'])} | {pc(r['hole_share'])}"
-                       f" | {pc(r['view_blur_share'])} | {pc(r['view_hole_share'])} | {r['views_rendered']} |"
+                       f" | {pc(r['view_blur_share'])} | {pc(r['view_hole_share'])} |"
+                       f" {pc(r['unseen_share']) if r.get('capture_cameras') else 'no cameras'} | {r['views_rendered']} |"
                        f" {r['poses_flagged']} / {r['poses']} | {pc(r['blurry_patches_flagged_mean'] or 0)} |"
                        f" {pc(r['blurry_patches_clean_mean'] or 0)} |")
     return "\n".join(out) + "\n"

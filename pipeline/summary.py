@@ -133,12 +133,14 @@ def print_summary(summary: dict, console: Console) -> None:
         console.print(f)
     if summary.get("screening"):
         f = Table(title="scene screening (quality score: share of valid cells not flagged)")
-        for col in ("scene", "score", "blobs", "floor holes", "views: blur", "views: holes", "verdict", "episodes"):
+        for col in ("scene", "score", "blobs", "floor holes", "views: blur", "views: holes", "unseen", "verdict",
+                    "episodes"):
             f.add_column(col, overflow="fold")
         style = {"pass": "green", "warn": "yellow", "reject": "red"}
         for r in summary["screening"]:
             f.add_row(f"{r['scene_id']} ({r['scene']})", f"{r['score']:.2f}",
-                      *(f"{100 * r[k]:.1f} %" for k in ("blur_share", "hole_share", "view_blur_share", "view_hole_share")),
+                      *(f"{100 * r[k]:.1f} %" for k in ("blur_share", "hole_share", "view_blur_share", "view_hole_share",
+                                                         "unseen_share")),
                       f"[{style[r['verdict']]}]{r['verdict']}[/]", "kept" if r["kept"] else "rejected (screen.reject)")
         console.print(f)
     placed = summary.get("placement")

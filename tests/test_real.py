@@ -482,3 +482,42 @@ def test_quality_layer_finds_injected_blur_and_holes():
         assert r[kind]["recall"] >= 0.9 and r[kind]["precision"] >= 0.8, (kind, r[kind])
     clean = synthetic(201, "moderate", 60_000, 0, 0.7)
     assert clean["flagged"]["flagged_cells"] < 0.05 * r["flagged"]["flagged_cells"], clean
+
+
+def test_capture_camera_cue_flags_what_no_camera_saw():
+    """The capture-camera cue (stages/screen/quality.py camera_layer) on a generated scene and its
+    capture path: with every camera little is unseen; with the cameras of one end only, every
+    cell beyond the render range of all of them is unseen, and no cell is seen by more cameras
+    than with all of them."""
+    from benchmarks.spatial import align_synthetic
+    from navcore.gaussians.cameras import cameras_from_json
+    from navcore.nav.costmap import Costmap
+    from navcore.nav.embodiment import Embodiment
+    from navcore.voxels.field import VoxelizeConfig
+    from stages.costmap.build import CostmapConfig, build_costmap
+    from stages.screen.quality import QualityConfig, camera_layer
+    from stages.synthesize.generate import SyntheticConfig, generate_scene
+
+    sc = generate_scene(201, SyntheticConfig(num_gaussians=60_000))
+    _, t, renderable, aligned = align_synthetic(sc)
+    lay, _ = build_costmap(aligned, Embodiment(), CostmapConfig(), VoxelizeConfig())
+    valid = ~Costmap(lay.clearance, lay.origin, lay.resolution, lay.radius, lay.margin, lay.components).occupancy \
+        & lay.support
+    c2w, ks = cameras_from_json({"hfov_deg": 90.0, "poses": sc.cameras}, 64, 48)
+    c2w = t @ c2w
+    cfg = QualityConfig(view_range_m=2.0)  # a small scene: a short range leaves cells out of reach
+    unseen, count = camera_layer(renderable, c2w, ks, 64, 48, valid, lay.origin, lay.resolution, cfg)
+    assert (unseen & valid).sum() < 0.15 * valid.sum()
+    x = c2w[:, 0, 3]
+    end = x <= np.quantile(x, 0.3)
+    part_unseen, part = camera_layer(renderable, c2w[end], ks[end], 64, 48, valid, lay.origin, lay.resolution, cfg)
+    assert (part[valid] <= count[valid]).all() and (count[~valid] == -1).all()
+    # in a 90 x 74 degree frustum a point's depth is >= 0.625 x its distance: out of reach beyond 1.6 x range
+    ij = np.argwhere(valid)
+    xy = np.asarray(lay.origin) + (ij[:, ::-1] + 0.5) * lay.resolution
+    far = np.hypot(*(xy[:, None] - c2w[end][None, :, :2, 3]).transpose(2, 0, 1)).min(1) > 1.6 * cfg.view_range_m + 0.2
+    beyond = np.zeros_like(valid)
+    beyond[ij[far, 0], ij[far, 1]] = True
+    assert beyond.sum() > 100, beyond.sum()
+    assert (part[beyond] == 0).all(), np.unique(part[beyond], return_counts=True)
+    assert part_unseen[beyond].mean() > 0.95, part_unseen[beyond].mean()  # less unseen pieces under 0.25 m2

@@ -222,8 +222,9 @@ class CostmapDataset(ZarrDataset):
         return g
 
 
-QUALITY_LAYERS = ("blur", "hole", "view_blur", "view_hole", "flagged")
-"""Arrays of a scene's quality store (stage `screen`), [ny, nx] bool on its costmap grid."""
+QUALITY_LAYERS = ("blur", "hole", "view_blur", "view_hole", "unseen", "flagged", "camera_views")
+"""Arrays of a scene's quality store (stage `screen`), [ny, nx] on its costmap grid: bool, but
+camera_views (int32 capture cameras seeing each valid cell's floor, -1 elsewhere; only with cameras)."""
 
 
 class QualityDataset(ZarrDataset):

@@ -31,6 +31,9 @@ FLOOR_Z = 0.1
 """Gaussians whose mean lies within this height of the floor (metres, aligned frame) are floor."""
 OPAQUE = 0.5
 """Accumulated opacity below which a pixel is a hole."""
+GRAZING = 0.05
+"""Relative slack of the coverage test's depth comparison (a floor seen at a grazing angle comes
+back a little short: its splats' extent along the ray)."""
 FLOOR_REACH = 0.8
 """A see-through pixel is a hole where its ray meets the floor within this share of far."""
 
@@ -108,3 +111,30 @@ class DefectViews:
             return ViewDefects(blur, hole)
         cat = lambda a: np.concatenate(a) if a else np.zeros((0, 2))  # noqa: E731
         return ViewDefects(blur, hole, cat(seen), cat(bxy), cat(hxy))
+
+
+def camera_coverage(scene, c2w: np.ndarray, Ks: np.ndarray, width: int, height: int, points: np.ndarray,
+                    far: float = 8.0, tolerance: float = 0.1) -> np.ndarray:
+    """[N] how many of the cameras see each point [N, 3] (aligned frame): inside the image, in
+    front of the camera and no farther than far, and not behind what the camera renders there (the
+    point's depth at most its pixel's rendered depth (1 + GRAZING) + tolerance; a pixel the scene leaves
+    see-through hides nothing). c2w [M, 4, 4] camera -> world (OpenCV axes), Ks [M, 3, 3] for a
+    width x height image."""
+    from navcore.render import cpu_fast
+
+    g = cpu_fast.prepare(scene)
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    seen = np.zeros(len(pts), np.int32)
+    for m in range(len(c2w)):
+        vm = np.linalg.inv(np.asarray(c2w[m], np.float64))
+        _, depth, alpha = cpu_fast.render_one(g, vm.astype(np.float32), Ks[m], width, height, 0, far=far)
+        cam = pts @ vm[:3, :3].T + vm[:3, 3]
+        z = cam[:, 2]
+        front = (z > 0.05) & (z <= far)
+        u = np.floor(Ks[m][0, 0] * cam[:, 0] / np.where(front, z, 1) + Ks[m][0, 2]).astype(np.int64)
+        v = np.floor(Ks[m][1, 1] * cam[:, 1] / np.where(front, z, 1) + Ks[m][1, 2]).astype(np.int64)
+        inside = front & (u >= 0) & (u < width) & (v >= 0) & (v < height)
+        i = np.flatnonzero(inside)
+        d, a = depth[v[i], u[i]], alpha[v[i], u[i]]
+        seen[i[(a < OPAQUE) | (z[i] <= d * (1 + GRAZING) + tolerance)]] += 1
+    return seen

@@ -51,7 +51,8 @@ def screening(scene, cfg, catalog, cm) -> tuple[dict, np.ndarray | None]:
                          "(rerun stages=[screen])")
     v = verdict(float(attrs["score"]), sc.warn_below, sc.reject_below)
     entry = {"score": attrs["score"], "verdict": v, "kept": not (sc.reject and v == "reject"),
-             **{k: attrs[k] for k in ("blur_share", "hole_share", "view_blur_share", "view_hole_share")}}
+             **{k: attrs.get(k, 0.0) for k in ("blur_share", "hole_share", "view_blur_share", "view_hole_share",
+                                               "unseen_share")}}
     return entry, (grow(flagged, sc.margin_m, cm.resolution) if sc.avoid else None)
 
 

@@ -1,7 +1,7 @@
 """The reconstruction-quality layer on the costmap grid: where the robot's camera would look at
 blur or through holes (issue 35, section 4).
 
-Three cues:
+Four cues:
 - blobs (from the Gaussians): opaque splats that are large (largest sigma >= ``blob_sigma_m``)
   and not flat (smallest / largest sigma >= ``blob_flatness``) below ``top_m``. Trained scenes draw
   a surface with thin discs, large ones too on plain walls and floors; a place few views saw is
@@ -17,13 +17,16 @@ Three cues:
   hole pixels (`navcore.render.view_quality`) are put where they land on the map, and a cell is
   flagged where they make at least ``view_cell_share`` of what lands there (the real hall's
   smeared sofas, flat splats a metre wide that no shape rule on the splats alone separates from
-  its floor).
+  its floor);
+- unseen (capture cameras, when the scene has them): valid cells whose floor fewer than
+  ``camera_min_views`` capture cameras see (in their image, within ``view_range_m``, not behind
+  what they render there).
 Flagged cells grow by ``margin_m``. `validate` scores a layer against injected regions
 (synthetic.realism blur_regions / hole_regions).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
@@ -80,6 +83,19 @@ class QualityConfig:
     """A cell needs at least this many blur (hole) pixels landing in its window ..."""
     view_cell_share: float = 0.5
     """... and at least this share of the pixels landing there, to be flagged by the views."""
+    cameras: bool = True
+    """With capture cameras (cameras.json; synthetic scenes' ground truth), flag the cells no
+    capture camera saw."""
+    camera_min_views: int = 1
+    """A cell fewer capture cameras see (within view_range_m, not hidden behind what they
+    render) is unseen."""
+    camera_heights: list[float] = field(default_factory=lambda: [0.0, 0.5, 1.0])
+    """A cell is seen by a capture camera that sees any of these points of its column, metres (the
+    floor, the body, the robot's camera)."""
+    camera_stride: int = 2
+    """The floor is tested at every this many cells (each cell takes its block's answer)."""
+    camera_width: int = 64
+    """Width of the capture cameras' depth renders, pixels (height: their aspect)."""
     margin_m: float = 0.1
     """Flagged cells grow by this, metres."""
 
@@ -187,7 +203,33 @@ def validate(flagged: np.ndarray, origin, resolution: float, regions: list[dict]
             "truth_cells": int(t.sum()), "flagged_cells": int(f.sum())}
 
 
-def screen_layers(content, camera, valid: np.ndarray, origin, resolution: float, emb, cfg: QualityConfig) -> dict:
+def camera_layer(scene, c2w: np.ndarray, Ks: np.ndarray, width: int, height: int, valid: np.ndarray, origin,
+                 resolution: float, cfg: QualityConfig) -> tuple[np.ndarray, np.ndarray]:
+    """The capture-camera cue: ([ny, nx] bool unseen valid cells, grown by margin_m; [ny, nx] int32
+    how many capture cameras see each cell's floor, -1 off the valid cells)."""
+    from navcore.render.view_quality import camera_coverage
+
+    k = max(1, int(cfg.camera_stride))
+    ny, nx = valid.shape
+    blocks = np.zeros(((ny + k - 1) // k, (nx + k - 1) // k), bool)
+    vi = np.argwhere(valid)
+    blocks[vi[:, 0] // k, vi[:, 1] // k] = True
+    bi = np.argwhere(blocks)
+    centre = np.minimum(bi * k + k // 2, [ny - 1, nx - 1])  # the block's middle cell
+    xy = np.asarray(origin) + (centre[:, ::-1] + 0.5) * resolution
+    hs = np.asarray(cfg.camera_heights, np.float64)
+    pts = np.c_[np.repeat(xy, len(hs), 0), np.tile(hs, len(xy))]
+    views = camera_coverage(scene, c2w, Ks, width, height, pts, cfg.view_range_m).reshape(-1, len(hs)).max(1)
+    per_block = np.full(blocks.shape, -1, np.int32)
+    per_block[bi[:, 0], bi[:, 1]] = views
+    count = np.where(valid, np.repeat(np.repeat(per_block, k, 0), k, 1)[:ny, :nx], -1).astype(np.int32)
+    unseen = _without_small(valid & (count >= 0) & (count < cfg.camera_min_views),
+                            cfg.hole_min_area_m2 / resolution ** 2)
+    return grow(unseen, cfg.margin_m, resolution), count
+
+
+def screen_layers(content, camera, valid: np.ndarray, origin, resolution: float, emb, cfg: QualityConfig,
+                  cameras: tuple | None = None) -> dict:
     """Every cue on one costmap grid: {"blur", "hole", "view_blur", "view_hole", "flagged": [ny, nx]
     bool, "view": the view cue's poses and shares (None without views), "views": views rendered}.
 
@@ -195,6 +237,8 @@ def screen_layers(content, camera, valid: np.ndarray, origin, resolution: float,
         content: the aligned content Gaussians (floaters out: the Gaussian cues).
         camera: what the robot's camera renders (`navcore.gaussians.content.camera_scene`).
         valid: [ny, nx] bool, the main embodiment's valid states (where views are rendered).
+        cameras: the capture cameras (camera -> world [M, 4, 4] in the aligned frame, Ks [M, 3, 3],
+            width, height), or None: no "unseen" cue.
     """
     from navcore.render.view_quality import DefectViews
 
@@ -208,7 +252,10 @@ def screen_layers(content, camera, valid: np.ndarray, origin, resolution: float,
         rendered = views.views
     else:
         layers["view_blur"] = layers["view_hole"] = np.zeros(valid.shape, bool)
-    layers["flagged"] = layers["blur"] | layers["hole"] | layers["view_blur"] | layers["view_hole"]
+    layers["unseen"] = np.zeros(valid.shape, bool)
+    if cfg.cameras and cameras is not None and valid.any():
+        layers["unseen"], layers["camera_views"] = camera_layer(camera, *cameras, valid, origin, resolution, cfg)
+    layers["flagged"] = layers["blur"] | layers["hole"] | layers["view_blur"] | layers["view_hole"] | layers["unseen"]
     return {**layers, "view": view, "views": rendered}
 
 
@@ -218,6 +265,6 @@ def scene_score(layers: dict, valid: np.ndarray, resolution: float) -> dict:
     n = max(int(valid.sum()), 1)
     out = {"score": round(1.0 - float((layers["flagged"] & valid).sum()) / n, 4),
            "valid_area_m2": round(float(valid.sum()) * resolution ** 2, 2)}
-    for k in ("blur", "hole", "view_blur", "view_hole"):
+    for k in ("blur", "hole", "view_blur", "view_hole", "unseen"):
         out[f"{k}_share"] = round(float((layers[k] & valid).sum()) / n, 4)
     return out

@@ -7,19 +7,23 @@ from __future__ import annotations
 import numpy as np
 from omegaconf import OmegaConf
 
+from navcore.gaussians.cameras import camera_file, read_cameras
 from navcore.gaussians.content import camera_scene, content_of
 from stages.screen.quality import QualityConfig, scene_score, screen_layers
 
 # top-down picture colours: outside the supported map, obstacles, blur, holes (free cells white)
-_OUTSIDE, _OBSTACLE, _BLUR, _HOLE, _VIEW = (230, 190, 190), (60, 60, 60), (255, 0, 255), (80, 120, 255), (255, 150, 0)
+_OUTSIDE, _OBSTACLE, _BLUR, _HOLE, _VIEW, _UNSEEN = \
+    (230, 190, 190), (60, 60, 60), (255, 0, 255), (80, 120, 255), (255, 150, 0), (220, 200, 0)
 
 
 def picture(layers: dict, support: np.ndarray, valid: np.ndarray, view: dict | None, origin, resolution: float) -> np.ndarray:
     """[ny, nx, 3] uint8, north up: obstacles dark, blobs magenta, floor holes blue, cells flagged
-    by the rendered views orange, the lattice poses whose views failed as black dots."""
+    by the rendered views orange, floor no capture camera saw yellow; the lattice poses as dots,
+    black where their worst view is mostly blur."""
     img = np.full(support.shape + (3,), 255, np.uint8)
     img[~support] = _OUTSIDE
     img[support & ~valid] = _OBSTACLE
+    img[layers["unseen"] & valid] = _UNSEEN
     img[layers["view_blur"] & valid] = _VIEW
     img[layers["view_hole"] & valid] = _VIEW
     img[layers["hole"] & valid] = _HOLE
@@ -42,7 +46,13 @@ def run(scene, cfg, catalog) -> dict:
     aligned = catalog.dataset("aligned", scene).load(view_dependent=False)
     content = content_of(aligned[0])
     camera, _ = camera_scene(catalog, scene, emb.name, loaded=aligned)
-    out = screen_layers(content, camera, valid, cm.origin, cm.resolution, emb, qcfg)
+    cams = camera_file(scene, catalog) if qcfg.cameras else None
+    capture = None
+    if cams is not None:
+        w, h = qcfg.camera_width, qcfg.camera_width * 3 // 4
+        c2w, ks = read_cameras(cams, w, h)
+        capture = (catalog.dataset("aligned", scene).transform() @ c2w, ks, w, h)
+    out = screen_layers(content, camera, valid, cm.origin, cm.resolution, emb, qcfg, capture)
     view = out.pop("view")
     rendered = out.pop("views")
     score = scene_score(out, valid, cm.resolution)
@@ -52,7 +62,9 @@ def run(scene, cfg, catalog) -> dict:
     ds = catalog.dataset("quality", scene)
     with ds.writing() as root:
         ds.write(root, arrays, {"origin": list(map(float, cm.origin)), "resolution": cm.resolution,
-                                "embodiment": emb.name, **score, "views_rendered": rendered})
+                                "embodiment": emb.name, **score, "views_rendered": rendered,
+                                "capture_cameras": 0 if capture is None else len(capture[0])})
     pic = catalog.dataset("quality_picture", scene)
     pic.save(picture(out, support, valid, view, cm.origin, cm.resolution))
-    return {"outputs": [str(ds.path), str(pic.path)], "quality": score, "views_rendered": rendered}
+    return {"outputs": [str(ds.path), str(pic.path)], "quality": score, "views_rendered": rendered,
+            "capture_cameras": 0 if capture is None else len(capture[0])}
