@@ -51,7 +51,8 @@ def measure(root: Path) -> dict:
         asset = root / "09_assets" / ing["group"] / sid
         stale = unlinked_source_files(asset, seen)
         store = tree_bytes([root / "01_scenes" / sid, asset], seen)
-        maps = tree_bytes([root / "02_voxels" / f"{sid}.zarr", root / "03_costmaps" / f"{sid}.zarr"], seen)
+        maps = tree_bytes([root / "02_voxels" / f"{sid}.zarr", root / "03_costmaps" / f"{sid}.zarr",
+                           root / "03_costmaps" / "screen" / f"{sid}.zarr"], seen)
         scenes.append({"scene_id": sid, "source_bytes": src, "store_and_asset_bytes": store, "maps_bytes": maps,
                        "ratio": store / src if src else None, "ratio_with_maps": (store + maps) / src if src else None,
                        "unlinked_source_files": stale})

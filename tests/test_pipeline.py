@@ -677,10 +677,10 @@ def test_screening_through_the_pipeline_and_screen_reject(tmp_path, make_cfg):
     sid = s1["results"][0]["scene_id"]
     (entry,) = s1["screening"]
     assert entry["scene_id"] == sid and entry["verdict"] in ("pass", "warn", "reject") and entry["kept"]
-    layer = zarr.open_group(str(tmp_path / "03_costmaps" / f"{sid}_quality.zarr"), mode="r")
+    layer = zarr.open_group(str(tmp_path / "03_costmaps" / "screen" / f"{sid}.zarr"), mode="r")
     flagged = np.asarray(layer["flagged"][...])
     assert 0 < entry["score"] < 1 and abs(entry["score"] - layer.attrs["score"]) < 1e-12 and flagged.any()
-    assert (tmp_path / "03_costmaps" / f"{sid}_quality.png").is_file()
+    assert (tmp_path / "03_costmaps" / "screen" / f"{sid}.png").is_file()
     res = layer.attrs["resolution"]
     keep_out = grow(flagged, 0.1, res)  # screen.margin_m's default
     origin = np.asarray(layer.attrs["origin"])

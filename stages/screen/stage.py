@@ -1,5 +1,5 @@
 """Stage `screen`: per scene, the reconstruction-quality layer on the main embodiment's costmap
-grid (stages/screen/quality.py) -> 03_costmaps/{scene_id}_quality.zarr, its top-down picture, and
+grid (stages/screen/quality.py) -> 03_costmaps/screen/{scene_id}.zarr, its top-down picture, and
 the scene's quality score (the episodes stage gives the verdict and keeps episodes out of the
 flagged cells)."""
 from __future__ import annotations
