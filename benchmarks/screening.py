@@ -162,11 +162,13 @@ def markdown(rep: dict, args) -> str:
            f"{args.regions} blurred and {args.regions} hole regions of {args.radius} m per scene "
            "(`synthetic.realism.blur_regions / hole_regions`); recall: share of the regions' cells flagged; "
            "precision: share of flagged cells within a region (+0.3 m). Targets 90 % / 80 %.", "",
-           "| seed | blur recall | blur precision | hole recall | hole precision | flagged share of valid cells | views |",
-           "|---|---|---|---|---|---|---|"]
+           "| seed | blur recall | blur precision | hole recall | hole precision | all defect cues: recall / precision |"
+           " flagged share of valid cells | of which unseen by the capture path | views |",
+           "|---|---|---|---|---|---|---|---|---|"]
     for r in rep["synthetic"]:
         out.append(f"| {r['seed']} | {pc(r['blur']['recall'])} | {pc(r['blur']['precision'])} | {pc(r['hole']['recall'])}"
-                   f" | {pc(r['hole']['precision'])} | {pc(r['flagged_share_of_valid'])} | {r['views_rendered']} |")
+                   f" | {pc(r['hole']['precision'])} | {pc(r['flagged']['recall'])} / {pc(r['flagged']['precision'])} |"
+                   f" {pc(r['flagged_share_of_valid'])} | {pc(r['unseen_share_of_valid'])} | {r['views_rendered']} |")
     if rep.get("real"):
         out += ["", "## Real scenes (the screen stage's layer; pictures in data/08_reports/screening/, not committed)", "",
                 "Cross-check with image sharpness, which no cue uses: views from random valid poses (random "

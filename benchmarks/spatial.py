@@ -114,13 +114,17 @@ def time_batch(fn, arg, n: int, repeats: int = 7) -> float:
     return float(np.median(out))
 
 
-def align_synthetic(sc) -> tuple[np.ndarray, np.ndarray, "object", "object"]:
+def align_synthetic(sc, cameras: bool = False) -> tuple[np.ndarray, np.ndarray, "object", "object"]:
     """A generated scene through content and floor alignment as the pipeline does them: (floor
     normal in the source frame, source -> aligned transform, all Gaussians aligned, the aligned
-    content)."""
+    content). cameras: with the capture path as evidence (the pipeline's case for scenes that
+    have cameras; real SOG / SPZ captures have none, hence the default)."""
+    from navcore.gaussians.cameras import cameras_from_json
+
     g = sc.gaussians
     g.extras[CONTENT_KEY] = content_mask(g.means)[0]
-    n, d, _ = fit_floor(content_of(g), AlignConfig())
+    c2w = cameras_from_json({"hfov_deg": 90.0, "poses": sc.cameras}, 64, 48)[0] if cameras else None
+    n, d, _ = fit_floor(content_of(g), AlignConfig(), c2w)
     t_align = floor_transform(n, d)
     renderable = g.transformed(t_align)
     return n, t_align, renderable, content_of(renderable)
@@ -128,14 +132,16 @@ def align_synthetic(sc) -> tuple[np.ndarray, np.ndarray, "object", "object"]:
 
 def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_states: int,
               n_motions: int, realism: "str | RealismConfig" = "none", resolutions=RESOLUTIONS, timing: bool = True,
-              render_check: RenderCheckConfig | None = None, ablations: dict | None = None) -> dict:
+              render_check: RenderCheckConfig | None = None, ablations: dict | None = None,
+              cameras: bool = False) -> dict:
     """One synthetic scene through content -> align -> costmap, against FCL on the mesh; with
     render_check, the render-based estimate of the 0.05 m map's FP / FN rates at the first
     render_check.poses of the same states, beside the true rates there; ablations: name -> CostmapConfig
-    overrides whose 0.05 m state FP / FN are reported beside the default's."""
+    overrides whose 0.05 m state FP / FN are reported beside the default's; cameras: align with the
+    capture path as evidence."""
     real = realism if isinstance(realism, RealismConfig) else RealismConfig(level=realism)
     sc = generate_scene(seed, SyntheticConfig(num_gaussians=n_gauss, realism=real))
-    n, t_align, renderable, aligned = align_synthetic(sc)
+    n, t_align, renderable, aligned = align_synthetic(sc, cameras)
     # alignment error against the ground truth: normal angle, and height of the true floor
     up_src = sc.transform[:3, :3] @ [0, 0, 1.0]
     tilt = float(np.degrees(np.arccos(np.clip(n @ up_src, -1, 1))))
