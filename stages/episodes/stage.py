@@ -65,7 +65,7 @@ def run(scene, cfg, catalog) -> dict:
     screen, screened = screening(scene, cfg, catalog, cm)
     graph = NavGraph(cm, eligible_cells(cm, ecfg), ecfg.geodesic_neighbourhood)
     views = goal_views = cam = None
-    if ecfg.view_near_m > 0:
+    if ecfg.view_near_m > 0 and screen["kept"]:
         cam, _ = camera_scene(catalog, scene, emb.name, view_dependent=False)
         views = NearViews(cam, cm, emb, ecfg.view_near_m)
     if cfg.screen.avoid and screen["kept"] and any(cfg.task[n].type == "imagenav" for n in cfg.task):
