@@ -9,7 +9,7 @@ ARGS ?=
 CUDA ?=
 WHEELS ?=
 
-.PHONY: setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -107,6 +107,13 @@ eval: $(STAMP)
 # render-based costmap check, and the realistic synthetic scenes against the mesh
 bench-real: $(STAMP)
 	$(BIN)/python -m benchmarks.real $(ARGS)
+
+# on a CUDA machine (make setup-gpu first): a 3DGS trained with gsplat on views of the real ScanNet
+# scan, in the scan's frame -> data/trained_scan/ (model.ply, cameras.json, train.json); bench-real
+# then compares its costmap with the scan (benchmarks.scan_truth --model)
+SCAN ?= ../shared/data/real_labelled/scannet_scene0000_02
+bench-trained-scan:
+	$(BIN)/python -m benchmarks.train_on_scan $(SCAN) data/trained_scan $(ARGS)
 
 # scene and region screening: the quality layer against injected blur and holes on realistic
 # synthetic scenes, and on the real indoor scenes (their screen stage run first; pictures and the

@@ -30,21 +30,24 @@ from navcore.io import jsonio
 LEVEL_NAMES = LEVELS
 
 
-def prepare_scan(scan: Path, root: Path, name: str):
-    """Run the pipeline up to the costmap on a scan folder (under root); (catalog, scene, cfg)."""
+def prepare_scan(scan: Path, root: Path, name: str, fmt: str | None = "npy_folder", stage: str = "costmap",
+                 group: str = "real_labelled"):
+    """Run the pipeline up to `stage` on a scan folder (or any scene file, fmt None: by its
+    extension) under root; (catalog, scene, cfg)."""
     from hydra import compose, initialize_config_dir
 
     from pipeline.config import CONF_DIR, register_configs
     from pipeline.executor import execute, open_catalog
 
     register_configs()
-    (root / "cat.yaml").write_text(f"scenes:\n  - {{name: {name}, group: real_labelled, path: {scan}, format: npy_folder}}\n")
+    fmt_key = f", format: {fmt}" if fmt else ""
+    (root / "cat.yaml").write_text(f"scenes:\n  - {{name: {name}, group: {group}, path: {scan}{fmt_key}}}\n")
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose("config", overrides=[f"data_root={root / 'data'}", "executor=sync", f"scenes.catalog={root / 'cat.yaml'}",
-                                           "stages=[costmap]"])
+                                           f"stages=[{stage}]"])
     s = execute(cfg)
     if s["failures"]:
-        raise RuntimeError(f"{scan}: the pipeline failed before semantics: {s['failures']}")
+        raise RuntimeError(f"{scan}: the pipeline failed up to {stage}: {s['failures']}")
     catalog, scenes, _ = open_catalog(cfg)
     return catalog, scenes[0], cfg
 
