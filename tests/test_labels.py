@@ -303,3 +303,36 @@ def test_scannet_vertices_outside_every_group_keep_their_nyu40_class(tmp_path):
     named = [g.names.names[s] if s >= 0 else None for s in g.segment]
     assert named == ["couch"] * 8 + ["chair"] * 4 + ["television"] * 2 + [None] * 2  # raw NYU40 ids 5, 25; 0 none
     assert g.instance.tolist() == [1] * 8 + [-1] * 8
+
+
+def test_training_views_of_a_scan_stand_in_the_free_room_and_the_model_file_reads_back(tmp_path, scannet_scan):
+    """benchmarks.train_on_scan's CPU parts on the real ScanNet scan: every training camera stands
+    where no scanned point is within 0.4 m horizontally in the 0.1-1.8 m band, 1.1-1.5 m above
+    the floor, as a right-handed OpenCV frame pitched 10 degrees down; the model file it writes
+    reads back through the project's INRIA reader to the same Gaussians."""
+    from scipy.spatial import cKDTree
+
+    from benchmarks.train_on_scan import SH_C0, room_poses, write_ply
+    from navcore.gaussians.formats import read_gaussians
+
+    coord = np.load(scannet_scan / "coord.npy").astype(np.float64)
+    floor = np.load(scannet_scan / "segment.npy") == (scannet_scan / "classes.txt").read_text().splitlines().index("floor")
+    c2w = room_poses(coord, floor, np.random.default_rng(0), positions=20, yaws=4)
+    assert c2w.shape == (80, 4, 4)
+    z0 = np.median(coord[floor, 2])
+    band = coord[~floor & (coord[:, 2] > z0 + 0.1) & (coord[:, 2] < z0 + 1.8)]
+    d, _ = cKDTree(band[:, :2]).query(c2w[:, :2, 3])
+    assert (d > 0.4).all() and ((c2w[:, 2, 3] - z0 >= 1.1) & (c2w[:, 2, 3] - z0 <= 1.5)).all()
+    r = c2w[:, :3, :3]
+    assert np.allclose(r.transpose(0, 2, 1) @ r, np.eye(3), atol=1e-9) and np.allclose(np.linalg.det(r), 1.0)
+    assert np.allclose(np.degrees(np.arcsin(r[:, 2, 2])), -10.0)  # the optical axis 10 degrees down
+    rng = np.random.default_rng(1)
+    n = 50
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    means, logs, logit, rgb = rng.normal(size=(n, 3)), rng.normal(-3, 0.5, (n, 3)), rng.normal(size=n), rng.uniform(size=(n, 3))
+    write_ply(tmp_path / "m.ply", means, logs, q, logit, (rgb - 0.5) / SH_C0)
+    g = read_gaussians(tmp_path / "m.ply")
+    assert np.allclose(g.means, means, atol=1e-6) and np.allclose(g.log_scales, logs, atol=1e-6)
+    assert np.allclose(np.abs((g.quats * q).sum(1)), 1.0, atol=1e-5) and np.allclose(g.opacity_logits, logit, atol=1e-6)
+    assert np.allclose(0.5 + SH_C0 * g.sh[:, 0], rgb, atol=1e-5)
