@@ -29,7 +29,7 @@ from navcore.io import jsonio
 
 TASKS = ("pointnav", "imagenav", "objectnav")
 PROTOCOLS = ("distance", "explicit_stop")
-STAGES = ("ingest", "voxelize", "align", "costmap", "semantics", "asset", "episodes", "export")
+STAGES = ("ingest", "voxelize", "align", "costmap", "screen", "semantics", "asset", "episodes", "export")
 
 
 def compose(data: str, *over: str):
@@ -167,6 +167,9 @@ def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) ->
                       if k in ("labels_from", "shortfall", "instances", "segmenter")},
         "objectnav_rejections": marker(catalog, scene, "episodes").get("info", {}).get("tasks", {})
         .get("objectnav", {}).get("rejections", {}),
+        "screening": marker(catalog, scene, "episodes").get("info", {}).get("screening", {}),
+        "screen_rejections": {t: {k: v for k, v in r.get("rejections", {}).items() if "screened" in k or "blurred" in k}
+                              for t, r in marker(catalog, scene, "episodes").get("info", {}).get("tasks", {}).items()},
         "render_fp_est": round(rc["fp_est"], 4), "render_fn_est": round(rc["fn_est"], 4),
         "render_check": {k: rc[k] for k in ("render_free", "render_blocked", "costmap_blocked", "poses", "fp_ci95",
                                             "fn_ci95", "fn_noise_only")} | {"seconds": round(rc_s, 1)},
@@ -305,6 +308,13 @@ def markdown(rep: dict, pictures_rel: str) -> str:
          f"({ci(s['direct_evidence']['fn_ci95'])}), {s['direct_evidence']['render_blocked']}"),
         ("render = direct verdict", lambda s: pct(s["render_vs_direct_agreement"])),
         ("warnings", lambda s: "; ".join(s["warnings"]) or "none"),
+        ("screening: score, verdict", lambda s: f"{s['screening'].get('score', float('nan')):.2f}, "
+         f"{s['screening'].get('verdict', '-')}"),
+        ("screening: blobs / floor holes / views blur / views holes (share of valid cells)", lambda s: " / ".join(
+            pct(s["screening"].get(k, 0.0)) for k in ("blur_share", "hole_share", "view_blur_share", "view_hole_share"))),
+        ("screening: graph cells kept out (with the margin)", lambda s: pct(s["screening"].get("screened_share_of_graph", 0.0))),
+        ("screening: rejections pointnav; imagenav", lambda s: "; ".join(
+            ", ".join(f"{k} {v}" for k, v in s["screen_rejections"].get(t, {}).items()) or "none" for t in ("pointnav", "imagenav"))),
     ]
     rows += [(f"seconds: {st}", (lambda st: lambda s: f"{s['seconds'][st]:.1f}" if s["seconds"][st] else "-")(st))
              for st in STAGES]
