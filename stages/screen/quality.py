@@ -93,7 +93,7 @@ class QualityConfig:
     """A cell is seen by a capture camera that sees any of these points of its column, metres (the
     floor, the body, the robot's camera)."""
     camera_stride: int = 2
-    """The floor is tested at every this many cells (each cell takes its block's answer)."""
+    """Cells' columns are tested at every this many cells (each cell takes its block's answer)."""
     camera_width: int = 64
     """Width of the capture cameras' depth renders, pixels (height: their aspect)."""
     margin_m: float = 0.1
@@ -206,7 +206,8 @@ def validate(flagged: np.ndarray, origin, resolution: float, regions: list[dict]
 def camera_layer(scene, c2w: np.ndarray, Ks: np.ndarray, width: int, height: int, valid: np.ndarray, origin,
                  resolution: float, cfg: QualityConfig) -> tuple[np.ndarray, np.ndarray]:
     """The capture-camera cue: ([ny, nx] bool unseen valid cells, grown by margin_m; [ny, nx] int32
-    how many capture cameras see each cell's floor, -1 off the valid cells)."""
+    how many capture cameras see each cell's column (the most over camera_heights), -1 off the
+    valid cells)."""
     from navcore.render.view_quality import camera_coverage
 
     k = max(1, int(cfg.camera_stride))
