@@ -24,8 +24,7 @@ def build_summary(results: list[dict], started: dt.datetime, cat_file, shard: li
                "shortfalls": [r for r in results if r.get("shortfall")],
                "warnings": [r for r in results if r.get("warnings")],
                "goal_mappings": [r for r in results if r.get("goal_mapping")],
-               "screening": [{"scene_id": r["scene_id"], "scene": r["scene"], **r["screening"]}
-                             for r in results if r.get("screening")], "results": results}
+               "screening": screening(results), "results": results}
     placed = placement(results)
     if placed:
         summary["placement"] = placed
@@ -33,6 +32,16 @@ def build_summary(results: list[dict], started: dt.datetime, cat_file, shard: li
         c = summary["counts"].setdefault(r["stage"], {})
         c[r["status"]] = c.get(r["status"], 0) + 1
     return summary
+
+
+def screening(results: list[dict]) -> list[dict]:
+    """One screening row per scene: the episodes stage's (score and verdict) where it ran, else
+    the screen stage's (score only, verdict None)."""
+    rows: dict[str, dict] = {}
+    for r in results:
+        if r.get("screening") and (r["scene_id"] not in rows or r["screening"].get("verdict") is not None):
+            rows[r["scene_id"]] = {"scene_id": r["scene_id"], "scene": r["scene"], **r["screening"]}
+    return list(rows.values())
 
 
 def _union(intervals: list[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -141,7 +150,8 @@ def print_summary(summary: dict, console: Console) -> None:
             f.add_row(f"{r['scene_id']} ({r['scene']})", f"{r['score']:.2f}",
                       *(f"{100 * r[k]:.1f} %" for k in ("blur_share", "hole_share", "view_blur_share", "view_hole_share",
                                                          "unseen_share")),
-                      f"[{style[r['verdict']]}]{r['verdict']}[/]", "kept" if r["kept"] else "rejected (screen.reject)")
+                      f"[{style[r['verdict']]}]{r['verdict']}[/]" if r.get("verdict") else "- (episodes not run)",
+                      "-" if r.get("kept") is None else "kept" if r["kept"] else "rejected (screen.reject)")
         console.print(f)
     placed = summary.get("placement")
     if placed and any(w["gpu"] for w in placed["workers"].values()):

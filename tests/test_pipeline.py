@@ -662,7 +662,8 @@ def test_tasks_refer_to_one_config_that_outlives_workers(tmp_path, make_cfg, mon
 
 def test_screening_through_the_pipeline_and_screen_reject(tmp_path, make_cfg):
     """A generated scene with injected blurred and hole regions: the screen stage writes its layer
-    and picture, the run summary has the scene's score and verdict, the stored episodes keep out
+    and picture, the run summary has the scene's score (alone, the verdict once the episodes
+    stage has run: one row a scene), the stored episodes keep out
     of the layer grown by the margin; screen.reject with the scene's verdict reject empties its
     shards and recomputes the episodes only (the layer's config is screen.layer)."""
     import pyarrow.parquet as pq
@@ -672,11 +673,15 @@ def test_screening_through_the_pipeline_and_screen_reject(tmp_path, make_cfg):
     over = ["stages=[episodes]", "task=[pointnav,imagenav]", "task.pointnav.episodes_per_scene=12",
             "task.imagenav.episodes_per_scene=6", "synthetic.realism.level=moderate",
             "synthetic.realism.blur_regions=2", "synthetic.realism.hole_regions=2"]
+    s0 = execute(make_cfg(tmp_path, *over[1:], "stages=[screen]"))  # the layer alone: its score, no verdict yet
+    (first,) = s0["screening"]
+    assert first["verdict"] is None and first["kept"] is None and 0 < first["score"] < 1
     s1 = execute(make_cfg(tmp_path, *over))
     assert not s1["failures"], s1["failures"]
     sid = s1["results"][0]["scene_id"]
-    (entry,) = s1["screening"]
+    (entry,) = s1["screening"]  # one row a scene: the episodes stage's
     assert entry["scene_id"] == sid and entry["verdict"] in ("pass", "warn", "reject") and entry["kept"]
+    assert entry["score"] == first["score"] and statuses(s1)["screen"] == "cached"
     layer = zarr.open_group(str(tmp_path / "03_costmaps" / "screen" / f"{sid}.zarr"), mode="r")
     flagged = np.asarray(layer["flagged"][...])
     assert 0 < entry["score"] < 1 and abs(entry["score"] - layer.attrs["score"]) < 1e-12 and flagged.any()

@@ -66,5 +66,8 @@ def run(scene, cfg, catalog) -> dict:
                                 "capture_cameras": 0 if capture is None else len(capture[0])})
     pic = catalog.dataset("quality_picture", scene)
     pic.save(picture(out, support, valid, view, cm.origin, cm.resolution))
+    # the run summary's screening table shows the score at once; the verdict is the episodes stage's
+    screening = {k: v for k, v in score.items() if k == "score" or k.endswith("_share")}
     return {"outputs": [str(ds.path), str(pic.path)], "quality": score, "views_rendered": rendered,
-            "capture_cameras": 0 if capture is None else len(capture[0])}
+            "capture_cameras": 0 if capture is None else len(capture[0]),
+            "screening": screening | {"verdict": None, "kept": None}}
