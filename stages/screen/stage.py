@@ -11,15 +11,15 @@ from navcore.gaussians.cameras import camera_file, read_cameras
 from navcore.gaussians.content import camera_scene, content_of
 from stages.screen.quality import QualityConfig, scene_score, screen_layers
 
-# top-down picture colours: outside the supported map, obstacles, blur, holes (free cells white)
+# top-down picture colours: outside the supported map, obstacles, blobs, holes, view flags, unseen (free cells white)
 _OUTSIDE, _OBSTACLE, _BLUR, _HOLE, _VIEW, _UNSEEN = \
     (230, 190, 190), (60, 60, 60), (255, 0, 255), (80, 120, 255), (255, 150, 0), (220, 200, 0)
 
 
 def picture(layers: dict, support: np.ndarray, valid: np.ndarray, view: dict | None, origin, resolution: float) -> np.ndarray:
     """[ny, nx, 3] uint8, north up: obstacles dark, blobs magenta, floor holes blue, cells flagged
-    by the rendered views orange, floor no capture camera saw yellow; the lattice poses as dots,
-    black where their worst view is mostly blur."""
+    by the rendered views orange, cells no capture camera saw yellow (valid cells only); the
+    lattice poses as green dots, black where their worst view is mostly blur."""
     img = np.full(support.shape + (3,), 255, np.uint8)
     img[~support] = _OUTSIDE
     img[support & ~valid] = _OBSTACLE
