@@ -150,3 +150,19 @@ class Costmap:
         cells = np.asarray(cells)
         return np.stack([self.origin[0] + (cells[:, 1] + 0.5) * self.resolution,
                          self.origin[1] + (cells[:, 0] + 0.5) * self.resolution], 1)
+
+
+def lattice_cells(valid: np.ndarray, step: int) -> np.ndarray:
+    """[P, 2] (row, col): per `step` x `step` block of the grid holding valid cells, the valid cell
+    nearest the block's centre (ties: the first in row-major order), blocks in row-major order. A
+    lattice of poses over the free space that still puts one in a narrow corridor between lattice
+    nodes."""
+    step = max(1, int(step))
+    cells = np.argwhere(valid)
+    if not len(cells):
+        return cells
+    block = cells // step
+    d = np.hypot(*(cells - (block * step + (step - 1) / 2.0)).T)
+    order = np.lexsort((d, block[:, 1], block[:, 0]))
+    _, first = np.unique(block[order], axis=0, return_index=True)
+    return cells[order][first]

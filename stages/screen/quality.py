@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import ndimage
 
+from navcore.nav.costmap import lattice_cells
 from navcore.nav.screening import disk, grow
 
 
@@ -127,23 +128,6 @@ def quality_layers(scene, origin, shape, resolution: float, cfg: QualityConfig) 
     return {"blur": grow(blur, cfg.margin_m, resolution), "hole": grow(hole, cfg.margin_m, resolution)}
 
 
-def view_lattice(valid: np.ndarray, origin, resolution: float, spacing_m: float) -> np.ndarray:
-    """[P, 2] (row, col) of valid cells on a lattice of this spacing: per lattice square, the
-    valid cell nearest its centre (a narrow corridor between lattice nodes still gets poses)."""
-    step = max(1, int(round(spacing_m / resolution)))
-    cells = np.argwhere(valid)
-    if not len(cells):
-        return cells
-    block = cells // step
-    centre = block * step + (step - 1) / 2
-    d = np.hypot(*(cells - centre).T)
-    key = block[:, 0] * (valid.shape[1] // step + 1) + block[:, 1]
-    order = np.lexsort((d, key))
-    first = np.ones(len(order), bool)
-    first[1:] = key[order][1:] != key[order][:-1]
-    return cells[order[first]]
-
-
 def view_layers(views, valid: np.ndarray, origin, resolution: float, cfg: QualityConfig) -> dict:
     """The view cue: {"view_blur", "view_hole": [ny, nx] bool, "poses": [P, 2] xy, "blur", "hole":
     [P] worst-view shares}; views: `navcore.render.view_quality.DefectViews` of the camera scene.
@@ -152,7 +136,7 @@ def view_layers(views, valid: np.ndarray, origin, resolution: float, cfg: Qualit
     surface's x, y; a hole pixel where its ray meets the floor plane); a cell is flagged where at
     least view_min_hits pixels of blur (holes) land and they are at least view_cell_share of the
     pixels landing there."""
-    cells = view_lattice(valid, origin, resolution, cfg.view_spacing_m)
+    cells = lattice_cells(valid, round(cfg.view_spacing_m / resolution))
     xy = np.asarray(origin) + (cells[:, ::-1] + 0.5) * resolution
     yaws = 2 * np.pi * np.arange(cfg.view_yaws) / cfg.view_yaws
     poses = np.concatenate([np.repeat(xy, len(yaws), 0), np.tile(yaws, len(xy))[:, None]], 1)

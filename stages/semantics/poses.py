@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+from navcore.nav.costmap import lattice_cells
+
 
 def free_space_poses(costmap, valid: np.ndarray, spacing: float = 1.0, yaw_step_deg: float = 45.0,
                      min_separation: float | None = None) -> np.ndarray:
@@ -13,17 +15,10 @@ def free_space_poses(costmap, valid: np.ndarray, spacing: float = 1.0, yaw_step_
     block of valid cells (the valid cell nearest the block's centre; blocks without one are
     skipped), each with headings every `yaw_step_deg`; positions closer than `min_separation`
     (default spacing / 2) to an earlier one are thinned out. Deterministic."""
-    res = costmap.resolution
-    step = max(1, int(round(spacing / res)))
-    cells = np.argwhere(valid)
+    cells = lattice_cells(valid, round(spacing / costmap.resolution))
     if not len(cells):
         return np.zeros((0, 3))
-    block = cells // step
-    centre = block * step + (step - 1) / 2.0
-    d = np.hypot(*(cells - centre).T)
-    order = np.lexsort((d, block[:, 1], block[:, 0]))
-    _, first = np.unique(block[order], axis=0, return_index=True)
-    picks = costmap.cell_centers(cells[order][first])
+    picks = costmap.cell_centers(cells)
     sep = spacing / 2 if min_separation is None else min_separation
     kept: list[np.ndarray] = []
     for p in picks:  # thin positions that fell close to one already kept (across block borders)
