@@ -493,6 +493,7 @@ def test_capture_camera_cue_flags_what_no_camera_saw():
     from navcore.gaussians.cameras import cameras_from_json
     from navcore.nav.costmap import Costmap
     from navcore.nav.embodiment import Embodiment
+    from navcore.render.view_quality import DefectViews
     from navcore.voxels.field import VoxelizeConfig
     from stages.costmap.build import CostmapConfig, build_costmap
     from stages.screen.quality import QualityConfig, camera_layer
@@ -506,11 +507,12 @@ def test_capture_camera_cue_flags_what_no_camera_saw():
     c2w, ks = cameras_from_json({"hfov_deg": 90.0, "poses": sc.cameras}, 64, 48)
     c2w = t @ c2w
     cfg = QualityConfig(view_range_m=2.0)  # a small scene: a short range leaves cells out of reach
-    unseen, count = camera_layer(renderable, c2w, ks, 64, 48, valid, lay.origin, lay.resolution, cfg)
+    views = DefectViews(renderable, Embodiment(), far=cfg.view_range_m)
+    unseen, count = camera_layer(views, c2w, ks, 64, 48, valid, lay.origin, lay.resolution, cfg)
     assert (unseen & valid).sum() < 0.15 * valid.sum()
     x = c2w[:, 0, 3]
     end = x <= np.quantile(x, 0.3)
-    part_unseen, part = camera_layer(renderable, c2w[end], ks[end], 64, 48, valid, lay.origin, lay.resolution, cfg)
+    part_unseen, part = camera_layer(views, c2w[end], ks[end], 64, 48, valid, lay.origin, lay.resolution, cfg)
     assert (part[valid] <= count[valid]).all() and (count[~valid] == -1).all()
     # in a 90 x 74 degree frustum a point's depth is >= 0.625 x its distance: out of reach beyond 1.6 x range
     ij = np.argwhere(valid)

@@ -1,6 +1,7 @@
 """What a robot's camera sees of a reconstruction's defects: per rendered view, the share of its
 pixels that are blur or holes (issue 35, section 4; the screen stage's view cue and the episodes
-stage's ImageNav goal-view test), and how many capture cameras see given points.
+stage's ImageNav goal-view test), and how many capture cameras see given points
+(`DefectViews.coverage`, the screen stage's capture-camera cue).
 
 - blur: an opaque pixel drawn mostly (half its opacity or more) by oversized Gaussians off the
   floor: largest standard deviation at least ``blur_sigma`` metres and (their alpha-weighted
@@ -82,6 +83,29 @@ class DefectViews:
         self._render = cpu_fast.render_one
         self.views = 0
 
+    def coverage(self, c2w: np.ndarray, Ks: np.ndarray, width: int, height: int, points: np.ndarray,
+                 tolerance: float = 0.1) -> np.ndarray:
+        """[N] how many of the cameras (capture cameras: c2w [M, 4, 4] camera -> world, OpenCV
+        axes; Ks [M, 3, 3] for a width x height image) see each point [N, 3] (aligned frame):
+        inside the image, in front of the camera and no farther than far, and not behind what the
+        camera renders there (the point's depth at most its pixel's rendered depth (1 + GRAZING) +
+        tolerance; a pixel the scene leaves see-through hides nothing)."""
+        pts = np.asarray(points, np.float64).reshape(-1, 3)
+        seen = np.zeros(len(pts), np.int32)
+        for m in range(len(c2w)):
+            vm = np.linalg.inv(np.asarray(c2w[m], np.float64))
+            _, depth, alpha = self._render(self._g, vm.astype(np.float32), Ks[m], width, height, 0, far=self.far)
+            cam = pts @ vm[:3, :3].T + vm[:3, 3]
+            z = cam[:, 2]
+            front = (z > 0.05) & (z <= self.far)
+            u = np.floor(Ks[m][0, 0] * cam[:, 0] / np.where(front, z, 1) + Ks[m][0, 2]).astype(np.int64)
+            v = np.floor(Ks[m][1, 1] * cam[:, 1] / np.where(front, z, 1) + Ks[m][1, 2]).astype(np.int64)
+            inside = front & (u >= 0) & (u < width) & (v >= 0) & (v < height)
+            i = np.flatnonzero(inside)
+            d, a = depth[v[i], u[i]], alpha[v[i], u[i]]
+            seen[i[(a < OPAQUE) | (z[i] <= d * (1 + GRAZING) + tolerance)]] += 1
+        return seen
+
     def measure(self, poses: np.ndarray, points: bool = False) -> ViewDefects:
         """poses [P, 3] (x, y, yaw) -> the defect shares of their views (and, with points, where
         their pixels land)."""
@@ -114,29 +138,3 @@ class DefectViews:
         cat = lambda a: np.concatenate(a) if a else np.zeros((0, 2))  # noqa: E731
         return ViewDefects(blur, hole, cat(seen), cat(bxy), cat(hxy))
 
-
-def camera_coverage(scene, c2w: np.ndarray, Ks: np.ndarray, width: int, height: int, points: np.ndarray,
-                    far: float = 8.0, tolerance: float = 0.1) -> np.ndarray:
-    """[N] how many of the cameras see each point [N, 3] (aligned frame): inside the image, in
-    front of the camera and no farther than far, and not behind what the camera renders there (the
-    point's depth at most its pixel's rendered depth (1 + GRAZING) + tolerance; a pixel the scene leaves
-    see-through hides nothing). c2w [M, 4, 4] camera -> world (OpenCV axes), Ks [M, 3, 3] for a
-    width x height image."""
-    from navcore.render import cpu_fast
-
-    g = cpu_fast.prepare(scene)
-    pts = np.asarray(points, np.float64).reshape(-1, 3)
-    seen = np.zeros(len(pts), np.int32)
-    for m in range(len(c2w)):
-        vm = np.linalg.inv(np.asarray(c2w[m], np.float64))
-        _, depth, alpha = cpu_fast.render_one(g, vm.astype(np.float32), Ks[m], width, height, 0, far=far)
-        cam = pts @ vm[:3, :3].T + vm[:3, 3]
-        z = cam[:, 2]
-        front = (z > 0.05) & (z <= far)
-        u = np.floor(Ks[m][0, 0] * cam[:, 0] / np.where(front, z, 1) + Ks[m][0, 2]).astype(np.int64)
-        v = np.floor(Ks[m][1, 1] * cam[:, 1] / np.where(front, z, 1) + Ks[m][1, 2]).astype(np.int64)
-        inside = front & (u >= 0) & (u < width) & (v >= 0) & (v < height)
-        i = np.flatnonzero(inside)
-        d, a = depth[v[i], u[i]], alpha[v[i], u[i]]
-        seen[i[(a < OPAQUE) | (z[i] <= d * (1 + GRAZING) + tolerance)]] += 1
-    return seen

@@ -187,13 +187,12 @@ def validate(flagged: np.ndarray, origin, resolution: float, regions: list[dict]
             "truth_cells": int(t.sum()), "flagged_cells": int(f.sum())}
 
 
-def camera_layer(scene, c2w: np.ndarray, Ks: np.ndarray, width: int, height: int, valid: np.ndarray, origin,
+def camera_layer(views, c2w: np.ndarray, Ks: np.ndarray, width: int, height: int, valid: np.ndarray, origin,
                  resolution: float, cfg: QualityConfig) -> tuple[np.ndarray, np.ndarray]:
     """The capture-camera cue: ([ny, nx] bool unseen valid cells, grown by margin_m; [ny, nx] int32
     how many capture cameras see each cell's column (the most over camera_heights), -1 off the
-    valid cells)."""
-    from navcore.render.view_quality import camera_coverage
-
+    valid cells). views: `navcore.render.view_quality.DefectViews` of the camera scene (its far
+    plane is the range)."""
     k = max(1, int(cfg.camera_stride))
     ny, nx = valid.shape
     blocks = np.zeros(((ny + k - 1) // k, (nx + k - 1) // k), bool)
@@ -204,9 +203,9 @@ def camera_layer(scene, c2w: np.ndarray, Ks: np.ndarray, width: int, height: int
     xy = np.asarray(origin) + (centre[:, ::-1] + 0.5) * resolution
     hs = np.asarray(cfg.camera_heights, np.float64)
     pts = np.c_[np.repeat(xy, len(hs), 0), np.tile(hs, len(xy))]
-    views = camera_coverage(scene, c2w, Ks, width, height, pts, cfg.view_range_m).reshape(-1, len(hs)).max(1)
+    seen = views.coverage(c2w, Ks, width, height, pts).reshape(-1, len(hs)).max(1)
     per_block = np.full(blocks.shape, -1, np.int32)
-    per_block[bi[:, 0], bi[:, 1]] = views
+    per_block[bi[:, 0], bi[:, 1]] = seen
     count = np.where(valid, np.repeat(np.repeat(per_block, k, 0), k, 1)[:ny, :nx], -1).astype(np.int32)
     unseen = _without_small(valid & (count >= 0) & (count < cfg.camera_min_views),
                             cfg.hole_min_area_m2 / resolution ** 2)
@@ -229,17 +228,16 @@ def screen_layers(content, camera, valid: np.ndarray, origin, resolution: float,
 
     layers = quality_layers(content, origin, valid.shape, resolution, cfg)
     view, rendered = None, 0
-    if cfg.views and valid.any():
-        views = DefectViews(camera, emb, cfg.view_width, cfg.view_width * 3 // 4, cfg.blur_angle, cfg.blur_sigma_m,
-                            cfg.view_range_m)
+    use_views, use_cameras = cfg.views and valid.any(), cfg.cameras and cameras is not None and valid.any()
+    views = DefectViews(camera, emb, cfg.view_width, cfg.view_width * 3 // 4, cfg.blur_angle, cfg.blur_sigma_m,
+                        cfg.view_range_m) if use_views or use_cameras else None  # one prepared scene for both
+    layers["view_blur"] = layers["view_hole"] = layers["unseen"] = np.zeros(valid.shape, bool)
+    if use_views:
         view = view_layers(views, valid, origin, resolution, cfg)
         layers["view_blur"], layers["view_hole"] = view.pop("view_blur"), view.pop("view_hole")
         rendered = views.views
-    else:
-        layers["view_blur"] = layers["view_hole"] = np.zeros(valid.shape, bool)
-    layers["unseen"] = np.zeros(valid.shape, bool)
-    if cfg.cameras and cameras is not None and valid.any():
-        layers["unseen"], layers["camera_views"] = camera_layer(camera, *cameras, valid, origin, resolution, cfg)
+    if use_cameras:
+        layers["unseen"], layers["camera_views"] = camera_layer(views, *cameras, valid, origin, resolution, cfg)
     layers["flagged"] = layers["blur"] | layers["hole"] | layers["view_blur"] | layers["view_hole"] | layers["unseen"]
     return {**layers, "view": view, "views": rendered}
 
