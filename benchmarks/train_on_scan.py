@@ -88,8 +88,13 @@ def main(argv=None) -> int:
     torch.manual_seed(args.seed)
     dev = "cuda"
     coord = np.load(args.scan / "coord.npy").astype(np.float64)
-    names = (args.scan / "classes.txt").read_text().splitlines()
+    names = [n.strip().lower() for n in (args.scan / "classes.txt").read_text().splitlines()]
+    if "floor" not in names:
+        raise ValueError(f"{args.scan / 'classes.txt'}: no 'floor' class; the training poses stand on the scan's "
+                         "floor-labelled points")
     floor = np.load(args.scan / "segment.npy") == names.index("floor")
+    if floor.sum() < 100:
+        raise ValueError(f"{args.scan}: only {int(floor.sum())} floor-labelled points; too few to place cameras on")
     teacher = {k: torch.tensor(v, dtype=torch.float32, device=dev) for k, v in {
         "means": coord, "quats": np.load(args.scan / "quat.npy"), "scales": np.load(args.scan / "scale.npy"),
         "opacities": np.load(args.scan / "opacity.npy"), "colors": np.load(args.scan / "color.npy") / 255.0}.items()}
@@ -152,12 +157,12 @@ def main(argv=None) -> int:
               params["sh0"][:, 0].detach().cpu().numpy())
     cams = [{"id": k, "img_name": f"view_{k:04d}", "width": WIDTH, "height": HEIGHT, "position": c[:3, 3].tolist(),
              "rotation": c[:3, :3].tolist(), "fx": f, "fy": f} for k, c in enumerate(c2w[~held])]
-    (args.out / "cameras.json").write_text(json.dumps(cams))
+    (args.out / "cameras.json").write_text(json.dumps(cams, allow_nan=False))  # strict JSON: NaN / inf raise
     rep = {"views": len(vms), "train_views": int((~held).sum()), "steps": args.steps, "init_gaussians": len(pts),
            "gaussians": len(params["means"]), "l1_last_100": float(np.mean(losses[-100:])),
            "psnr_held_out_median": float(np.median(psnr)), "seconds": time.perf_counter() - t0,
            "device": torch.cuda.get_device_name(0)}
-    (args.out / "train.json").write_text(json.dumps(rep, indent=1))
+    (args.out / "train.json").write_text(json.dumps(rep, indent=1, allow_nan=False))
     if args.split_mib:  # a transfer that takes files of a bounded size: model.ply.partK, joined by cat
         data = (args.out / "model.ply").read_bytes()
         step = args.split_mib << 20
