@@ -9,7 +9,7 @@ ARGS ?=
 CUDA ?=
 WHEELS ?=
 
-.PHONY: setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -70,17 +70,22 @@ test-all: $(STAMP)
 
 bench: bench-spatial bench-episodes bench-eval bench-semantics
 
+# the benchmark pages (docs/bench_*.md) whose code inputs changed since the commit each was measured
+# on (benchmarks/pages.py names each page's inputs and command); exits 1 when one is stale
+bench-stale: $(STAMP)
+	$(BIN)/python -m benchmarks.pages stale --strict
+
 bench-spatial: $(STAMP)
-	$(BIN)/python -m benchmarks.spatial $(ARGS)
+	$(BIN)/python -m benchmarks.spatial --docs $(ARGS)
 
 # the episode dataset of the default scenes: Table-4 style summary, throughput, re-checks
 bench-episodes: $(STAMP)
-	$(BIN)/python -m benchmarks.episodes $(ARGS)
+	$(BIN)/python -m benchmarks.episodes --docs $(ARGS)
 
 # closed-loop figures on this machine (oracle / random on the dataset, env overhead, CPU renderer
 # steps/s); merges data/08_reports/eval_gpu.json when a CUDA run (bench-eval-gpu) left one there
 bench-eval: $(STAMP)
-	$(BIN)/python -m benchmarks.eval $(ARGS)
+	$(BIN)/python -m benchmarks.eval --docs $(ARGS)
 
 bench-eval-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.eval --gpu $(ARGS)
@@ -175,7 +180,7 @@ test-faults: $(STAMP)
 	wait $$a; ra=$$?; wait $$f; rf=$$?; tail -3 data/fuzz_frames.log data/fuzz_a.log; test $$b$$ra$$rf = 000
 	$(BIN)/python -m benchmarks.fuzz_readers --merge data/08_reports/fuzz_a/fuzz_readers.json \
 	    data/08_reports/fuzz_b/fuzz_readers.json
-	$(BIN)/python -m benchmarks.faults --merge data/08_reports/faults_scenarios.json
+	$(BIN)/python -m benchmarks.faults --docs --merge data/08_reports/faults_scenarios.json
 
 test-slurm: $(STAMP)
 	scripts/slurm_localhost.sh

@@ -23,6 +23,7 @@ import time
 import traceback
 from pathlib import Path
 
+from benchmarks.pages import write_page
 from navcore.io import jsonio
 
 PARTS = ("ready", "render", "eval", "voxelize", "semantics", "open_vocab")
@@ -129,7 +130,7 @@ def main(argv=None) -> dict:
         md += "\n" + multi_gpu_markdown(json.loads((out / "multi_gpu.json").read_text())) + "\n"
     (out / "bench_gpu.md").write_text(md)
     if args.docs:
-        (Path(__file__).resolve().parents[1] / "docs" / "bench_gpu.md").write_text(md)
+        write_page("bench_gpu.md", md)
     print(md)
     return rep
 

@@ -25,6 +25,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from benchmarks import write_report
+from benchmarks.pages import write_page
 
 PROJECT = Path(__file__).resolve().parent.parent
 # tiny procedural scenes: one small room, 20 k Gaussians, 6 episodes, semantics off, coarser
@@ -255,7 +256,7 @@ def report(args) -> dict:
     md = markdown(rep)
     (out / "bench_scale.md").write_text(md)
     if args.docs:  # only when asked (make bench-scale): a report into a scratch folder must not replace it
-        Path(args.docs).write_text(md)
+        write_page(Path(args.docs).name, md)
     return rep
 
 

@@ -22,6 +22,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from benchmarks.pages import write_page
+
 
 def rendered_depth(renderer, emb, poses: np.ndarray, batch: int = 64) -> np.ndarray:
     from navcore.render.camera import embodiment_camera
@@ -99,7 +101,7 @@ def main(argv=None) -> dict:
            "scenes": {sid: scene_views(root, sid, a.per_kind, a.near) for sid in scenes}}
     write_report(a.out, "blind_views.json", rep)
     if a.docs:
-        Path(a.docs).write_text(markdown(rep))
+        write_page(Path(a.docs).name, markdown(rep))
     return rep
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import machine
+from benchmarks.pages import write_page
 from navcore.io import jsonio
 from navcore.io.datasets import CostmapDataset
 from navcore.nav.costmap import Costmap
@@ -167,6 +168,7 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser()
     ap.add_argument("--data", default="data")
     ap.add_argument("--out", default="data/08_reports")
+    ap.add_argument("--docs", action="store_true", help="also write docs/bench_eval.md")
     ap.add_argument("--gpu", action="store_true")
     ap.add_argument("--merge-gpu", action="store_true", help="only fold eval_gpu.json into an existing report")
     args = ap.parse_args(argv)
@@ -198,6 +200,8 @@ def main(argv=None) -> dict:
         result["gpu"] = g
     path.write_text(jsonio.dumps(result, indent=1))
     (out / "bench_eval.md").write_text(markdown(result))
+    if args.docs:
+        write_page("bench_eval.md", markdown(result))
     print(markdown(result))
     return result
 

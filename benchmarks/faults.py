@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.compare_data import compare
+from benchmarks.pages import write_page
 
 PROJECT = Path(__file__).resolve().parent.parent
 BASE = ("scenes.count=2", "scenes.num_gaussians=40000", "task.pointnav.episodes_per_scene=10",
@@ -375,6 +376,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--kills", type=int, default=20)
     ap.add_argument("--only", default=",".join(SCENARIOS))
     ap.add_argument("--out", default="data/08_reports")
+    ap.add_argument("--docs", action="store_true", help="also write docs/bench_faults.md")
     ap.add_argument("--merge", nargs="+", type=Path,
                     help="instead of running: bench_faults.json files, later ones replacing earlier scenarios")
     args = ap.parse_args(argv)
@@ -409,6 +411,8 @@ def main(argv=None) -> dict:
             rep[ours] = rep.get(ours, 0) + f[theirs]
     write_report(args.out, "bench_faults.json", rep)
     (Path(args.out) / "bench_faults.md").write_text(markdown(rep))
+    if args.docs:
+        write_page("bench_faults.md", markdown(rep))
     return rep
 
 

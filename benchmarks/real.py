@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import machine
+from benchmarks.pages import write_page
 from navcore.io import jsonio
 
 TASKS = ("pointnav", "imagenav", "objectnav")
@@ -459,7 +460,7 @@ def main(argv=None) -> int:
     (out / "bench_real.json").write_text(jsonio.dumps(rep, indent=1))
     md = markdown(rep, str(pictures))
     (out / "bench_real.md").write_text(md)
-    Path(args.docs).write_text(md)
+    write_page(Path(args.docs).name, md)
     print(md)
     return 1 if failures else 0
 

@@ -14,6 +14,7 @@ import json
 import time
 from pathlib import Path
 
+from benchmarks.pages import write_page
 from navcore.io import jsonio
 
 REFLECTION_LEVELS = {
@@ -101,7 +102,7 @@ def main(argv=None) -> int:
     (out / "reflections.json").write_text(jsonio.dumps(rep, indent=1))
     md = markdown(rep)
     if args.docs:
-        (Path(__file__).resolve().parents[1] / "docs" / "bench_reflections.md").write_text(md)
+        write_page("bench_reflections.md", md)
     print(md)
     return 0
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.pages import write_page
 from navcore.io import jsonio
 
 
@@ -145,7 +146,7 @@ def main(argv=None) -> int:
     (Path(args.out) / "screening.json").write_text(jsonio.dumps(rep, indent=1))
     print(json.dumps({k: v for k, v in rep.items() if k.endswith("_min")}))
     if args.docs:
-        Path("docs/bench_screening.md").write_text(markdown(rep, args))
+        write_page("bench_screening.md", markdown(rep, args))
     return 0
 
 

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import machine
+from benchmarks.pages import write_page
 from navcore.gaussians.cameras import cameras_from_json
 from navcore.io import jsonio
 from navcore.render import Renderer
@@ -238,9 +239,9 @@ def timing(rep: dict) -> dict:
             "machine": rep["machine"], "renderer": rep["renderer"]}
 
 
-def write_report(out: Path, cpu: dict | None, gpu: dict | None) -> dict:
+def write_report(out: Path, cpu: dict | None, gpu: dict | None, docs: bool = True) -> dict:
     """The report: metrics from the GPU run when there is one (same code; the renderers agree to
-    > 75 dB), timings from both."""
+    > 75 dB), timings from both; docs: also docs/bench_semantics.md."""
     base = dict(gpu or cpu)
     base.pop("per_scene", None)
     base["timing_gpu"] = timing(gpu) if gpu else None
@@ -252,9 +253,8 @@ def write_report(out: Path, cpu: dict | None, gpu: dict | None) -> dict:
     (out / "bench_semantics.json").write_text(jsonio.dumps(base, indent=1))
     md = markdown(base)
     (out / "bench_semantics.md").write_text(md)
-    docs = Path(__file__).resolve().parents[1] / "docs"
-    if docs.is_dir():
-        (docs / "bench_semantics.md").write_text(md)
+    if docs:
+        write_page("bench_semantics.md", md)
     return base
 
 

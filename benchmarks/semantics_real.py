@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import machine
+from benchmarks.pages import write_page
 from benchmarks.semantics import LEVELS, level_seed
 from navcore.io import jsonio
 
@@ -180,7 +181,7 @@ def main(argv=None) -> dict:
     md = markdown(rep)
     (out / "bench_semantics_real.md").write_text(md)
     if args.docs:
-        (Path(__file__).resolve().parents[1] / "docs" / "bench_semantics_real.md").write_text(md)
+        write_page("bench_semantics_real.md", md)
     print(md)
     return rep
 

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.pages import write_page
 from navcore.gaussians.content import CONTENT_KEY, content_mask, content_of
 from navcore.io import jsonio
 from navcore.nav.costmap import Costmap
@@ -177,7 +178,8 @@ def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_
              "neg_state": int((~ref_state).sum()), "pos_state": int(ref_state.sum()),
              "neg_motion": int((~ref_motion).sum()), "pos_motion": int(ref_motion.sum()),
              "clearance_kib": layers.clearance.nbytes / 1024, "occ_bitmap_kib": np.packbits(layers.occ).nbytes / 1024,
-             "cells": int(layers.occ.size)}
+             "cells": int(layers.occ.size), "supported_area_m2": info["supported_area_m2"],
+             "free_area_m2": info["free_area_m2"]}
         if res == 0.05 and timing:  # query speed on the paper's resolution
             sl = [(float(x), float(y)) for x, y in states]
             ml = [tuple(map(float, s)) for s in segs]
@@ -261,13 +263,14 @@ def main(argv=None) -> int:
                     help="scenes of the agreement table at realism level moderate (0 = skip)")
     ap.add_argument("--ablate-faint", action="store_true",
                     help="realism table: also build each map with every opacity as a potential obstacle")
+    ap.add_argument("--docs", action="store_true", help="also write docs/bench_spatial.md (make bench-spatial)")
     ap.add_argument("--merge-gpu", action="store_true",
                     help="only fold OUT/voxelize_gpu.json into an existing OUT/bench_spatial.json")
     args = ap.parse_args(argv)
     out = Path(args.out)
     if args.merge_gpu:
         rep = json.loads((out / "bench_spatial.json").read_text())
-        write_report(rep, out)
+        write_report(rep, out, args.docs)
         return 0
     emb = Embodiment()
     vcfg = VoxelizeConfig(sample=args.sample)
@@ -332,13 +335,13 @@ def main(argv=None) -> int:
             rep["realism_moderate"]["fp_state_all_opacities"] = sum(a["fp_state"] for a in abl) / max(tot("neg_state"), 1)
             rep["realism_moderate"]["fn_state_all_opacities"] = sum(a["fn_state"] for a in abl) / max(tot("pos_state"), 1)
     rep["per_scene"] = scenes
-    write_report(rep, out)
+    write_report(rep, out, args.docs)
     return 0
 
 
-def write_report(rep: dict, out: Path) -> None:
+def write_report(rep: dict, out: Path, docs: bool = False) -> None:
     """Merge the GPU voxelization figure (from benchmarks.voxelize_gpu on a CUDA machine) when
-    present, then write the JSON and the markdown table."""
+    present, then write the JSON and the markdown table (and docs/bench_spatial.md with docs)."""
     gpu_file = out / "voxelize_gpu.json"
     if gpu_file.exists():
         gv = json.loads(gpu_file.read_text())
@@ -349,6 +352,8 @@ def write_report(rep: dict, out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "bench_spatial.json").write_text(jsonio.dumps(rep, indent=1))
     (out / "bench_spatial.md").write_text(markdown(rep))
+    if docs:
+        write_page("bench_spatial.md", markdown(rep))
     print(markdown(rep))
 
 
