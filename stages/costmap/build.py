@@ -49,11 +49,13 @@ class CostmapConfig:
 
     resolution: float = 0.05
     """Stored map cell size, metres."""
-    raw_resolution: float = 0.01
+    raw_resolution: float = 0.005
     """Target xy cell size of the body-band voxelization that locates obstacle boundaries, metres
-    (rounded so that an odd number of fine cells spans one map cell). 0.01 (5 per 5 cm cell) runs
-    4x faster than 0.005 (11 per cell: 37.9 -> 9.1 s on the 1.5 M room) for about 0.8 points more
-    state FP on the realistic synthetic scenes (FN 0 either way; stages/costmap/design.md)."""
+    (rounded so that an odd number of fine cells spans one map cell: 11 per 5 cm cell). The fast
+    setting 0.01 (5 per cell) runs the fine pass 3-4x faster (1.27 vs 4.23 s median on the 1 M
+    generated scenes, 9.1 vs 37.9 s on the 1.5 M real room) for 0.8 / 0.9 points more state /
+    motion FP against the mesh (2.98 / 3.24 % vs 2.21 / 2.31 %, bench-spatial's 10 scenes at
+    0.05 m; 0.006 gives 2.34 / 2.56 %); FN 0 at all (stages/costmap/design.md)."""
     z_resolution: float = 0.05
     """Voxel height in the body band, metres."""
     margin_xy: float = 0.5
