@@ -272,6 +272,7 @@ def main(argv=None) -> int:
         rep = json.loads((out / "bench_spatial.json").read_text())
         write_report(rep, out, args.docs)
         return 0
+    t_run = time.perf_counter()
     emb = Embodiment()
     vcfg = VoxelizeConfig(sample=args.sample)
     scenes = []
@@ -335,6 +336,8 @@ def main(argv=None) -> int:
             rep["realism_moderate"]["fp_state_all_opacities"] = sum(a["fp_state"] for a in abl) / max(tot("neg_state"), 1)
             rep["realism_moderate"]["fn_state_all_opacities"] = sum(a["fn_state"] for a in abl) / max(tot("pos_state"), 1)
     rep["per_scene"] = scenes
+    rep["wall_s"] = time.perf_counter() - t_run
+    rep["argv"] = " ".join(argv if argv is not None else sys.argv[1:])
     write_report(rep, out, args.docs)
     return 0
 
@@ -402,6 +405,10 @@ def markdown(rep: dict) -> str:
         v = rep["voxelize_1m_gpu"]
         lines.append(f"- voxelize 1M at 0.05 m on {v.get('device', 'GPU')}: {v['median_s']:.3f} s median, "
                      f"peak GPU memory {v.get('peak_gpu_mb', float('nan')):.0f} MB")
+    if rep.get("wall_s"):
+        lines += ["", f"This run: `python -m benchmarks.spatial {rep.get('argv', '')}`, {rep['wall_s'] / 60:.0f} min wall on "
+                  f"{rep['machine']} (query times are absolute figures of a shared machine; the FCL reference was "
+                  "timed in the same run)."]
     return "\n".join(lines) + "\n"
 
 
