@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import machine
+from benchmarks.floor_level import floor_level
 from benchmarks.pages import write_page
 from navcore.io import jsonio
 
@@ -155,6 +156,7 @@ def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) ->
         "all_box_m": ingest["content"]["all_box_m"],
         "up_axis": align["up_axis"], "tilt_deg": round(align["tilt_from_nearest_axis_deg"], 3),
         "floor_error_m": round(floor_error(content_of(gs)), 4),
+        "floor_level": floor_level(content_of(gs).means, content_of(gs).alphas),
         "floor_to_ceiling_m": align["floor_to_ceiling_m"], "ceiling_from": align["ceiling_from"],
         "narrowest_gaps_m": cm_info.get("scale", {}).get("narrowest_gaps_m"),
         "warnings": cm_info.get("warnings", []),
@@ -290,6 +292,10 @@ def markdown(rep: dict, pictures_rel: str) -> str:
          + " x ".join(f"{v:.1f}" for v in s["content_box_m"])),
         ("up axis (tilt)", lambda s: f"{s['up_axis']} ({s['tilt_deg']:.2f} deg)"),
         ("floor error vs density peak", lambda s: f"{100 * s['floor_error_m']:.1f} cm"),
+        ("aligned floor tilt: cell-median plane (95 % CI) / open3d RANSAC", lambda s: "{:.3f} deg ({:.3f}-{:.3f}) / "
+         "{:.3f} deg".format(s["floor_level"]["tilt_deg"], *s["floor_level"]["tilt_ci95_deg"],
+                             s["floor_level"]["ransac_tilt_deg"])),
+        ("aligned floor: 3 x 3 cell-median spread", lambda s: f"{100 * s['floor_level']['spread_3x3_m']:.1f} cm"),
         ("floor to ceiling", lambda s: f"{s['floor_to_ceiling_m']:.2f} m ({s['ceiling_from']})"),
         ("narrowest doorway-like gaps", lambda s: ", ".join(f"{g:.2f}" for g in s["narrowest_gaps_m"] or []) or "none"),
         ("voxel grid / content voxels", lambda s: f"{s['grid_voxels']:,} / {s['content_voxels']:,} "

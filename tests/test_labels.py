@@ -93,6 +93,25 @@ def test_instance_cleaning_known_answers():
     assert rep.goal_mapping == {"sofa": {"couch": 1}, "chair": {"chair": 1}} and rep.unlabelled == 50
 
 
+def test_instance_class_vote_counts_only_ids_the_table_names():
+    """An instance whose Gaussians mostly carry an ignored id (raw NYU40 0 with ignore [0]) takes the
+    class its other Gaussians name (issue 46: it was dropped as no_class); one with only ignored or
+    unknown ids is still dropped; one whose named ids disagree takes the majority of them."""
+    rng = np.random.default_rng(1)
+    parts = [(_blob(rng, [1, 1, 0.5], 300), 1, [0] * 200 + [2] * 100),          # mostly 0, the rest chair
+             (_blob(rng, [3, 1, 0.5], 300), 2, [0] * 250 + [99] * 50),           # ignored and unknown only
+             (_blob(rng, [5, 1, 0.5], 300), 3, [0] * 150 + [1] * 60 + [3] * 90)]  # couch 60 vs table 90
+    means = np.concatenate([p for p, _, _ in parts]).astype(np.float32)
+    inst = np.concatenate([[i] * len(p) for p, i, _ in parts])
+    seg = np.concatenate([c for _, _, c in parts])
+    names = LabelSet("t", ("unlabelled", "couch", "chair", "table"), ignore=(0,))
+    rep = LabelReport()
+    labels, _ = instances_from_gaussians(means, np.full(len(means), 0.9), inst, seg, names, GoalVocabulary(),
+                                         CleaningConfig(), 2.8, rep)
+    assert {lab["instance_id"]: lab["dataset_class"] for lab in labels} == {1: "chair", 3: "table"}
+    assert [d["instance_id"] for d in rep.dropped["no_class"]] == [2]
+
+
 def test_label_spec_from_catalog_entry_and_scene_hash(tmp_path):
     from navcore.io.catalog import Catalog
     from pipeline.graph import scene_hash

@@ -191,6 +191,11 @@ def instances_from_gaussians(means: np.ndarray, opacity: np.ndarray, instance: n
         sel = rows[s:e]
         seg = segment[sel]
         valid = seg[seg >= 0]
+        if names is not None and len(valid):  # vote among the ids the table names: an instance whose
+            # Gaussians mostly carry an ignored id (NYU40's 0) takes the class its others name
+            ids_, counts = np.unique(valid, return_counts=True)
+            named = np.array([names.lookup(int(i)) is not None for i in ids_])
+            valid = np.repeat(ids_[named], counts[named])
         name = None
         if len(valid):
             cls = int(np.bincount(valid).argmax())

@@ -30,8 +30,10 @@ two) is a piece of surface whose normal is its smallest axis.
    flat surfaces below a candidate whose reflection across it lands on a flat surface above
    (``mirrored_below``) is reflection and leaves the candidate's "below"; a faded floor's flat
    upward splats count towards its area at any opacity >= ``faint_floor_alpha``.
-4. Refinement: a weighted least-squares plane through the flat Gaussians facing up near the peak
-   (opacity >= ``faint_floor_alpha``), every floor cell weighted alike.
+4. Refinement (``refine_floor_plane``): a weighted least-squares plane through the floor slab's
+   opaque Gaussians (and the faint flat upward ones of a glossy floor), iterated until the normal
+   stops moving in a wide band, then in narrowing bands; floor cells weighted by their evidence,
+   capped at the median cell's.
 ``alignment.json`` gets every candidate with its numbers.
 """
 from __future__ import annotations
@@ -73,8 +75,23 @@ class AlignConfig:
     """Approximate up direction in the source frame (e.g. [0, 0, 1]); null = any."""
     max_tilt_deg: float = 45.0
     """With up_hint or cameras: largest angle between the up axis and them."""
-    refine_band: float = 0.05
-    """Flat Gaussians within this distance of the floor candidate feed the refinement, metres."""
+    refine_band: float = 0.15
+    """The plane refinement starts with the floor slab's Gaussians within this distance of the floor
+    candidate's plane (wide: a start a degree off across a 15 m hall is 13 cm high at its walls),
+    metres."""
+    glossy_mirror_share: float = 0.5
+    """A chosen floor with at least this mirrored_below is glossy: its refinement takes the flat
+    upward splats only (reflections below it are opaque too). Measured: generated glossy floors
+    0.999-1.0, trained-like scenes 0.017-0.026, the real room 0.015, the real hall 0.001."""
+    refine_band_halved_to: float = 0.04
+    """The band is halved from refine_band down to this, then narrowed to 3 robust sigmas of the
+    residuals, metres."""
+    refine_band_min: float = 0.01
+    """The narrowest band of the refinement, metres."""
+    refine_converged_deg: float = 0.002
+    """A band has settled when a pass moves the normal less than this, degrees."""
+    refine_max_passes: int = 200
+    """Bound on the refinement's passes over all bands."""
     refine_min_alpha: float = 0.5
     """Gaussians at least this opaque are 'opaque': a floor candidate's second histogram and its area."""
     faint_floor_alpha: float = 0.05
@@ -87,8 +104,9 @@ class AlignConfig:
     mirror_samples: int = 20_000
     """Gaussians below a candidate tested for a mirror image (a seeded subset)."""
     area_balanced_refinement: bool = True
-    """The floor plane's least squares weight every floor cell (coverage_cell_m) alike, so that the
-    densest patch does not tilt the plane of the whole room."""
+    """The floor plane's least squares weight each floor cell (coverage_cell_m) by its opacity capped
+    at the median cell's, so that the densest patch does not tilt the plane of the whole room and a
+    cell of a few stray splats does not weigh as much as a full one."""
     seed: int = 0
     """Seed of the subsampling and of the dominant-normal search."""
 
@@ -287,33 +305,70 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
     n = best["sign"] * u
     d = -best["height"]
 
-    # 3. refinement on the floor's own opaque flat Gaussians near the plane (the faint ones where a
-    # glossy floor's splats faded), every floor cell weighted alike (the whole room's plane, not its
-    # densest patch), twice with a shrinking band
-    band = cfg.refine_band
-    for _ in range(2):
-        sd = p @ n + d
-        sel = np.nonzero((np.abs(sd) < band) & facing & (alpha >= cfg.faint_floor_alpha))[0]
-        if len(sel) < 100:
-            break
-        w = alpha[sel].astype(np.float64)
-        if cfg.area_balanced_refinement:
-            inv = np.unique(cell[sel], return_inverse=True)[1].reshape(-1)
-            w = w / np.bincount(inv, weights=w)[inv]
-        n2, d2 = _plane_svd(p[sel], w)
-        if n2 @ n < 0:
-            n2, d2 = -n2, -d2
-        if _angle(n2, n) > 10:
-            break  # a sloppy patch; keep the histogram's plane
-        n, d = n2, d2
-        res = np.abs(p[sel] @ n + d)
-        band = max(3.0 * float(np.median(res)) * 1.4826, 0.01)
+    # 3. refinement: a plane through the floor slab's opaque Gaussians (and the faint flat upward ones
+    # of a faded floor), iterated in a wide band until the normal stops moving, then in a band
+    # narrowed to 3 robust sigmas of the residuals, again until it settles; each floor cell's
+    # weight is its evidence, capped at the median cell's (stages/align/design.md, issue 46)
+    # under a glossy floor (a mirror image of the room below it) opaque reflections share the
+    # floor's slab: there only the flat upward splats, which the mirror test found, feed the fit
+    glossy = best["mirrored_below"] >= cfg.glossy_mirror_share
+    cand = (facing & (alpha >= cfg.faint_floor_alpha)) | (opaque & ~glossy)
+    n, d, info_refine = refine_floor_plane(p, alpha, cand, cell, n, d, cfg, glossy)
+    info_refine["glossy"] = bool(glossy)
     floors.sort(key=lambda f: -f["score"])
     info = {"up_axis_candidates": [{**a, "dir": np.round(a["dir"], 5).tolist()} for a in axes],
             "up_axis": np.round(u, 5).tolist(), "up_axis_source": up["source"],
             "floor_candidates": floors[:12], "chosen": floors.index(best), "normal": n.tolist(), "d": float(d),
-            "used_cameras": cam_pos is not None, "gaussians_used": int(len(p))}
+            "used_cameras": cam_pos is not None, "gaussians_used": int(len(p)), "refinement": info_refine}
     return n, float(d), info
+
+
+def refine_floor_plane(p: np.ndarray, alpha: np.ndarray, cand: np.ndarray, cell: np.ndarray, n: np.ndarray,
+                       d: float, cfg: AlignConfig, glossy_start: bool = False) -> tuple[np.ndarray, float, dict]:
+    """The floor plane n . p + d = 0 refined from a start (the histogram's plane) by weighted least
+    squares through the candidate Gaussians ``cand`` within a band of the plane.
+
+    The band starts at ``refine_band`` (wide enough to hold the whole floor under a start that is a
+    degree off) and each band is iterated until the normal moves less than ``refine_converged_deg``;
+    only then is it narrowed: halved down to ``refine_band_halved_to`` (the feet of walls and
+    furniture leave the fit), then to 3 robust sigmas of the residuals (at least
+    ``refine_band_min``), until a settled band no longer narrows (at most ``refine_max_passes``).
+    Weights: opacity, and with ``area_balanced_refinement`` each ``cell`` (coverage_cell_m of the
+    plane) weighted by its summed opacity capped at the median cell's, so that neither the densest
+    patch nor a cell of two stray splats tilts the room's plane. A pass whose plane turns more than
+    10 degrees from the start keeps the start (a sloppy patch)."""
+    n0 = n.copy()
+    band = cfg.refine_band if not glossy_start else 0.05
+    passes, bands, moved = 0, [], float("nan")
+    while passes < cfg.refine_max_passes:
+        sel = np.nonzero(cand & (np.abs(p @ n + d) < band))[0]
+        if len(sel) < 100:
+            break
+        passes += 1
+        w = alpha[sel].astype(np.float64)
+        if cfg.area_balanced_refinement:
+            inv = np.unique(cell[sel], return_inverse=True)[1].reshape(-1)
+            tot = np.bincount(inv, weights=w)
+            w = w * (np.minimum(tot, np.median(tot)) / tot)[inv]
+        n2, d2 = _plane_svd(p[sel], w)
+        if n2 @ n < 0:
+            n2, d2 = -n2, -d2
+        if _angle(n2, n0) > 10:
+            break
+        moved = _angle(n2, n)
+        n, d = n2, float(d2)
+        if moved < cfg.refine_converged_deg:  # this band has settled: narrow it
+            if band > cfg.refine_band_halved_to:  # halving: furniture bases and wall feet leave first
+                narrower = max(0.5 * band, cfg.refine_band_halved_to)
+            else:  # then to the floor's own thickness
+                res = np.abs(p[sel] @ n + d)
+                narrower = max(3.0 * 1.4826 * float(np.median(res)), cfg.refine_band_min)
+                if narrower >= 0.999 * band:
+                    break  # converged
+            bands.append(round(band, 4))
+            band = narrower
+    return n, d, {"passes": passes, "bands_m": bands + [round(band, 4)], "last_move_deg": moved,
+                  "converged": bool(moved < cfg.refine_converged_deg)}
 
 
 def nearest_axis(n: np.ndarray) -> tuple[str, float]:

@@ -58,10 +58,13 @@ class SyntheticScene:
     defects: list[dict] = field(default_factory=list)  # injected blur / hole regions (canonical frame)
 
 
-def random_rigid_transform(rng: np.random.Generator, max_tilt_deg: float, max_offset_m: float) -> np.ndarray:
-    """Tilt about a random horizontal axis by up to max_tilt_deg, any yaw, any offset."""
+def random_rigid_transform(rng: np.random.Generator, max_tilt_deg: float, max_offset_m: float,
+                           tilt_deg: float | None = None) -> np.ndarray:
+    """Tilt about a random horizontal axis by up to max_tilt_deg (tilt_deg: by exactly that; rng
+    draws the same numbers either way), any yaw, any offset."""
     yaw = rng.uniform(-np.pi, np.pi)
-    tilt = np.deg2rad(rng.uniform(0, max_tilt_deg))
+    drawn = rng.uniform(0, max_tilt_deg)
+    tilt = np.deg2rad(drawn if tilt_deg is None else tilt_deg)
     ax = rng.uniform(0, 2 * np.pi)
     k = np.array([np.cos(ax), np.sin(ax), 0.0])
     kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
@@ -160,7 +163,8 @@ def generate_scene(seed: int, cfg: SyntheticConfig) -> SyntheticScene:
         sh[:, 0] = canonical.sh[:, 0]
         sh[:, 1:] = rng.normal(0, 0.02, (len(canonical), k - 1, 3))
         canonical.sh = sh
-    transform = random_rigid_transform(rng, cfg.max_tilt_deg, cfg.max_offset_m)
+    tilt = None if real.tilt_deg is None else float(rrng.uniform(*real.tilt_deg))
+    transform = random_rigid_transform(rng, cfg.max_tilt_deg, cfg.max_offset_m, tilt)
     transform[:3, :3] = up_rot @ transform[:3, :3]  # then the up axis (identity for +z)
     transform[:3, 3] = up_rot @ transform[:3, 3]
     cams = [transform @ c for c in _capture_path(lay, cfg.camera_height_m, rng)]

@@ -12,12 +12,15 @@ measured on what real scenes look like (each a knob; ``level`` sets them all at 
 - haze: large low-opacity Gaussians hugging surfaces;
 - sparse coverage: surfaces thinned with their distance from the capture path;
 - up axis: the scene's up direction before the random tilt (+-x, +-y, +-z; "random" from the seed);
+- trained splats: the structure's splats turned by up to ``splat_scatter_deg`` from their surface
+  and thickened up to ``splat_thickness`` of their width, the scene tilted by ``tilt_deg``;
 - defects (for screening): ``blur_regions`` discs of ``defect_radius_m`` inside rooms whose
   Gaussians (up to 2.5 m) are blurred: 3x their largest scale, isotropic (at most 0.4 m), 70 % of
   the region's mean colour, as a fit leaves a place few views saw; ``hole_regions`` discs whose
   Gaussians are removed, floor included (an incomplete reconstruction). The regions are returned
   as ground truth (``defects``: kind, canonical centre, radius).
-Levels (``none`` / ``moderate`` / ``heavy``) are the presets in LEVELS; a knob set explicitly wins.
+Levels (``none`` / ``moderate`` / ``heavy`` / ``trained``) are the presets in LEVELS; a knob set
+explicitly wins.
 """
 from __future__ import annotations
 
@@ -32,6 +35,12 @@ LEVELS = {
                      sparse_distance_m=3.0, up_axis="random"),
     "heavy": dict(reflection_fraction=0.6, far_floater_fraction=0.05, floor_noise_m=0.02, haze_fraction=0.03,
                   sparse_distance_m=1.5, up_axis="random"),
+    # trained Gaussians (issue 46): moderate's artefacts, and splats whose rotations scatter up to
+    # 45 deg from their surface with a thickness of up to half their width, in a scene tilted 1-2
+    # deg in its source frame (as a capture's frame is off level by a little, not by 20 deg)
+    "trained": dict(reflection_fraction=0.3, far_floater_fraction=0.02, floor_noise_m=0.01, haze_fraction=0.01,
+                    sparse_distance_m=3.0, up_axis="random", splat_scatter_deg=45.0, splat_thickness=0.5,
+                    tilt_deg=[1.0, 2.0]),
 }
 AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": (2, 1.0), "-z": (2, -1.0)}
 
@@ -41,7 +50,7 @@ class RealismConfig:
     """Reconstruction artefacts of the procedural scenes (README: realistic synthetic scenes)."""
 
     level: str = "none"
-    """Preset of every knob below: none | moderate | heavy (knobs set explicitly override it)."""
+    """Preset of every knob below: none | moderate | heavy | trained (knobs set explicitly override it)."""
     reflection_fraction: float | None = None
     """Share of the surface Gaussians within reflection_depth above the floor mirrored below it."""
     reflection_depth: float = 1.5
@@ -67,6 +76,17 @@ class RealismConfig:
     exp(-(d - this) / this); 0 keeps everything."""
     up_axis: str | None = None
     """Up direction of the written scene before the random tilt: +x, -x, +y, -y, +z, -z or random."""
+    splat_scatter_deg: float | None = None
+    """The structure's splats (floor, walls, ceiling) turned by up to this angle about an axis in
+    their plane, leaning towards one horizontal direction of the scene more than the others,
+    degrees: a trained floor splat's normal lies tens of degrees from vertical, and their mean is
+    off the surface's (0 = exact)."""
+    splat_thickness: float | None = None
+    """The structure's splats get a smallest scale of up to this share of their middle one (drawn
+    uniformly per splat; 0 keeps the generator's flatness)."""
+    tilt_deg: list[float] | None = None
+    """[lo, hi]: the scene's tilt in its source frame drawn from this range, degrees, instead of up
+    to synthetic.max_tilt_deg (null = that)."""
     blur_regions: int = 0
     """Blurred regions (discs of defect_radius_m inside rooms, up to 2.5 m high): their Gaussians
     grow to 3x their largest scale, isotropic (at most 0.4 m), and take 70 % of the region's mean
@@ -117,6 +137,31 @@ def add_artefacts(g: dict, floor_mask: np.ndarray, cams_xyz: np.ndarray, cfg: Re
     """
     g = {k: np.array(v, copy=True) for k, v in g.items()}
     n = len(g["means"])
+    if cfg.splat_scatter_deg or cfg.splat_thickness:
+        s_ = np.nonzero(g["inst"] == 0)[0]  # the structure: floor, walls, ceiling
+        if cfg.splat_scatter_deg:  # about an axis in the splat's plane: its normal turns by the angle
+            q = g["quats"][s_]
+            w, x, y, z = q.T
+            rot = np.stack([np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], 1),
+                            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], 1),
+                            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], 1)], 1)
+            k = np.argmin(g["scales"][s_], axis=1)
+            normal = rot[np.arange(len(s_)), :, k]
+            # towards one side more than the other, as a fit leans splats towards where they were
+            # seen from: their mean normal is off the surface's by a few degrees
+            lean = np.r_[rng.normal(size=2), 0.0]
+            axis = np.cross(normal, lean / np.linalg.norm(lean) + 0.7 * rng.normal(size=(len(s_), 3)))
+            axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+            half = np.radians(rng.uniform(0, cfg.splat_scatter_deg, len(s_))) / 2
+            turn = np.c_[np.cos(half), axis * np.sin(half)[:, None]]
+            g["quats"][s_] = _quat_mul(turn, g["quats"][s_])
+        if cfg.splat_thickness:
+            sc = g["scales"][s_]
+            mid = np.sort(sc, axis=1)[:, 1]
+            k = np.argmin(sc, axis=1)
+            sc[np.arange(len(s_)), k] = np.maximum(sc[np.arange(len(s_)), k], rng.uniform(0, cfg.splat_thickness,
+                                                                                         len(s_)) * mid)
+            g["scales"][s_] = sc
     if cfg.floor_noise_m:
         f = np.nonzero(floor_mask)[0]
         g["means"][f, 2] += rng.normal(0, cfg.floor_noise_m, len(f))
@@ -217,6 +262,14 @@ def _mirrored(g: dict, idx: np.ndarray, axis: int, plane: float, alpha_factor: f
     sign = -np.ones(4)
     sign[0] = sign[1 + axis] = 1.0
     return m, g["quats"][idx] * sign, g["scales"][idx], g["alphas"][idx] * alpha_factor, g["rgb"][idx] * 0.8
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton products a * b of [K, 4] wxyz quaternions (b turned by a)."""
+    aw, ax, ay, az = a.T
+    bw, bx, by, bz = b.T
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], 1)
 
 
 def _random_quats(rng: np.random.Generator, k: int) -> np.ndarray:
