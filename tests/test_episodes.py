@@ -777,3 +777,48 @@ def test_paths_crossing_matches_walking_each_path(room_with_door):
         ij = np.rint(np.concatenate(pts)).astype(int)
         assert fast[node] == mask[ij[:, 0], ij[:, 1]].any(), node
     assert 0 < fast.mean() < 1
+
+
+def _disk_costmap(radius=0.18, res=0.05, n=120):
+    """A 6 x 6 m map whose only obstacle is a point at (3, 3): the clearance is the distance to it,
+    so the valid region is the outside of a disk of radius + margin."""
+    from navcore.nav.costmap import Costmap
+    from stages.costmap.build import interpolation_margin
+
+    c = (np.arange(n) + 0.5) * res
+    clr = np.hypot(*np.meshgrid(c - 3.0, c - 3.0)).astype(np.float32)
+    return Costmap(clr, (0.0, 0.0), res, radius, interpolation_margin(res, radius))
+
+
+def test_taut_path_wraps_a_disk_like_the_exact_geodesic():
+    """Known answer: around a disk of radius R from a start to a goal at distance D from its centre,
+    an angle theta apart, the shortest path is tangent, arc, tangent:
+    2 sqrt(D^2 - R^2) + R (theta - 2 acos(R / D)). The query's bilinear clearance puts the disk's
+    edge between the radius and the radius plus the interpolation margin, so the geodesic lies
+    between those two answers. The taut path (a polyline around an arc) lies within 0.3 % of that
+    interval and stays valid, the grid graph's path through cell centres does not (issue 46); the
+    benchmark's reference (a visibility graph over the valid region's boundary sampled finely)
+    lies within it too."""
+    from benchmarks.episodes import VisibilityReference
+    from navcore.nav.geodesic import taut_path
+
+    cm = _disk_costmap()
+    s, g = np.array([3.0 - 0.575, 3.0 + 0.025]), np.array([3.0 + 0.575, 3.0 + 0.025])  # cell centres
+    d = float(np.hypot(0.575, 0.025))
+    theta = math.pi - 2 * math.atan2(0.025, 0.575)  # the angle start - centre - goal
+    exact = lambda r: 2 * math.sqrt(d * d - r * r) + r * (theta - 2 * math.acos(r / d))  # noqa: E731
+    lo, hi = exact(cm.radius) * 0.997, exact(cm.radius + cm.margin) * 1.003
+    valid = ~cm.occupancy
+    graph = NavGraph(cm, valid, 6)
+    fld = graph.field(cm.cells_of(g[None]))
+    grid_path = cm.cell_centers(fld.path_cells(cm.cells_of(s[None])[0]))
+    taut = taut_path(cm, grid_path)
+    length = float(np.hypot(*np.diff(taut, axis=0).T).sum())
+    grid_len = float(np.hypot(*np.diff(grid_path, axis=0).T).sum())
+    assert np.allclose(grid_path[0], s) and np.allclose(grid_path[-1], g)
+    assert np.allclose(taut[0], s) and np.allclose(taut[-1], g)
+    assert cm.are_motions_valid(np.concatenate([taut[:-1], taut[1:]], 1)).all()
+    assert length <= grid_len and grid_len > hi  # the grid metric is the defect
+    assert lo <= length <= hi, (length, lo, hi)
+    ref = VisibilityReference(cm, valid).distance(s, g)
+    assert lo <= ref <= hi, (ref, lo, hi)

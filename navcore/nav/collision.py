@@ -184,3 +184,82 @@ def taut_path(f, ox, oy, inv_res, thr, xy, step):
         n += 1
         i = best
     return out[:n]
+
+
+@numba.njit(cache=True)
+def _turn(p, k):
+    """Turning angle of polyline p at vertex k (radians)."""
+    ux, uy = p[k, 0] - p[k - 1, 0], p[k, 1] - p[k - 1, 1]
+    vx, vy = p[k + 1, 0] - p[k, 0], p[k + 1, 1] - p[k, 1]
+    return abs(math.atan2(ux * vy - uy * vx, ux * vx + uy * vy))
+
+
+@numba.njit(cache=True)
+def relax_path(f, ox, oy, inv_res, thr, xy, step0, step_min, sweeps, tol, splits, min_turn):
+    """Pull a valid polyline's bends onto the shortest nearby valid positions (pattern search).
+
+    Each interior vertex in turn tries eight moves of ``step0`` (then of half as much, down to
+    ``step_min``) and takes the first that shortens its two segments while both stay valid
+    motions; a vertex whose neighbours see each other and that turns the path is dropped. When a
+    sweep shortens the path by less than ``tol`` (metres), the segments next to a bend of more
+    than ``min_turn`` radians are split at their midpoints (at most ``splits`` times), so that the
+    bends can follow a rounded clearance boundary (the shortest path wraps around the disk of a
+    wall's end); at most ``sweeps`` sweeps in all. End points stay.
+    Returns [K, 2], no longer than the input, every segment a valid motion.
+    """
+    cap = xy.shape[0] * (2 ** splits) + 2
+    p = np.empty((cap, 2))
+    n = xy.shape[0]
+    p[:n] = xy
+    dx = np.array([1.0, -1.0, 0.0, 0.0, 0.7071067811865476, 0.7071067811865476, -0.7071067811865476,
+                   -0.7071067811865476])
+    dy = np.array([0.0, 0.0, 1.0, -1.0, 0.7071067811865476, -0.7071067811865476, 0.7071067811865476,
+                   -0.7071067811865476])
+    done_splits = 0
+    for _ in range(sweeps):
+        gain = 0.0
+        k = 1
+        while k < n - 1:
+            ax, ay, bx, by = p[k - 1, 0], p[k - 1, 1], p[k + 1, 0], p[k + 1, 1]
+            vx, vy = p[k, 0], p[k, 1]
+            cur = math.hypot(vx - ax, vy - ay) + math.hypot(bx - vx, by - vy)
+            s = step0
+            while s >= step_min:
+                moved = False
+                for d in range(8):
+                    wx, wy = vx + s * dx[d], vy + s * dy[d]
+                    new = math.hypot(wx - ax, wy - ay) + math.hypot(bx - wx, by - wy)
+                    if new < cur - 1e-12 and motion_valid(f, ox, oy, inv_res, thr, ax, ay, wx, wy) \
+                            and motion_valid(f, ox, oy, inv_res, thr, wx, wy, bx, by):
+                        gain += cur - new
+                        vx, vy, cur = wx, wy, new
+                        moved = True
+                        break
+                if not moved:
+                    s *= 0.5
+            p[k, 0], p[k, 1] = vx, vy
+            straight = math.hypot(bx - ax, by - ay)
+            if cur - straight > 1e-9 and motion_valid(f, ox, oy, inv_res, thr, ax, ay, bx, by):
+                gain += cur - straight  # the bend is not needed
+                for j in range(k, n - 1):
+                    p[j] = p[j + 1]
+                n -= 1
+                continue
+            k += 1
+        if gain < tol:
+            if done_splits >= splits or n <= 2:
+                break
+            done_splits += 1
+            q = np.empty((cap, 2))
+            m = 0
+            for i in range(n - 1):
+                q[m] = p[i]
+                m += 1
+                if (i > 0 and _turn(p, i) > min_turn) or (i + 1 < n - 1 and _turn(p, i + 1) > min_turn):
+                    q[m, 0] = 0.5 * (p[i, 0] + p[i + 1, 0])
+                    q[m, 1] = 0.5 * (p[i, 1] + p[i + 1, 1])
+                    m += 1
+            q[m] = p[n - 1]
+            n = m + 1
+            p = q
+    return p[:n].copy()

@@ -16,6 +16,7 @@ from navcore.io.episode_schema import quantize_trajectory
 from navcore.labels import is_structure
 from navcore.nav.actions import ACTION_NAMES, MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from navcore.nav.embodiment import Limits
+from navcore.nav.geodesic import taut_path
 from navcore.nav.oracle import discrete_expert
 from navcore.nav.poses import in_region, point_regions, region_distance, relative_waypoints
 from stages.episodes.config import DifficultyConfig, EpisodesConfig, PlannerConfig, TaskConfig
@@ -168,8 +169,10 @@ class EpisodeGenerator:
         return goals
 
     # ---- one episode -------------------------------------------------------------------------
-    def _episode(self, goal: Goal, fld, node: int, difficulty_budget: int):
-        """Plan, roll out and check one start; returns (episode dict, trajectory arrays) or None."""
+    def _episode(self, goal: Goal, fld, node: int, difficulty_budget: int, bucket: int = -1):
+        """Plan, roll out and check one start; returns (episode dict, trajectory arrays) or None.
+        bucket: the difficulty the start was drawn for by its grid distance (-1: any); a start whose
+        taut geodesic falls into another is rejected, so that the difficulties stay balanced."""
         t, cm = self.task, self.cm
         start_xy = cm.cell_centers(self.graph.cells[node][None])[0]
         start_yaw = self._start_yaw(start_xy)
@@ -197,6 +200,12 @@ class EpisodeGenerator:
             return None
         if cm.is_motion_valid(start_xy[0], start_xy[1], goal_xy[0], goal_xy[1]):
             geo = min(geo, euclid)  # in line of sight the geodesic is the straight line
+        else:  # the grid path through cell centres, pulled taut in the continuous free space
+            taut = taut_path(cm, cm.cell_centers(path_cells))
+            geo = min(geo, float(np.hypot(*np.diff(taut, axis=0).T).sum()))
+        if bucket >= 0 and difficulty_of(geo, self.ecfg.difficulty) != bucket:
+            self.rejections["difficulty_changed_by_taut_geodesic"] += 1
+            return None
         best = None
         seed_path = cm.cell_centers(path_cells)
         for _ in range(max(1, self.planner.cfg.attempts)):
@@ -408,7 +417,7 @@ class EpisodeGenerator:
                     self.rejections["no_start_in_range"] += 1
                     break
                 budget = self.ecfg.difficulty.max_steps[b] if b >= 0 else max(self.ecfg.difficulty.max_steps)
-                out = self._episode(goal, fld, node, budget)
+                out = self._episode(goal, fld, node, budget, b)
                 if out is None:
                     continue
                 row, ro, fe = out
