@@ -81,7 +81,8 @@ def main(argv=None) -> int:
         if s["unlinked_source_files"]:
             print(f"  warning: {len(s['unlinked_source_files'])} of the asset's links to its original are copies now "
                   f"(the original was replaced since): `stages=[asset] force=true` links the current files")
-    print(f"{rep['episodes']} episodes: {rep['bytes_per_episode'] / 1e3:.2f} KB an episode with its trajectory")
+    if rep["episodes"]:
+        print(f"{rep['episodes']} episodes: {rep['bytes_per_episode'] / 1e3:.2f} KB an episode with its trajectory")
     print(json.dumps(rep, indent=1))
     return 0
 
