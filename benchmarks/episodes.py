@@ -223,6 +223,10 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     run = run_stage(args.data, args.episodes)
     data = Path(args.data)
+    from pipeline.executor import open_catalog
+
+    # the run's scene set only: other scene sets may share the data root (bench-real's real scenes)
+    scenes = sorted(s.scene_id for s in open_catalog(run["cfg"])[1])
     markers = [json.loads(p.read_text()) for p in sorted((data / "_markers" / "episodes").glob("*.json"))]
     eps = pd.read_parquet(data / "05_episodes")
     trajs = pd.read_parquet(data / "06_trajectories")
@@ -230,6 +234,8 @@ def main(argv=None) -> dict:
     eps["scene_id"] = eps["scene_id"].astype(str)
     trajs["task"] = trajs["task"].astype(str)
     trajs["scene_id"] = trajs["scene_id"].astype(str)
+    eps = eps[eps["scene_id"].isin(scenes)]
+    trajs = trajs[trajs["scene_id"].isin(scenes)]
     scenes = sorted(eps["scene_id"].unique())
     markers = [m for m in markers if m["scene_id"] in scenes]
     cfg = run["cfg"]
