@@ -3,8 +3,9 @@
     python -m benchmarks.storage data
 
 Counts unique inodes (a hard link to the source costs nothing; an asset's link whose original was
-replaced since is a copy, and is named). Per scene: the scene folder
-(canonical Gaussian store, alignment, reports) plus the asset, then with voxels and costmaps; per
+replaced since is a copy, and is named). Per scene: the bytes of each stage's outputs (scene
+store, asset, voxels, costmaps, screen layer, semantics), the scene folder (canonical Gaussian
+store, alignment, reports) plus the asset, then with voxels and costmaps; per
 episode: the episodes and trajectories tables over the number of episodes. Prints a table and
 JSON.
 """
@@ -50,11 +51,17 @@ def measure(root: Path) -> dict:
         src = tree_bytes(source_files(ing["source"])[1], seen)  # counted first: links to it are free
         asset = root / "09_assets" / ing["group"] / sid
         stale = unlinked_source_files(asset, seen)
-        store = tree_bytes([root / "01_scenes" / sid, asset], seen)
-        maps = tree_bytes([root / "02_voxels" / f"{sid}.zarr", root / "03_costmaps" / f"{sid}.zarr",
-                           root / "03_costmaps" / "screen" / f"{sid}.zarr"], seen)
-        scenes.append({"scene_id": sid, "source_bytes": src, "store_and_asset_bytes": store, "maps_bytes": maps,
+        per_stage = {name: tree_bytes(paths, seen) for name, paths in (
+            ("ingest (scene store)", [root / "01_scenes" / sid]), ("asset", [asset]),
+            ("voxelize", [root / "02_voxels" / f"{sid}.zarr"]), ("costmap", [root / "03_costmaps" / f"{sid}.zarr"]),
+            ("screen", [root / "03_costmaps" / "screen" / f"{sid}.zarr"]),
+            ("semantics", [root / "04_semantics" / sid]))}
+        store = per_stage["ingest (scene store)"] + per_stage["asset"]
+        maps = per_stage["voxelize"] + per_stage["costmap"] + per_stage["screen"]
+        scenes.append({"scene_id": sid, "scene": ing.get("name", sid), "source_bytes": src,
+                       "store_and_asset_bytes": store, "maps_bytes": maps, "bytes_per_stage": per_stage,
                        "ratio": store / src if src else None, "ratio_with_maps": (store + maps) / src if src else None,
+                       "ratio_all": sum(per_stage.values()) / src if src else None,
                        "unlinked_source_files": stale})
     eps = sorted((root / "05_episodes").glob("task=*/scene_id=*/part-0.parquet"))
     n = sum(pq.read_metadata(f).num_rows for f in eps)
@@ -69,11 +76,13 @@ def main(argv=None) -> int:
     for s in rep["scenes"]:
         print(f"{s['scene_id']}: source {s['source_bytes'] / 1e6:.1f} MB, scene store + asset "
               f"{s['store_and_asset_bytes'] / 1e6:.1f} MB ({s['ratio']:.2f}x), with voxels and costmaps "
-              f"{s['ratio_with_maps']:.2f}x")
+              f"{s['ratio_with_maps']:.2f}x, everything {s['ratio_all']:.2f}x; per stage (MB): "
+              + ", ".join(f"{k} {v / 1e6:.2f}" for k, v in s["bytes_per_stage"].items()))
         if s["unlinked_source_files"]:
             print(f"  warning: {len(s['unlinked_source_files'])} of the asset's links to its original are copies now "
                   f"(the original was replaced since): `stages=[asset] force=true` links the current files")
-    print(f"{rep['episodes']} episodes: {rep['bytes_per_episode'] / 1e3:.2f} KB an episode with its trajectory")
+    if rep["episodes"]:
+        print(f"{rep['episodes']} episodes: {rep['bytes_per_episode'] / 1e3:.2f} KB an episode with its trajectory")
     print(json.dumps(rep, indent=1))
     return 0
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from navcore.io import jsonio
 from navcore.io.atomic import atomic_path, write_text_atomic
+from navcore.io.codecs import array_codecs
 
 
 class Dataset:
@@ -213,9 +214,10 @@ class CostmapDataset(ZarrDataset):
         g = root.create_group(embodiment.name)
         for name in COSTMAP_LAYERS:
             arr = getattr(layers, name)
-            g.create_array(name, data=arr, chunks=arr.shape)
+            g.create_array(name, data=arr, chunks=arr.shape, **array_codecs(arr.dtype))
         if hidden is not None:
-            g.create_array(HIDDEN_SPLATS, data=np.asarray(hidden, np.int64), chunks=(max(len(hidden), 1),))
+            g.create_array(HIDDEN_SPLATS, data=np.asarray(hidden, np.int64), chunks=(max(len(hidden), 1),),
+                           **array_codecs(np.int64))
         g.attrs.update({"origin": list(layers.origin), "resolution": layers.resolution, "radius": embodiment.radius,
                         "margin": layers.margin, "h_min": embodiment.h_min, "h_max": embodiment.h_max,
                         "layout": COSTMAP_GRID, **attrs})
@@ -242,7 +244,7 @@ class QualityDataset(ZarrDataset):
         """Every array of layers (chunked whole) and the attrs, into a root opened by writing()."""
         for name, arr in layers.items():
             arr = np.asarray(arr)
-            root.create_array(name, data=arr, chunks=tuple(max(d, 1) for d in arr.shape))
+            root.create_array(name, data=arr, chunks=tuple(max(d, 1) for d in arr.shape), **array_codecs(arr.dtype))
         root.attrs.update({"layout": COSTMAP_GRID, **attrs})
 
 

@@ -8,6 +8,7 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from navcore.gaussians.content import content_of
+from navcore.io.codecs import array_codecs, slab_shards
 from navcore.voxels.field import VoxelizeConfig, log_transmittance_blocks
 from navcore.voxels.grid import grid_for_points
 
@@ -24,9 +25,11 @@ def run(scene, cfg, catalog) -> dict:
         # opacity in 1/255 steps (as the 8-bit alpha of images): half the bytes of float16 and fine
         # enough to re-threshold; V is thresholded on the exact values. No stage reads A, so stores
         # written before (float16, no A_scale attribute) stay valid: the stage version is unchanged
-        a_arr = (g.create_array("A", shape=grid.shape, dtype="uint8", chunks=chunks, fill_value=0)
-                 if vcfg.store_opacity else None)
-        v_arr = g.create_array("V", shape=grid.shape, dtype="bool", chunks=chunks, fill_value=False)
+        shards = slab_shards(grid.shape, chunks)  # one file per x-slab (navcore.io.codecs)
+        a_arr = (g.create_array("A", shape=grid.shape, dtype="uint8", chunks=chunks, shards=shards, fill_value=0,
+                                **array_codecs("uint8")) if vcfg.store_opacity else None)
+        v_arr = g.create_array("V", shape=grid.shape, dtype="bool", chunks=chunks, shards=shards, fill_value=False,
+                               **array_codecs("bool"))
         for x0, blk in log_transmittance_blocks(gs, grid, vcfg):
             a = -np.expm1(blk)
             if a_arr is not None:
