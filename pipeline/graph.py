@@ -76,7 +76,7 @@ STAGES: tuple[Stage, ...] = (
           memory_gb=3.0),
     Stage("asset", asset.run, ("costmap", "semantics"), ("asset",), version="4"),
     Stage("episodes", episodes.run, ("costmap", "semantics", "screen"),
-          ("episodes", "task", "planner", "embodiment", "screen"), version="7"),
+          ("episodes", "task", "planner", "embodiment", "screen"), version="8"),
     Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",), gpu=True, memory_gb=2.0),
     Stage("export", export.run, ("episodes", "asset", "goal_images"), ("export",), finalize=export.finalize),
     Stage("evaluate", evaluate.run, ("episodes",), ("evaluate", "episodes", "task", "embodiment"),
