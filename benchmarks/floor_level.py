@@ -19,10 +19,11 @@ floor). Three measures of that layer:
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
 import numpy as np
+
+from navcore.io import jsonio
 
 SLAB_M = 0.15
 """Half-height of the slab around z = 0 that the measures take, metres."""
@@ -32,6 +33,13 @@ def _tilt(n: np.ndarray) -> float:
     return float(np.degrees(np.arccos(min(abs(float(n[2])) / float(np.linalg.norm(n)), 1.0))))
 
 
+def cell_groups(p: np.ndarray, cell_m: float) -> list[np.ndarray]:
+    """Indices of the points of each cell_m x cell_m cell of the plane (cells in sorted order)."""
+    c = np.unique(np.floor(p[:, :2] / cell_m).astype(np.int64), axis=0, return_inverse=True)[1].reshape(-1)
+    order = np.argsort(c, kind="stable")
+    return np.split(order, np.nonzero(np.diff(c[order]))[0] + 1)
+
+
 def median_plane(p: np.ndarray, cell_m: float = 0.5, min_points: int = 20, boot: int = 300,
                  seed: int = 0) -> tuple[np.ndarray, int, list[float]]:
     """Least-squares plane z = a x + b y + c through the median heights of the floor points' cells
@@ -39,11 +47,8 @@ def median_plane(p: np.ndarray, cell_m: float = 0.5, min_points: int = 20, boot:
     Returns (a, b, c), the cells used, and the 95 % bootstrap interval of its tilt over the cells
     (degrees). The cell medians are robust already; a re-cut of cells off the plane made the
     tilt jump on the room's slightly bowl-shaped floor (0.02 -> 0.24 deg), so there is none."""
-    c = np.unique(np.floor(p[:, :2] / cell_m).astype(np.int64), axis=0, return_inverse=True)[1].reshape(-1)
-    order = np.argsort(c, kind="stable")
-    bounds = np.r_[0, np.nonzero(np.diff(c[order]))[0] + 1, len(order)]
-    q = np.array([[*p[order[a:b], :2].mean(0), np.median(p[order[a:b], 2])]
-                  for a, b in zip(bounds[:-1], bounds[1:]) if b - a >= min_points])
+    q = np.array([[*p[idx, :2].mean(0), np.median(p[idx, 2])] for idx in cell_groups(p, cell_m)
+                  if len(idx) >= min_points])
     fit = lambda s: np.linalg.lstsq(np.c_[s[:, :2], np.ones(len(s))], s[:, 2], rcond=None)[0]  # noqa: E731
     rng = np.random.default_rng(seed)
     ts = [_tilt(np.array([-a, -b, 1.0])) for a, b, _ in (fit(q[rng.integers(0, len(q), len(q))]) for _ in range(boot))]
@@ -63,13 +68,9 @@ def floor_points(means: np.ndarray, alphas: np.ndarray, slab_m: float = SLAB_M, 
     p = means[(alphas >= 0.5) & (np.abs(means[:, 2]) < slab_m)].astype(np.float64)
     if not len(p):
         return p
-    cell = np.unique(np.floor(p[:, :2] / cell_m).astype(np.int64), axis=0, return_inverse=True)[1].reshape(-1)
-    order = np.argsort(cell, kind="stable")
-    bounds = np.r_[0, np.nonzero(np.diff(cell[order]))[0] + 1, len(order)]
     bins = np.arange(-slab_m, slab_m + 0.01, 0.01)
     cells = []  # (members, peak x, y, z)
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        idx = order[a:b]
+    for idx in cell_groups(p, cell_m):
         if len(idx) < 30:
             continue
         h = gaussian_filter1d(np.histogram(p[idx, 2], bins)[0].astype(float), 1.0)
@@ -138,7 +139,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     for s in args.sources:
         al, _ = align_source(s)
-        print(s, json.dumps(floor_level(al.means, al.alphas)))
+        print(s, jsonio.dumps(floor_level(al.means, al.alphas)))
     return 0
 
 

@@ -122,6 +122,14 @@ class Costmap:
         xy = np.ascontiguousarray(np.asarray(xy, dtype=np.float64)[:, :2])
         return K.taut_path(self._f, self._ox, self._oy, self._inv, self._thr + slack, xy, float(step))
 
+    def relax_path(self, xy: np.ndarray, step0: float, step_min: float, sweeps: int, tol: float, splits: int,
+                   min_turn: float, slack: float = 1e-3) -> np.ndarray:
+        """[M, 2] valid polyline -> its bends moved to their shortest valid positions (pattern
+        search, segments next to bends split; collision.relax_path), motions valid with `slack`."""
+        xy = np.ascontiguousarray(np.asarray(xy, dtype=np.float64)[:, :2])
+        return K.relax_path(self._f, self._ox, self._oy, self._inv, self._thr + slack, xy, float(step0),
+                            float(step_min), int(sweeps), float(tol), int(splits), float(min_turn))
+
     def clearance_at(self, xy: np.ndarray) -> np.ndarray:
         """Interpolated clearance (metres; negative outside the supported region) at [N, 2] points."""
         return K.clearance_at(self._f, self._ox, self._oy, self._inv, np.ascontiguousarray(np.asarray(xy, float)[:, :2]))

@@ -180,12 +180,8 @@ def taut_path(costmap, path: np.ndarray, slack: float = 1e-3) -> np.ndarray:
     sampled every 1/16 cell (bench-episodes' reference) on 191 episodes of two scenes: at most
     0.36 % longer, 0.6-0.9 ms an episode (steps to a 512th and 1e-6 m: 0.35 %, 1.3-1.9 ms, up to
     42 ms on a 10 m path; three splits at 2 degrees: 0.51 %; the grid path alone: 1.5 %)."""
-    from navcore.nav import collision as K
-
     h = costmap.resolution
     p = costmap.taut_path(np.asarray(path, np.float64), 0.25 * h, slack)
     if len(p) <= 2:
         return p
-    f, ox, oy, inv, thr = costmap._args
-    return K.relax_path(f, ox, oy, inv, thr + slack, np.ascontiguousarray(p), 0.25 * h, h / 128, 40, 1e-4, 5,
-                        math.radians(1.0))
+    return costmap.relax_path(p, 0.25 * h, h / 128, 40, 1e-4, 5, math.radians(1.0), slack)

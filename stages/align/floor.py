@@ -83,6 +83,10 @@ class AlignConfig:
     """A chosen floor with at least this mirrored_below is glossy: its refinement takes the flat
     upward splats only (reflections below it are opaque too). Measured: generated glossy floors
     0.999-1.0, trained-like scenes 0.017-0.026, the real room 0.015, the real hall 0.001."""
+    refine_band_glossy: float = 0.05
+    """The refinement's first band on a glossy floor (glossy_mirror_share), metres: its flat upward
+    splats, found by the mirror test, start near the candidate's plane; the wide band would take in
+    reflected low surfaces below it."""
     refine_band_halved_to: float = 0.04
     """The band is halved from refine_band down to this, then narrowed to 3 robust sigmas of the
     residuals, metres."""
@@ -338,7 +342,7 @@ def refine_floor_plane(p: np.ndarray, alpha: np.ndarray, cand: np.ndarray, cell:
     patch nor a cell of two stray splats tilts the room's plane. A pass whose plane turns more than
     10 degrees from the start keeps the start (a sloppy patch)."""
     n0 = n.copy()
-    band = cfg.refine_band if not glossy_start else 0.05
+    band = cfg.refine_band_glossy if glossy_start else cfg.refine_band
     passes, bands, moved = 0, [], float("nan")
     while passes < cfg.refine_max_passes:
         sel = np.nonzero(cand & (np.abs(p @ n + d) < band))[0]
