@@ -9,7 +9,7 @@ ARGS ?=
 CUDA ?=
 WHEELS ?=
 
-.PHONY: bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: release verify-release bench-release bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -101,6 +101,21 @@ bench-semantics: $(STAMP)
 
 bench-semantics-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.semantics --gpu $(ARGS)
+
+# the release folder users download, from the finished data root (make dataset first; the same
+# ARGS as the dataset was made with, plus release.* keys), e.g. make release ARGS="--version 1.0.0"
+release: $(STAMP)
+	$(BIN)/navarena release $(ARGS)
+
+# check a release folder as a user does after a download: make verify-release DIR=data/11_releases/navarena-v0.1.0
+DIR ?= data/11_releases/navarena-v0.1.0
+verify-release: $(STAMP)
+	$(BIN)/navarena verify-release $(DIR) $(ARGS)
+
+# a release of the 2,000-scene simulation: time, peak memory, files, bytes, verify-release time and the
+# 22 M-episode projection -> data/08_reports/bench_release.{json,md}, docs/bench_release.md
+bench-release: $(STAMP)
+	$(BIN)/python -m benchmarks.release --docs $(ARGS)
 
 # evaluate an agent on the dataset, e.g. make eval ARGS="evaluate.agent=depth_reactive"
 eval: $(STAMP)

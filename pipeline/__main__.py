@@ -1,5 +1,6 @@
 """CLI: ``python -m pipeline [overrides]`` or ``navarena [overrides]`` (Hydra); ``navarena
-render-episodes ...`` and ``navarena export-lerobot ...`` are tools over a finished data root."""
+render-episodes ...``, ``navarena export-lerobot ...``, ``navarena release ...`` and ``navarena
+verify-release DIR`` are tools over a finished data root or release."""
 from __future__ import annotations
 
 import sys
@@ -21,7 +22,8 @@ def _app(cfg) -> None:
         sys.exit(code)
 
 
-TOOLS = {"render-episodes": "navarena.render_episodes", "export-lerobot": "navarena.lerobot"}
+TOOLS = {"render-episodes": "navarena.render_episodes", "export-lerobot": "navarena.lerobot",
+         "release": "pipeline.release.__main__", "verify-release": "navarena.verify_release"}
 """Subcommands beside the Hydra pipeline run: ``navarena render-episodes --help``."""
 
 
@@ -29,7 +31,9 @@ def main() -> None:
     if len(sys.argv) > 1 and sys.argv[1] in TOOLS:
         import importlib
 
-        importlib.import_module(TOOLS[sys.argv[1]]).main(sys.argv[2:])
+        code = importlib.import_module(TOOLS[sys.argv[1]]).main(sys.argv[2:])
+        if isinstance(code, int) and code:  # the tools that report failure by their exit status
+            sys.exit(code)
         return
     _app()
 

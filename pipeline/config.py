@@ -12,6 +12,7 @@ from navcore.gaussians.validate import ValidationLimits
 from navcore.nav.embodiment import Embodiment
 from navcore.voxels.field import VoxelizeConfig
 from pipeline.graph import DEFAULT_STAGES
+from pipeline.release.config import ReleaseConfig
 from stages.align.floor import AlignConfig
 from stages.costmap.build import CostmapConfig
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
@@ -183,6 +184,8 @@ class NavArenaConfig:
     export: ExportConfig = field(default_factory=ExportConfig)
     evaluate: EvaluateConfig = field(default_factory=EvaluateConfig)
     """Closed-loop evaluation (stage `evaluate`, not in the default stages: stages=[evaluate])."""
+    release: ReleaseConfig = field(default_factory=ReleaseConfig)
+    """The release folder users download (`navarena release`, not a stage: it reads a finished root)."""
     embodiment: Embodiment = field(default_factory=Embodiment)
     scenes: ScenesConfig = field(default_factory=ScenesConfig)
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)

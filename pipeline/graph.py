@@ -36,7 +36,7 @@ class Stage:
             version are recomputed; v2 of voxelize: the bound exact over the voxel height).
         only_synthetic: the stage applies to synthetic scenes only (others pass through).
         inputs: optional function of cfg -> JSON-able data the stage also reads from outside its
-            config sections (hashed with them), e.g. embodiment files.
+            config sections (hashed with them), e.g. embodiment files; None when it reads nothing more.
         finalize: optional function of (cfg, catalog) -> dict, run once after all scenes of the
             stage (dataset-level files); it must derive them from what is on disk, so that shards
             of one dataset agree.
@@ -80,7 +80,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",), gpu=True, memory_gb=2.0),
     Stage("export", export.run, ("episodes", "asset", "goal_images"), ("export",), finalize=export.finalize),
     Stage("evaluate", evaluate.run, ("episodes",), ("evaluate", "episodes", "task", "embodiment"),
-          finalize=evaluate.finalize, default=False, gpu=True, memory_gb=2.0),
+          finalize=evaluate.finalize, default=False, gpu=True, memory_gb=2.0, inputs=evaluate.hashed_inputs),
 )
 DEFAULT_STAGES = [s.name for s in STAGES if s.default]
 BY_NAME = {s.name: s for s in STAGES}
@@ -146,8 +146,8 @@ def config_hashes(cfg) -> dict[str, str]:
             for sec, key, _ in storage:
                 if sec == k:
                     part[k].pop(key, None)
-        if s.inputs:
-            part["_inputs"] = s.inputs(cfg)
+        if s.inputs and (extra := s.inputs(cfg)) is not None:  # None: nothing read beyond the sections
+            part["_inputs"] = extra
         blob = json.dumps({"stage": s.name, "version": s.version, "config": part,
                            "needs": [chain[n] for n in s.needs]}, sort_keys=True, default=str)
         chain[s.name] = out[s.name] = hashlib.sha256(blob.encode()).hexdigest()[:16]

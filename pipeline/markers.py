@@ -5,13 +5,13 @@ manifest says: every file present with its recorded size (a stat per file, so th
 thousands of scenes stays a matter of seconds), and with `verify=checksum` also its sha256."""
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from pathlib import Path
 
 from navcore.io import jsonio
 from navcore.io.atomic import TEMP_PREFIXES, write_text_atomic
+from navcore.io.release import sha256_file
 
 VERIFY = ("size", "checksum", "none")
 """How a marker's outputs are checked before the marker is trusted: file sizes (default),
@@ -44,14 +44,6 @@ def _files(path: Path):
         for f in sorted(filenames):
             if not f.startswith(TEMP_PREFIXES):
                 yield Path(dirpath) / f
-
-
-def sha256_file(path: Path, chunk: int = 1 << 22) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(chunk):
-            h.update(block)
-    return h.hexdigest()
 
 
 def output_manifest(outputs: list[str], root: Path) -> dict[str, list]:

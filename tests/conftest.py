@@ -69,6 +69,10 @@ def rng():
     return np.random.default_rng(0)
 
 
+NO_HELD_OUT = ("episodes.scene_splits.val_unseen=0", "episodes.scene_splits.test=0")
+"""Overrides that hold no scene out of training (Hydra merges dicts: `scene_splits={}` keeps the defaults)."""
+
+
 @pytest.fixture(scope="session")
 def make_cfg():
     """cfg(root, *overrides): the pipeline config of one small synthetic scene, run in-process."""
@@ -80,8 +84,9 @@ def make_cfg():
 
     def make(root, *overrides):
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            # no scene held out (the default holds out 10 %: synth_0000, the only scene here, is val_unseen)
             return compose("config", overrides=[f"data_root={root}", "executor=sync", "scenes.count=1",
-                                                "scenes.num_gaussians=60000", *overrides])
+                                                "scenes.num_gaussians=60000", *NO_HELD_OUT, *overrides])
     return make
 
 

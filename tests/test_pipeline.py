@@ -37,8 +37,8 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
     from PIL import Image
 
     from navcore.gaussians.formats import read_gaussians
+    from navcore.io.asset_files import read_pgm
     from navcore.io.datasets import AlignedGaussianDataset, GaussianDataset
-    from stages.asset.stage import read_pgm
 
     store = GaussianDataset(tmp_path / "01_scenes" / sid / "gaussians.zarr")
     aligned, attrs = AlignedGaussianDataset(tmp_path / "01_scenes" / sid / "alignment.json", store).load()

@@ -4,6 +4,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 ALIGNED_FILES = {"ply": "aligned.ply", "spz": "aligned.spz"}
 """asset.aligned_format -> the aligned model's file in the asset."""
 COMPRESSED_SOURCES = ("spz", "sog", "splat", "supersplat_ply")
@@ -32,3 +34,36 @@ def aligned_model(asset_dir) -> Path:
     if not name or not (folder / name).is_file():
         raise FileNotFoundError(f"{man}: files.aligned names {name!r}, which is not in the folder")
     return folder / name
+
+
+def write_pgm(path: Path, occ: np.ndarray) -> None:
+    """ROS map_server PGM (P5): 0 occupied, 255 free; rows flipped so the first row is max y."""
+    img = np.where(occ, 0, 255).astype(np.uint8)[::-1]
+    h, w = img.shape
+    Path(path).write_bytes(f"P5\n{w} {h}\n255\n".encode() + img.tobytes())
+
+
+def read_pgm(path: Path) -> np.ndarray:
+    """Inverse of write_pgm: [ny, nx] bool occupancy, row = y ascending."""
+    data = Path(path).read_bytes()
+    parts = data.split(maxsplit=4)
+    if len(parts) < 5 or parts[0] != b"P5":
+        raise ValueError(f"{path}: not a binary PGM (P5) map")
+    w, h = int(parts[1]), int(parts[2])
+    if len(parts[4]) < w * h:
+        raise ValueError(f"{path}: {len(parts[4])} bytes of pixels, the header says {w} x {h}")
+    img = np.frombuffer(parts[4][: w * h], dtype=np.uint8).reshape(h, w)
+    return (img[::-1] < 128)
+
+
+def read_nav_map(asset_dir) -> tuple[np.ndarray, tuple[float, float], float]:
+    """A V1 asset's ROS map: (occupancy [ny, nx] bool, row = y ascending; origin (x, y) of the
+    minimum corner, metres; resolution, metres), from nav_map.yaml and the PGM it names."""
+    import yaml
+
+    folder = Path(asset_dir)
+    spec = yaml.safe_load((folder / "nav_map.yaml").read_text())
+    image = folder / str(spec["image"])
+    if image.parent.resolve() != folder.resolve():
+        raise ValueError(f"{folder / 'nav_map.yaml'}: image {spec['image']!r} is not a file of the asset folder")
+    return read_pgm(image), (float(spec["origin"][0]), float(spec["origin"][1])), float(spec["resolution"])

@@ -2,7 +2,8 @@
 
 A catalog YAML has ``scenes:`` (explicit entries; relative paths are relative to the catalog
 file's folder) and/or ``synthetic:`` (a generated range of
-procedural scenes), and may override entries of the shared layout (catalogs/layout.yaml) under
+procedural scenes, under the project's licence unless it names another), and may override
+entries of the shared layout (catalogs/layout.yaml) under
 ``layout:``. Each layout entry is a path template and a dataset type (navcore/io/datasets.py);
 stage code asks ``catalog.dataset("costmaps", scene)`` and loads or saves through it, never
 building or opening paths itself. ``catalog.path`` is for the pipeline's own files (markers,
@@ -21,6 +22,7 @@ import yaml
 
 from navcore.gaussians.formats import detect_format
 from navcore.io.datasets import TYPES, Dataset
+from navcore.io.licences import PROJECT_LICENSE
 from navcore.labels.shipped import LabelSpec
 
 LAYOUT_FILE = Path(__file__).resolve().parents[2] / "catalogs" / "layout.yaml"
@@ -39,6 +41,21 @@ def safe_component(value, what: str, where) -> str:
     return v
 
 
+PROVENANCE = ("license", "source_url", "attribution")
+"""Catalog entry keys of a scene's provenance (strings or absent): what a release says of it."""
+
+
+def provenance(entry: dict, where: str) -> dict:
+    """The provenance keys of a catalog entry, checked to be strings."""
+    out = {}
+    for k in PROVENANCE:
+        v = entry.get(k)
+        if v is not None and not isinstance(v, str):
+            raise ValueError(f"{where}: {k} must be a string (an SPDX id such as CC-BY-4.0, or free text), got {v!r}")
+        out[k] = v.strip() if isinstance(v, str) and v.strip() else None
+    return out
+
+
 def scene_id_for(dataset: str, name: str, taken: set[str] | None = None) -> str:
     """NavArena scene id: first 8 hex chars of sha256("{dataset}:{name}"), 12 on collision."""
     h = hashlib.sha256(f"{dataset}:{name}".encode()).hexdigest()
@@ -55,6 +72,9 @@ class SceneEntry:
     seed: int | None = None
     num_gaussians: int | None = None
     labels: LabelSpec | None = None  # the entry's `labels:` (class table, labelled mesh; navcore.labels.shipped)
+    license: str | None = None  # SPDX id or free text (navcore.io.licences); None: unknown
+    source_url: str | None = None  # where the capture was published
+    attribution: str | None = None  # whom to credit, as the source asks
 
     @property
     def synthetic(self) -> bool:
@@ -86,7 +106,8 @@ class Catalog:
                 path = (self.file.parent / path).resolve()  # relative to the catalog file's folder
             fmt = e.get("format") or detect_format(path)  # left out: the path tells
             labels = LabelSpec.from_entry(e.get("labels"), self.file.parent, f"catalog {self.file}, scene {e['name']!r}")
-            self.scenes.append(SceneEntry(sid, e["name"], group, str(path), fmt, labels=labels))
+            self.scenes.append(SceneEntry(sid, e["name"], group, str(path), fmt, labels=labels,
+                                          **provenance(e, f"catalog {self.file}, scene {e['name']!r}")))
             taken.add(sid)
         syn = spec.get("synthetic")
         if syn:
@@ -101,8 +122,10 @@ class Catalog:
                 group = safe_component(syn.get("group", "synthetic"), "group", self.file)
                 sid = scene_id_for(group, name, taken)
                 taken.add(sid)
-                self.scenes.append(SceneEntry(sid, name, group, "", "synthetic", seed,
-                                              syn.get("num_gaussians")))
+                self.scenes.append(SceneEntry(
+                    sid, name, group, "", "synthetic", seed, syn.get("num_gaussians"),
+                    license=str(syn.get("license") or PROJECT_LICENSE), source_url=syn.get("source_url"),
+                    attribution=syn.get("attribution") or f"NavArena procedural scene generator, seed {seed}"))
 
     @classmethod
     def for_root(cls, root: str | Path) -> "Catalog":

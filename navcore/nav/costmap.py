@@ -56,6 +56,16 @@ class Costmap:
         return cls(layers.clearance, layers.origin, layers.resolution, layers.radius, layers.margin,
                    layers.components)
 
+    @classmethod
+    def from_occupancy(cls, occ: np.ndarray, origin, resolution: float) -> "Costmap":
+        """A costmap from a binary map alone (a ROS map of a released asset: occ [ny, nx] bool, row =
+        y): clearance 1 on free cells and 0 on occupied ones, a state valid where the bilinear
+        interpolation reaches 0.5, so the valid region's boundary lies half way between a free and
+        an occupied cell centre. Coarser than the stored clearance, which is what a downloaded
+        release has to check its episodes with."""
+        clearance = np.where(np.asarray(occ, bool), 0.0, 1.0).astype(np.float32)
+        return cls(clearance, origin, resolution, radius=0.5, margin=0.0)
+
     @property
     def occupancy(self) -> np.ndarray:
         """[ny, nx] bool M_occ (cell centres that are not valid states)."""

@@ -15,26 +15,10 @@ import numpy as np
 from navcore.gaussians.formats import source_files, write_inria_ply, write_splat, write_spz
 from navcore.gaussians.formats.ply import is_inria_ply
 from navcore.instances import ground_truth_labels, load_instances, table_to_labels
-from navcore.io.asset_files import COMPRESSED_SOURCES, aligned_file
+from navcore.io.asset_files import COMPRESSED_SOURCES, aligned_file, write_pgm
 from navcore.io.stamps import build_time
 
 NORMALIZER_VERSION = "navarena-0.1"
-
-
-def write_pgm(path: Path, occ: np.ndarray) -> None:
-    """ROS map_server PGM (P5): 0 occupied, 255 free; rows flipped so the first row is max y."""
-    img = np.where(occ, 0, 255).astype(np.uint8)[::-1]
-    h, w = img.shape
-    path.write_bytes(f"P5\n{w} {h}\n255\n".encode() + img.tobytes())
-
-
-def read_pgm(path: Path) -> np.ndarray:
-    """Inverse of write_pgm: [ny, nx] bool occupancy, row = y ascending."""
-    data = Path(path).read_bytes()
-    parts = data.split(maxsplit=4)
-    w, h = int(parts[1]), int(parts[2])
-    img = np.frombuffer(parts[4][: w * h], dtype=np.uint8).reshape(h, w)
-    return (img[::-1] < 128)
 
 
 def topdown_image(raw, support, occ, components=None) -> np.ndarray:

@@ -111,10 +111,13 @@ class EpisodesConfig:
     """Base seed; each (scene, task) derives its own stream from it."""
     splits: dict[str, float] = field(default_factory=lambda: {"train": 1.0})
     """Share of each scene's episodes per split (train, val_seen, val_unseen, test), in order."""
-    scene_splits: dict[str, float] = field(default_factory=dict)
-    """Shares of whole scenes held out into one split (e.g. {val_unseen: 0.1, test: 0.1}); a scene
-    is assigned by a hash of its id (stable as the scene set grows), and all its episodes get that
-    split. Other scenes use `splits`."""
+    scene_splits: dict[str, float] = field(default_factory=lambda: {"val_unseen": 0.05, "test": 0.05})
+    """Shares of whole scenes held out into one split ({} holds none out); a scene is assigned by a
+    hash of its id (stable as the scene set grows), and all its episodes get that split. Other
+    scenes use `splits`. The default holds 5 % of the scenes out for validation and 5 % for the
+    test split, from which the release draws its zero-shot evaluation set (release.eval_set: as
+    the paper, on scenes never seen in training); of the four default scenes, one is val_unseen
+    and one test."""
     components: str = "largest"
     """Free components episodes may use: 'largest' (the main one) or 'all' (every component of at
     least min_island_area_m2; start and goal always share one)."""

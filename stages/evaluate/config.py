@@ -23,7 +23,9 @@ class EvaluateConfig(EnvSettings):
     tasks: list[str] = field(default_factory=lambda: ["pointnav", "imagenav", "objectnav"])
     """Tasks to evaluate."""
     split: str | None = None
-    """Only this split (null = all)."""
+    """Only this split (null = all); the name of the release's zero-shot evaluation set
+    (release.eval_set.name, eval_zeroshot) runs that set: 600 stratified episodes a task from the
+    held-out test scenes, each with its difficulty's step budget (navcore/nav/eval_set.py)."""
     difficulty: str | None = None
     """Only this difficulty (null = all)."""
     episodes_per_scene: int | None = None

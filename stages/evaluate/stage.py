@@ -15,6 +15,8 @@ import pyarrow as pa
 from omegaconf import OmegaConf
 
 from navcore.gaussians.content import camera_scene
+from navcore.io.licences import redistributable
+from navcore.nav.eval_set import EvalSetConfig, listing
 from navcore.nav.geodesic import NavGraph, eligible_cells
 from navcore.seeds import stream_seed
 from stages.evaluate.config import EvaluateConfig
@@ -43,14 +45,50 @@ def make_scene_agent(ecfg: EvaluateConfig, seed: int):
     return make_agent(ecfg.agent, **args)
 
 
-def load_episodes(catalog, scene, ecfg: EvaluateConfig) -> list[Episode]:
+def eval_set_config(cfg) -> EvalSetConfig | None:
+    """The release's zero-shot evaluation set when `evaluate.split` names it, else None."""
+    es = OmegaConf.select(cfg, "release.eval_set")
+    if es is None or cfg.evaluate.split != es.name:
+        return None
+    return OmegaConf.to_object(es)
+
+
+def hashed_inputs(cfg) -> dict | None:
+    """What decides the episodes of an evaluation on the zero-shot set beside its config sections:
+    the set's settings and which scenes a public release may hold (None for any other split)."""
+    es = eval_set_config(cfg)
+    if es is None:
+        return None
+    return {"eval_set": OmegaConf.to_container(cfg.release.eval_set, resolve=True), "public": cfg.release.public,
+            "extra_licenses": list(cfg.release.extra_licenses)}
+
+
+def eval_set_ids(catalog, scene, cfg) -> dict[str, set[str]] | None:
+    """{task: episode ids} of `scene` in the zero-shot evaluation set when `evaluate.split` names it
+    (the listing a release wrote into the data root, or drawn now from the catalog's scenes that the
+    release would hold: navcore/nav/eval_set.py), else None."""
+    es = eval_set_config(cfg)
+    if es is None:
+        return None
+    extra = tuple(cfg.release.extra_licenses)
+    pool = [s for s in catalog.scenes if not cfg.release.public or redistributable(s.license, extra)[0]]
+    chosen = listing(catalog, pool, es, scene)
+    mine = chosen[chosen["scene_id"] == scene.scene_id]
+    return {t: set(g["episode_id"]) for t, g in mine.groupby("task")}
+
+
+def load_episodes(catalog, scene, ecfg: EvaluateConfig, eval_ids: dict[str, set[str]] | None = None) -> list[Episode]:
+    """The episodes to run: `evaluate.tasks`, then `split` (or, for the zero-shot set, the episode
+    ids of `eval_ids`), `difficulty` and `episodes_per_scene`."""
     out = []
     for task in ecfg.tasks:
         src = catalog.dataset("episodes", scene, task=task)
         if not src.exists():
             continue
         eps = src.load().to_pandas()
-        if ecfg.split:
+        if eval_ids is not None:
+            eps = eps[eps["episode_id"].isin(eval_ids.get(task, set()))]
+        elif ecfg.split:
             eps = eps[eps["split"] == ecfg.split]
         if ecfg.difficulty:
             eps = eps[eps["difficulty"] == ecfg.difficulty]
@@ -83,7 +121,7 @@ def run(scene, cfg, catalog) -> dict:
     ctx = scene_context(scene, cfg, catalog, ecfg.render, ecfg.renderer)
     cm = ctx.costmap
     env_cfg = EnvConfig.of(ecfg, OmegaConf.to_object(cfg.episodes).actions)
-    episodes = load_episodes(catalog, scene, ecfg)
+    episodes = load_episodes(catalog, scene, ecfg, eval_set_ids(catalog, scene, cfg))
     seed = stream_seed(ecfg.seed, scene.scene_id, "evaluate") % 2**31
     remote = ecfg.agent.startswith(("ws://", "wss://"))
     run = run_name(ecfg)

@@ -1,0 +1,181 @@
+"""The dataset card (README.md in the dataset-hub convention): YAML front matter that
+`datasets.load_dataset(folder, "<task>", split=...)` reads (configs with data_files per task and
+split, split sizes), and a body with the release's statistics, plots, evaluation set, embodiment,
+evaluation protocol, scenes and their provenance, scenes left out and known limitations."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pyarrow as pa
+import yaml
+
+from navcore.io.licences import PROJECT_LICENSE
+
+SCENES_SCHEMA = pa.schema([
+    ("scene_id", pa.string()), ("name", pa.string()), ("group", pa.string()), ("format", pa.string()),
+    ("license", pa.string()), ("source_url", pa.string()), ("attribution", pa.string()),
+    ("screening_verdict", pa.string()), ("screening_score", pa.float64()), ("episodes_kept", pa.bool_()),
+    ("episodes", pa.string()),  # JSON {"task/split": count}
+    ("content_sha256", pa.string()),  # sha256 over the scene's files (path and sha256): what versions compare
+])
+"""scenes.parquet: one row per released scene."""
+
+HUB_LICENSES = {"ODbL-1.0": "odbl", "PDDL-1.0": "pddl", "ODC-By-1.0": "odc-by", "Unlicense": "unlicense"}
+"""SPDX ids whose dataset-hub licence id is not simply the lower-case SPDX id."""
+SIZES = ((1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K"), (1_000_000, "100K<n<1M"),
+         (10_000_000, "1M<n<10M"), (100_000_000, "10M<n<100M"))
+
+
+def hub_license(licenses: set[str]) -> dict:
+    """The card's licence keys: one id when every scene (and the project) share it, else `other`."""
+    if len(licenses) == 1:
+        lic = next(iter(licenses))
+        return {"license": HUB_LICENSES.get(lic, lic.lower())}
+    return {"license": "other", "license_name": "per-scene",
+            "license_link": "scenes.parquet"}
+
+
+def size_category(n: int) -> str:
+    for limit, name in SIZES:
+        if n < limit:
+            return name
+    return "n>100M"
+
+
+def front_matter(info: dict, rcfg) -> dict:
+    counts = info["counts"]
+    configs, dataset_info = [], []
+    for task, splits in counts.items():
+        for kind, folder in (("", "episodes"), ("_trajectories", "trajectories")):
+            configs.append({"config_name": f"{task}{kind}",
+                            "data_files": [{"split": sp, "path": f"{folder}/task={task}/split={sp}/*/*.parquet"}
+                                           for sp in splits]})
+        dataset_info.append({"config_name": task, "splits": [{"name": sp, "num_examples": n} for sp, n in splits.items()]})
+    lic = {s["license"] or "unknown" for s in info["scene_rows"]} | {PROJECT_LICENSE}
+    fm = {"pretty_name": f"{rcfg.name} {info['version']}", **hub_license(lic),
+          "task_categories": ["robotics"],
+          "tags": ["embodied-ai", "navigation", "pointnav", "imagenav", "objectnav", "3d-gaussian-splatting"],
+          "size_categories": [size_category(sum(info["counts_total"].values()))],
+          "configs": configs, "dataset_info": dataset_info}
+    return fm
+
+
+def _f(x, nd=2) -> str:
+    return "-" if x is None else f"{x:,.{nd}f}"
+
+
+def _table(rows: list[dict], by: str | None) -> list[str]:
+    head = ["task"] + ([by] if by else []) + ["episodes", "mean geodesic path (m)", "mean expert steps",
+                                               "total expert duration (h)", "mean oracle actions"]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        out.append("| " + " | ".join([r["task"]] + ([str(r[by])] if by else []) +
+                                     [f"{r['episodes']:,}", _f(r["mean_geodesic_m"]), _f(r["mean_expert_steps"], 0),
+                                      _f(r["expert_hours"]), _f(r["mean_oracle_actions"], 1)]) + " |")
+    return out
+
+
+def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: list[str], rcfg) -> None:
+    cfg = info["config"]
+    info = {**info, "scene_rows": scene_rows,
+            "counts_total": {t: sum(n for sp, n in s.items() if sp not in stats.extra_splits)
+                             for t, s in info["counts"].items()}}
+    fm = front_matter(info, rcfg)
+    es = info["eval_set"]
+    L = ["---", yaml.safe_dump(fm, sort_keys=False, width=120).rstrip(), "---", "",
+         f"# {rcfg.name} {info['version']}", ""]
+    if not info["public"]:
+        L += ["> **Internal release (release.public=false): not for redistribution.** It keeps every scene "
+              "whatever its licence; scenes whose licence does not allow redistribution are marked below.", ""]
+    total = stats.total_episodes()
+    L += [f"Goal-directed navigation episodes (PointNav, ImageNav, ObjectNav) with expert trajectories, generated "
+          f"by NavArena from frozen 3D Gaussian Splatting scenes: {total:,} episodes in {len(scene_rows)} scene(s), "
+          f"created {info['created']}. Every file is listed with its sha256 in `MANIFEST.tsv`; "
+          "`navarena verify-release <folder>` checks a downloaded copy.", "",
+          "## Loading", "", "```python",
+          "import datasets",
+          "episodes = datasets.load_dataset(\"<this folder>\", \"pointnav\", split=\"train\")",
+          "steps = datasets.load_dataset(\"<this folder>\", \"pointnav_trajectories\", split=\"train\")",
+          "",
+          "import pyarrow.dataset as ds  # hive partitions task=, split=, scene_id= become columns",
+          "table = ds.dataset(\"<this folder>/episodes\", format=\"parquet\", partitioning=\"hive\").to_table()",
+          "",
+          "import mlcroissant as mlc",
+          "records = mlc.Dataset(jsonld=\"<this folder>/croissant.json\").records(\"pointnav\")",
+          "```", "",
+          "Schemas: `release.json` (`schemas`), the same as `navcore/io/episode_schema.py`. Frame: the scene's aligned "
+          "frame (z up, metres, floor at z = 0); headings are yaw about +z.", ""]
+    L += ["## Statistics", "", "Per task (the layout of the paper's Table 4; every split except the evaluation set, "
+          "whose episodes repeat test episodes):", "", *_table(stats.rows(), None), ""]
+    for by, title in (("split", "Per split"), ("group", "Per source group"), ("difficulty", "Per difficulty")):
+        L += [f"{title}:", "", *_table(stats.rows(by), by), ""]
+    if plots:
+        L += ["Plots:", ""] + [f"![{Path(p).stem}]({p})" for p in plots] + [""]
+    L += [f"## Zero-shot evaluation set (`{es['name']}`)", "",
+          f"A fixed, stratified sample of the `{', '.join(es['from_splits'])}` split (scenes held out of training by "
+          f"`episodes.scene_splits`), {es['size']} episodes a task at {' / '.join(f'{k} {v:.0%}' for k, v in es['proportions'].items())} "
+          "(the paper's 180 / 240 / 180), drawn round robin over source groups, scenes and goal categories "
+          "(navcore/nav/eval_set.py). It ships as its own split (`split=" + es["name"] + "`) and as a listing "
+          f"(`eval_sets/{es['name']}.parquet`); run it with `make eval ARGS=\"evaluate.split={es['name']}\"`.", "",
+          "| task | selected | requested | easy / medium / hard | candidates easy / medium / hard | scenes | groups |",
+          "|---|---|---|---|---|---|---|"]
+    for task, r in es["per_task"].items():
+        pd_, c = r["per_difficulty"], r["candidates"]
+        L.append(f"| {task} | {r['selected']} | {r['requested']} | {' / '.join(str(v) for v in pd_.values())} | "
+                 f"{' / '.join(str(v) for v in c.values())} | {r['scenes']} | {r['groups']} |")
+    short = [t for t, r in es["per_task"].items() if r["selected"] < r["requested"]]
+    if short:
+        L += ["", f"Fewer than requested for {', '.join(short)}: the held-out scenes hold fewer episodes at these "
+              "proportions (the set is the largest one that keeps them)."]
+    if not es["per_task"]:
+        L += ["", "Empty: no episodes in the held-out splits (episodes.scene_splits holds no scene out)."]
+    emb = cfg["embodiment"]
+    L += ["", "## Embodiment", "",
+          f"`{emb['name']}`: footprint radius {emb['radius']} m, body {emb['h_min']}-{emb['h_max']} m above the floor, "
+          f"camera at {emb['camera_height']} m (pitch {emb['camera_pitch_deg']} deg, {emb['hfov_deg']} deg horizontal field "
+          f"of view, {emb['image_width']} x {emb['image_height']}), at most {emb['max_linear_velocity']} m/s and "
+          f"{emb['max_angular_velocity']} rad/s. Expert trajectories at {1 / cfg['episodes']['dt']:.0f} Hz; "
+          f"discrete actions: forward {cfg['episodes']['actions']['forward_step']} m, turns "
+          f"{cfg['episodes']['actions']['turn_angle_deg']} deg.", ""]
+    diff = cfg["episodes"]["difficulty"]
+    L += ["## Evaluation protocol", "",
+          "| task | success radius (m) | rule |", "|---|---|---|"]
+    for name, t in sorted(cfg["task"].items()):
+        rule = {"objectnav": f"within the radius of the goal instance's {t['success_rule']}",
+                "imagenav": f"within the radius and {t['heading_tolerance_deg']} deg of the goal heading (Pose SR)",
+                }.get(t["type"], "within the radius of the goal point")
+        L.append(f"| {name} | {t['success_radius']} | {rule} |")
+    L += ["", "Step budgets by difficulty (geodesic distance): " + ", ".join(
+        f"{n} < {u:g} m: {s}" if u < 1e8 else f"{n}: {s}" for n, u, s in zip(diff["names"], diff["upper"], diff["max_steps"]))
+          + ". An episode ends when the agent stops (protocol `explicit_stop`) or reaches the goal region (`distance`), or "
+          "when its step budget runs out; metrics (SR, SPL, DTW, collisions) are defined in the evaluation docs and "
+          f"computed by `make eval` (dynamics: blocked moves `{cfg['evaluate']['dynamics']['blocked']}`).", ""]
+    L += ["## Scenes", "", "| scene | id | group | licence | source | attribution | screening | content sha256 |",
+          "|---|---|---|---|---|---|---|---|"]
+    for r in scene_rows:
+        L.append(f"| {r['name']} | {r['scene_id']} | {r['group']} | {r['license'] or 'unknown'} | "
+                 f"{r['source_url'] or '-'} | {r['attribution'] or '-'} | {r['screening_verdict'] or '-'} | "
+                 f"`{(r['content_sha256'] or '')[:16]}` |")
+    excluded = info["scenes"]["excluded"]
+    if excluded:
+        L += ["", "### Scenes left out of this public release", "", "| scene | id | group | licence | reason |",
+              "|---|---|---|---|---|"]
+        L += [f"| {e['name']} | {e['scene_id']} | {e['group']} | {e['license'] or 'unknown'} | {e['reason']} |"
+              for e in excluded]
+    code = info["code"]
+    L += ["", "## Known limitations", "",
+          "- Geometry is what the 3DGS shows: free space is derived from the Gaussians' opacity, so glass, mirrors "
+          "and thin structures the capture missed are free, and floaters the screening did not catch are obstacles.",
+          "- ObjectNav goals come from lifted open-vocabulary masks or a scene's shipped labels; a scene without "
+          "either has no ObjectNav episodes.",
+          "- The expert is a kinematic unicycle at the embodiment's limits, not a dynamic model of a robot.",
+          "- Geodesic distances are exact to about 0.5 % (any-angle grid paths pulled taut).", "",
+          "## Reproducing", "",
+          f"Code {code.get('package')} at commit `{code.get('commit')}`" + (" (with uncommitted changes)" if code.get("dirty") else "")
+          + f"; resolved config sha256 `{info['config_sha256'][:16]}` (in `release.json`, with each stage's hash, "
+          "the catalog and the seeds).", ""]
+    if rcfg.citation:
+        L += ["## Citation", "", "```bibtex", rcfg.citation.strip(), "```", ""]
+    L += ["## Licence", "", f"The code that made it: {PROJECT_LICENSE} (`LICENSE`). Each scene and what is derived from "
+          "it keeps the scene's licence (table above, `scenes.parquet`); credit the attribution it names.", ""]
+    Path(path).write_text("\n".join(L))
