@@ -1,0 +1,266 @@
+"""The release (issue 45): built from a finished data root, verified, loaded with the tools users
+have (datasets, pyarrow, mlcroissant), its licences, evaluation set, versions and damage detection."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from navcore.io.release import MANIFEST, RELEASE_JSON, read_card_front_matter, read_manifest, sha256_file, write_manifest
+from navcore.nav.eval_set import EvalSetConfig, allocate, feasible_size, select
+
+# synth_0000 (d0ba0a89) is the only generated scene: holding out 10 % as test puts it in the test split
+HELD_OUT = ["episodes.scene_splits.val_unseen=0", "episodes.scene_splits.test=0.1"]
+SMALL = ["task.pointnav.episodes_per_scene=24", "task.imagenav.episodes_per_scene=12", "task.objectnav.episodes_per_scene=12"]
+
+
+def _candidates(groups=2, scenes=3, per=(100, 100, 100), categories=("bed", "chair", "sofa")) -> pd.DataFrame:
+    rows = []
+    for g in range(groups):
+        for s in range(scenes):
+            for d, n in zip(("easy", "medium", "hard"), per):
+                for k in range(n):
+                    rows.append({"task": "objectnav", "scene_id": f"g{g}s{s}", "group": f"g{g}",
+                                 "episode_id": f"test_{d}_{k:04d}", "difficulty": d,
+                                 "goal_object_category": categories[k % len(categories)], "split": "test"})
+    return pd.DataFrame(rows)
+
+
+def test_eval_set_has_the_papers_proportions_and_spreads_over_strata():
+    chosen, report = select(_candidates(), EvalSetConfig())
+    assert report["objectnav"]["selected"] == 600
+    assert chosen["difficulty"].value_counts().to_dict() == {"easy": 180, "medium": 240, "hard": 180}
+    # round robin: groups and scenes (and categories within a scene) share each difficulty evenly
+    per_scene = chosen.groupby(["difficulty", "scene_id"]).size()
+    assert per_scene.groupby("difficulty").agg(lambda x: x.max() - x.min()).max() <= 1
+    per_cat = chosen.groupby(["difficulty", "scene_id", "goal_object_category"]).size()
+    assert per_cat.groupby(["difficulty", "scene_id"]).agg(lambda x: x.max() - x.min()).max() <= 1
+    again, _ = select(_candidates().sample(frac=1.0, random_state=3), EvalSetConfig())
+    assert again.equals(chosen)  # independent of the candidates' order
+    other, _ = select(_candidates(), EvalSetConfig(seed=1))
+    assert not other.equals(chosen)
+
+
+def test_eval_set_shrinks_keeping_the_proportions():
+    # 50 medium episodes: N = 126 splits into 38 / 50.4 -> 50 / 38 (largest remainders), 127 would need 51
+    chosen, report = select(_candidates(groups=1, scenes=1, per=(100, 50, 100)), EvalSetConfig())
+    assert report["objectnav"]["selected"] == 126 == len(chosen)
+    assert report["objectnav"]["per_difficulty"] == {"easy": 38, "medium": 50, "hard": 38}
+    assert chosen["difficulty"].value_counts().to_dict() == allocate(126, EvalSetConfig().proportions)
+    assert feasible_size({"easy": 0}, 600, EvalSetConfig().proportions) == 0
+    assert allocate(600, {"easy": 0.3, "medium": 0.4, "hard": 0.3}) == {"easy": 180, "medium": 240, "hard": 180}
+    empty, report = select(_candidates().assign(split="train"), EvalSetConfig())
+    assert empty.empty and report == {}
+
+
+@pytest.fixture(scope="module")
+def release_root(tmp_path_factory, make_cfg):
+    """A finished data root of two scenes: a generated one (the project's licence) and the same
+    Gaussians brought in as an outside capture whose catalog entry names no licence."""
+    from pipeline.executor import execute
+
+    root = tmp_path_factory.mktemp("release_root")
+    s = execute(make_cfg(root, *SMALL, *HELD_OUT))
+    assert not s["failures"], s["failures"]
+    catalog = root / "catalog.yaml"
+    catalog.write_text(
+        "synthetic: {prefix: synth, group: synthetic, count: 1, first_seed: 0, num_gaussians: 60000}\n"
+        "scenes:\n"
+        f"  - {{name: borrowed, group: outside, path: {root}/00_sources/synthetic/synth_0000/scene.ply,\n"
+        "     source_url: 'https://example.org/capture', attribution: 'someone'}\n")
+    over = [*SMALL, *HELD_OUT, f"scenes.catalog={catalog}"]
+    s = execute(make_cfg(root, *over))
+    assert not s["failures"], s["failures"]
+    return root, over
+
+
+@pytest.fixture(scope="module")
+def release(release_root, make_cfg, tmp_path_factory):
+    from pipeline.release.build import build_release
+
+    root, over = release_root
+    out = root / "11_releases" / "r1"
+    summary = build_release(make_cfg(root, *over, "release.version=1.0.0"), out)
+    return out, summary
+
+
+def test_release_verifies_and_leaves_out_the_licenceless_scene(release, release_root):
+    from navarena.verify_release import verify
+
+    out, summary = release
+    info = json.loads((out / RELEASE_JSON).read_text())
+    assert [e["name"] for e in info["scenes"]["excluded"]] == ["borrowed"]
+    assert "no licence stated" in info["scenes"]["excluded"][0]["reason"]
+    borrowed = info["scenes"]["excluded"][0]["scene_id"]
+    card = (out / "README.md").read_text()
+    assert "Scenes left out of this public release" in card and "borrowed" in card
+    assert not [f for f in read_manifest(out / MANIFEST) if borrowed in f]  # no episodes, assets, goal images
+    assert summary["hard_links"] > 0 and summary["copies"] == 0  # the data root's bytes, not a second copy
+    report = verify(out, sample=0, quiet=True)
+    assert report.ok, report.problems
+    assert report.checked["episodes re-checked"] == summary["episodes"] + sum(
+        r["selected"] for r in info["eval_set"]["per_task"].values())
+
+
+def test_release_loads_with_datasets_pyarrow_and_croissant(release, tmp_path, monkeypatch):
+    import datasets
+    import mlcroissant as mlc
+    import pyarrow.dataset as pds
+
+    out, _ = release
+    monkeypatch.setenv("HF_DATASETS_CACHE", str(tmp_path / "hf"))
+    fm = read_card_front_matter(out / "README.md")
+    card = {(c["config_name"], s["name"]): s["num_examples"] for c in fm["dataset_info"] for s in c["splits"]}
+    assert {sp for _, sp in card} == {"test", "eval_zeroshot"}
+    for (task, split), n in card.items():
+        ds = datasets.load_dataset(str(out), task, split=split)
+        assert ds.num_rows == n and set(ds["split"]) == {split}
+    table = pds.dataset(out / "episodes", format="parquet", partitioning="hive").to_table()
+    assert table.num_rows == sum(card.values())
+    assert {"task", "scene_id"} <= set(table.schema.names)
+    md = mlc.Dataset(jsonld=str(out / "croissant.json"))
+    assert not md.metadata.issues.errors
+    n = sum(1 for _ in md.records("pointnav"))
+    assert n == card[("pointnav", "test")] + card[("pointnav", "eval_zeroshot")]
+    rec = next(iter(md.records("pointnav")))
+    assert isinstance(rec["pointnav/geodesic_distance"], float)
+
+
+def test_eval_set_ships_as_a_split_and_runs_in_evaluate(release, release_root, make_cfg):
+    import pyarrow.dataset as pds
+
+    from pipeline.executor import execute
+
+    out, _ = release
+    root, over = release_root
+    info = json.loads((out / RELEASE_JSON).read_text())
+    listing = pq.read_table(out / "eval_sets" / "eval_zeroshot.parquet").to_pandas()
+    for task, r in info["eval_set"]["per_task"].items():
+        mine = listing[listing["task"] == task]
+        assert len(mine) == r["selected"] > 0
+        assert mine["difficulty"].value_counts().to_dict() == {k: v for k, v in r["per_difficulty"].items() if v}
+        assert r["per_difficulty"] == allocate(r["selected"], EvalSetConfig().proportions)
+    # the data root has the same listing; evaluate.split=eval_zeroshot runs exactly those episodes
+    assert pq.read_table(root / "05_eval_sets" / "eval_zeroshot.parquet").equals(
+        pq.read_table(out / "eval_sets" / "eval_zeroshot.parquet"))
+    s = execute(make_cfg(root, *over, "stages=[evaluate]", "evaluate.split=eval_zeroshot", "evaluate.render=false",
+                         "evaluate.agent=oracle", "evaluate.run=zs", "scenes.ids=[synth_0000]"))
+    assert not s["failures"], s["failures"]
+    res = pd.concat(pd.read_parquet(p) for p in (root / "07_eval" / "zs" / "results").rglob("*.parquet"))
+    assert sorted(zip(res["task"], res["episode_id"])) == sorted(zip(listing["task"], listing["episode_id"]))
+    budgets = {"easy": 500, "medium": 1000, "hard": 1500}
+    eps = pds.dataset(out / "episodes", format="parquet", partitioning="hive").to_table().to_pandas()
+    zs = eps[eps["split"] == "eval_zeroshot"]
+    assert (zs["max_steps"] == zs["difficulty"].map(budgets)).all()
+
+
+def test_internal_release_keeps_every_scene(release_root, make_cfg):
+    from pipeline.release.build import build_release
+
+    root, over = release_root
+    out = root / "11_releases" / "internal"
+    build_release(make_cfg(root, *over, "release.public=false"), out)
+    info = json.loads((out / RELEASE_JSON).read_text())
+    assert info["scenes"]["included"] == 2 and not info["scenes"]["excluded"]
+    assert "Internal release" in (out / "README.md").read_text().split("\n## ")[0]
+
+
+def test_release_refuses_an_unfinished_root_naming_scenes_and_stages(release_root, make_cfg):
+    from pipeline.release.build import ReleaseError, build_release
+
+    root, over = release_root
+    with pytest.raises(ReleaseError, match=r"synth_0000 \(d0ba0a89\) stage episodes: made with another config"):
+        build_release(make_cfg(root, *over, "task.pointnav.episodes_per_scene=25"), root / "11_releases" / "nope")
+    assert not (root / "11_releases" / "nope").exists()
+
+
+def test_versions_reuse_unchanged_files_and_write_notes(release, release_root, make_cfg, monkeypatch):
+    from pipeline.release.build import ReleaseError, build_release
+
+    out, _ = release
+    root, over = release_root
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    v2 = root / "11_releases" / "r2"
+    summary = build_release(make_cfg(root, *over, "release.version=1.1.0", f"release.previous={out}"), v2)
+    notes = (v2 / "RELEASE_NOTES.md").read_text()
+    assert "0 added, 0 removed, 0 changed, 1 unchanged" in notes
+    old, new = read_manifest(out / MANIFEST), read_manifest(v2 / MANIFEST)
+    episodes = [f for f in new if f.startswith(("episodes/", "trajectories/"))]
+    assert episodes and all(old[f] == new[f] for f in episodes)  # byte-identical episodes across versions
+    assert all(os.stat(out / f).st_ino == os.stat(v2 / f).st_ino for f in episodes)  # one copy of the bytes
+    assert summary["reused_from_previous"] >= len(episodes)
+    # determinism: the same root, config and time stamp give the same bytes
+    v2b = root / "11_releases" / "r2b"
+    build_release(make_cfg(root, *over, "release.version=1.1.0", f"release.previous={out}"), v2b)
+    assert read_manifest(v2b / MANIFEST) == new
+    with pytest.raises(ReleaseError, match="not higher"):
+        build_release(make_cfg(root, *over, "release.version=1.0.0", f"release.previous={out}"), root / "11_releases" / "x")
+
+
+def _damaged_copy(src: Path, dst: Path) -> Path:
+    shutil.copytree(src, dst)  # real copies: damage must not reach the data root through hard links
+    return dst
+
+
+def _rehash(folder: Path, rel: str) -> None:
+    m = read_manifest(folder / MANIFEST)
+    m[rel] = ((folder / rel).stat().st_size, sha256_file(folder / rel))
+    write_manifest(folder / MANIFEST, m)
+
+
+@pytest.mark.parametrize("damage", ["flip", "truncate", "delete", "extra", "schema", "edit"])
+def test_verify_release_names_every_damaged_file(release, tmp_path, damage):
+    from navarena.verify_release import verify
+
+    out, _ = release
+    rel = next(f for f in read_manifest(out / MANIFEST) if f.startswith("episodes/task=pointnav/split=test/"))
+    d = _damaged_copy(out, tmp_path / "copy")
+    p = d / rel
+    if damage == "flip":
+        b = bytearray(p.read_bytes())
+        b[len(b) // 2] ^= 0x01
+        p.write_bytes(bytes(b))
+        want = "sha256 differs"
+    elif damage == "truncate":
+        p.write_bytes(p.read_bytes()[:-100])
+        want = "truncated"
+    elif damage == "delete":
+        p.unlink()
+        want = "missing"
+    elif damage == "extra":
+        (d / "episodes" / "stray.parquet").write_bytes(b"x")
+        rel, want = "episodes/stray.parquet", "unexpected"
+    elif damage == "schema":
+        t = pq.read_table(p)
+        t = t.set_column(t.schema.get_field_index("geodesic_distance"), "geodesic_distance", t["geodesic_distance"].cast(pa.float64()))
+        pq.write_table(t, p)
+        _rehash(d, rel)  # even with a consistent manifest the schema check names it
+        want = "schema differs"
+    else:  # an edited episode whose manifest line was updated too: the re-check against the map finds it
+        t = pq.read_table(p).to_pandas()
+        t.loc[0, "geodesic_distance"] = np.float32(t.loc[0, "geodesic_distance"] * 0.7)
+        pq.write_table(pa.Table.from_pandas(t, schema=pq.read_schema(p), preserve_index=False), p)
+        _rehash(d, rel)
+        want = "stored geodesic"
+    report = verify(d, sample=0, quiet=True)
+    assert not report.ok
+    assert any(pr["file"].startswith(rel) and want in pr["problem"] for pr in report.problems), report.problems
+
+
+def test_verify_release_cli_exit_codes(release, tmp_path, capsys):
+    from navarena.verify_release import main
+
+    out, _ = release
+    assert main([str(out), "--sample", "5", "--quiet"]) == 0
+    d = _damaged_copy(out, tmp_path / "copy")
+    (d / "scenes.parquet").unlink()
+    assert main([str(d), "--sample", "5", "--quiet", "--json", str(tmp_path / "r.json")]) == 1
+    assert "scenes.parquet: missing" in capsys.readouterr().err
+    assert json.loads((tmp_path / "r.json").read_text())["ok"] is False
