@@ -66,6 +66,8 @@ PAGES: dict[str, Page] = {
     "bench_gpu.md": Page("make bench-gpu", ("navcore/render", "navcore/voxels", "stages/semantics", "stages/evaluate",
                                             "benchmarks/bench_gpu.py", "benchmarks/multi_gpu.py",
                                             "benchmarks/render_gpu.py")),
+    "bench_release.md": Page("make bench-release", ("pipeline/release", "navarena/verify_release.py", "navcore/io/release.py",
+                                                    "navcore/nav/eval_set.py", "benchmarks/release.py")),
     "bench_scale.md": Page("make bench-scale", _PIPELINE + ("benchmarks/bench_scale.py", "benchmarks/storage.py",
                                                             "benchmarks/render_cpu.py")),
 }
