@@ -264,3 +264,29 @@ def test_verify_release_cli_exit_codes(release, tmp_path, capsys):
     assert main([str(d), "--sample", "5", "--quiet", "--json", str(tmp_path / "r.json")]) == 1
     assert "scenes.parquet: missing" in capsys.readouterr().err
     assert json.loads((tmp_path / "r.json").read_text())["ok"] is False
+
+
+def test_licence_table_and_catalog_provenance(tmp_path):
+    from navcore.io.catalog import Catalog
+    from navcore.io.licences import PROJECT_LICENSE, redistributable
+
+    assert redistributable("CC-BY-4.0")[0] and redistributable("MIT")[0]
+    for lic in (None, "", "CC-BY-NC-4.0", "CC-BY-ND-4.0", "ScanNet Terms of Use (no redistribution)"):
+        assert not redistributable(lic)[0]
+    assert redistributable("CC-BY-NC-4.0", ["CC-BY-NC-4.0"]) == (True, "allowed by release.extra_licenses")
+    ply = tmp_path / "a.ply"
+    ply.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\nend_header\n")
+    cat = tmp_path / "c.yaml"
+    cat.write_text("synthetic: {count: 1}\nscenes:\n  - {name: a, path: a.ply, format: inria_ply, license: CC-BY-4.0, "
+                   "source_url: 'https://x.org', attribution: me}\n")
+    c = Catalog(cat, tmp_path / "data")
+    a, syn = sorted(c.scenes, key=lambda s: s.format)
+    assert (a.license, a.source_url, a.attribution) == ("CC-BY-4.0", "https://x.org", "me")
+    assert syn.license == PROJECT_LICENSE and "seed 0" in syn.attribution
+    # the project's licence is the one pyproject and LICENSE declare
+    root = Path(__file__).resolve().parents[1]
+    assert f'license = "{PROJECT_LICENSE}"' in (root / "pyproject.toml").read_text()
+    assert "Apache License" in (root / "LICENSE").read_text() and PROJECT_LICENSE == "Apache-2.0"
+    cat.write_text("scenes:\n  - {name: a, path: a.ply, format: inria_ply, license: 3}\n")
+    with pytest.raises(ValueError, match="license must be a string"):
+        Catalog(cat, tmp_path / "data")
