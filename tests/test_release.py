@@ -147,14 +147,17 @@ def test_eval_set_ships_as_a_split_and_runs_in_evaluate(release, release_root, m
         assert len(mine) == r["selected"] > 0
         assert mine["difficulty"].value_counts().to_dict() == {k: v for k, v in r["per_difficulty"].items() if v}
         assert r["per_difficulty"] == allocate(r["selected"], EvalSetConfig().proportions)
-    # the data root has the same listing; evaluate.split=eval_zeroshot runs exactly those episodes
-    assert pq.read_table(root / "05_eval_sets" / "eval_zeroshot.parquet").equals(
-        pq.read_table(out / "eval_sets" / "eval_zeroshot.parquet"))
+    # the data root has the same listing; evaluate.split=eval_zeroshot runs exactly those episodes, and
+    # draws the same listing itself where no release wrote one
+    in_root = root / "05_eval_sets" / "eval_zeroshot.parquet"
+    assert pq.read_table(in_root).equals(pq.read_table(out / "eval_sets" / "eval_zeroshot.parquet"))
+    in_root.unlink()
     s = execute(make_cfg(root, *over, "stages=[evaluate]", "evaluate.split=eval_zeroshot", "evaluate.render=false",
                          "evaluate.agent=oracle", "evaluate.run=zs", "scenes.ids=[synth_0000]"))
     assert not s["failures"], s["failures"]
     res = pd.concat(pd.read_parquet(p) for p in (root / "07_eval" / "zs" / "results").rglob("*.parquet"))
     assert sorted(zip(res["task"], res["episode_id"])) == sorted(zip(listing["task"], listing["episode_id"]))
+    assert pq.read_table(in_root).equals(pq.read_table(out / "eval_sets" / "eval_zeroshot.parquet"))
     budgets = {"easy": 500, "medium": 1000, "hard": 1500}
     eps = pds.dataset(out / "episodes", format="parquet", partitioning="hive").to_table().to_pandas()
     zs = eps[eps["split"] == "eval_zeroshot"]
