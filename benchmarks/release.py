@@ -163,7 +163,8 @@ def markdown(r: dict) -> str:
               "The evaluation set is small here because the simulation's rooms are 3.6-4 m across: hard episodes "
               "(6 m and more) barely exist, and the set keeps the paper's 30 / 40 / 30 % proportions, so it is as large "
               "as its scarcest difficulty allows (the card says so). The default dataset's rooms give 83 a task from "
-              "its one test scene; 100 test scenes of real size, each with its difficulties balanced (episodes.difficulty.balance), would fill the 600.", ""]
+              "its one test scene; 100 test scenes of real size, each with its difficulties balanced "
+              "(episodes.difficulty.balance), would fill the 600.", ""]
     return "\n".join(L)
 
 

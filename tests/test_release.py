@@ -172,7 +172,10 @@ def test_internal_release_keeps_every_scene(release_root, make_cfg):
     build_release(make_cfg(root, *over, "release.public=false"), out)
     info = json.loads((out / RELEASE_JSON).read_text())
     assert info["scenes"]["included"] == 2 and not info["scenes"]["excluded"]
-    assert "Internal release" in (out / "README.md").read_text().split("\n## ")[0]
+    card = (out / "README.md").read_text()
+    assert "Internal release" in card.split("\n## ")[0]
+    assert "| borrowed |" in card and "unknown (**not redistributable**)" in card
+    assert read_card_front_matter(out / "README.md")["license"] == "other"  # mixed licences
 
 
 def test_release_refuses_an_unfinished_root_naming_scenes_and_stages(release_root, make_cfg):

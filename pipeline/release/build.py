@@ -138,7 +138,7 @@ class Builder:
             self.scene_files[scene_id].append(rel)
 
     # -- one scene ---------------------------------------------------------------------------------
-    def add_scene(self, scene, eval_ids: dict[str, set[str]]) -> None:
+    def add_scene(self, scene, eval_ids: dict[str, set[str]], redistributable: bool = True) -> None:
         from navcore.io.episode_schema import TRAJECTORY_WRITE
 
         cat, sid = self.catalog, scene.scene_id
@@ -189,7 +189,7 @@ class Builder:
         screening = (marker.get("info") or {}).get("screening") or {}
         self.scene_rows.append({
             "scene_id": sid, "name": scene.name, "group": scene.group, "format": scene.format,
-            "license": scene.license, "source_url": scene.source_url, "attribution": scene.attribution,
+            "license": scene.license, "redistributable": redistributable, "source_url": scene.source_url, "attribution": scene.attribution,
             "screening_verdict": screening.get("verdict"), "screening_score": screening.get("score"),
             "episodes_kept": screening.get("kept"), "episodes": json.dumps(counts, sort_keys=True)})
 
@@ -287,7 +287,7 @@ def build_release(cfg, out: Path | None = None, console=None) -> dict:
     for s in sorted(scenes, key=lambda s: s.scene_id):
         ok, why = redistributable(s.license, extra)
         if ok or not rcfg.public:
-            included.append((s, why))
+            included.append((s, ok))
         else:
             excluded.append({"scene_id": s.scene_id, "name": s.name, "group": s.group, "license": s.license,
                              "source_url": s.source_url, "reason": why})
@@ -307,8 +307,8 @@ def build_release(cfg, out: Path | None = None, console=None) -> dict:
         tmp.mkdir()
         b = Builder(cfg, catalog, [s for s, _ in included], out, previous)
         b.tmp = tmp
-        for s, _ in included:
-            b.add_scene(s, eval_ids.get(s.scene_id, {}))
+        for s, ok in included:
+            b.add_scene(s, eval_ids.get(s.scene_id, {}), ok)
         eval_dir = tmp / "eval_sets"
         eval_dir.mkdir()
         pq.write_table(eval_table, eval_dir / f"{es.name}.parquet", compression="zstd")

@@ -13,7 +13,7 @@ from navcore.io.licences import PROJECT_LICENSE
 
 SCENES_SCHEMA = pa.schema([
     ("scene_id", pa.string()), ("name", pa.string()), ("group", pa.string()), ("format", pa.string()),
-    ("license", pa.string()), ("source_url", pa.string()), ("attribution", pa.string()),
+    ("license", pa.string()), ("redistributable", pa.bool_()), ("source_url", pa.string()), ("attribution", pa.string()),
     ("screening_verdict", pa.string()), ("screening_score", pa.float64()), ("episodes_kept", pa.bool_()),
     ("episodes", pa.string()),  # JSON {"task/split": count}
     ("content_sha256", pa.string()),  # sha256 over the scene's files (path and sha256): what versions compare
@@ -128,7 +128,8 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
         L += ["", f"Fewer than requested for {', '.join(short)}: the held-out scenes hold fewer episodes at these "
               "proportions (the set is the largest one that keeps them)."]
     if not es["per_task"]:
-        L += ["", "Empty: no episodes in the held-out splits (episodes.scene_splits holds no scene out)."]
+        L += ["", "Empty: none of this release's scenes is in the held-out splits (episodes.scene_splits assigns "
+              "scenes by a hash of their id; a small scene set may have none there)."]
     emb = cfg["embodiment"]
     L += ["", "## Embodiment", "",
           f"`{emb['name']}`: footprint radius {emb['radius']} m, body {emb['h_min']}-{emb['h_max']} m above the floor, "
@@ -153,7 +154,8 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
     L += ["## Scenes", "", "| scene | id | group | licence | source | attribution | screening | content sha256 |",
           "|---|---|---|---|---|---|---|---|"]
     for r in scene_rows:
-        L.append(f"| {r['name']} | {r['scene_id']} | {r['group']} | {r['license'] or 'unknown'} | "
+        lic = (r["license"] or "unknown") + ("" if r["redistributable"] else " (**not redistributable**)")
+        L.append(f"| {r['name']} | {r['scene_id']} | {r['group']} | {lic} | "
                  f"{r['source_url'] or '-'} | {r['attribution'] or '-'} | {r['screening_verdict'] or '-'} | "
                  f"`{(r['content_sha256'] or '')[:16]}` |")
     excluded = info["scenes"]["excluded"]
