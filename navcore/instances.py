@@ -27,6 +27,8 @@ INSTANCE_SCHEMA = pa.schema([
     pa.field("confidence", pa.float32()),
     pa.field("source", pa.string()),  # ground_truth | model_predicted
     pa.field("dataset_class", pa.string()),  # the label set's own class name (ground truth), else null
+    pa.field("views", pa.int32()),  # model_predicted: distinct views whose masks voted for it, else null
+    pa.field("agreement", pa.float32()),  # model_predicted: mean share of its cells each of those views voted for
 ])
 
 
@@ -76,6 +78,8 @@ def labels_to_table(labels: list[dict], support: dict[int, int] | None = None) -
         cols["confidence"].append(float(lab.get("confidence", 1.0)))
         cols["source"].append(lab.get("source", "ground_truth"))
         cols["dataset_class"].append(lab.get("dataset_class"))
+        cols["views"].append(lab.get("views"))
+        cols["agreement"].append(lab.get("agreement"))
     return pa.table(cols, schema=INSTANCE_SCHEMA)
 
 
@@ -87,7 +91,8 @@ def table_to_labels(table: pa.Table) -> list[dict]:
         box = None if any(np.isnan(lo + hi)) else {"min": lo, "max": hi}
         out.append({"instance_id": r["instance_id"], "category": r["category"],
                     "position": [r[f"center_{k}"] for k in "xyz"], "bounding_box": box,
-                    "confidence": r["confidence"], "source": r["source"], "dataset_class": r.get("dataset_class")})
+                    "confidence": r["confidence"], "source": r["source"], "dataset_class": r.get("dataset_class"),
+                    **{k: r[k] for k in ("views", "agreement") if r.get(k) is not None}})
     return out
 
 

@@ -72,7 +72,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="6",
           inputs=costmap.hashed_inputs),
     Stage("screen", screen.run, ("costmap",), ("screen.layer", "embodiment")),
-    Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), version="2", gpu=True,
+    Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), version="3", gpu=True,
           memory_gb=3.0),
     Stage("asset", asset.run, ("costmap", "semantics"), ("asset",), version="4"),
     Stage("episodes", episodes.run, ("costmap", "semantics", "screen"),

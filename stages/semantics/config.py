@@ -6,6 +6,7 @@ from typing import Optional
 
 from navcore.labels.shipped import CleaningConfig
 from navcore.nav.tasks import OBJECTNAV_CATEGORIES
+from stages.semantics.detector import DetectorConfig
 from stages.semantics.lifting import LiftingConfig
 from stages.semantics.open_vocab import OpenVocabConfig
 from stages.semantics.segmenters import CORRUPTION_LEVELS, Corruption
@@ -98,6 +99,8 @@ class SemanticsConfig:
     oracle: OracleConfig = field(default_factory=OracleConfig)
     sam3: Sam3Config = field(default_factory=Sam3Config)
     open_vocab: OpenVocabConfig = field(default_factory=OpenVocabConfig)
+    detector: DetectorConfig = field(default_factory=DetectorConfig)
+    """The `detector` segmenter: the shipped COCO detector, masks from rendered depth."""
 
     def vocabulary(self, scene=None):
         """The goal vocabulary of a scene: these categories, `goal_map`, and the catalog entry's own

@@ -45,6 +45,10 @@ class LiftingConfig:
     """DBSCAN core-point threshold."""
     min_cluster: int = 30
     """Clusters with fewer Gaussians are dropped."""
+    min_views: int = 1
+    """An instance needs votes from at least this many distinct views (its `views`): multi-view
+    consistency against detections that do not recur in 3D (the detector segmenter asks for
+    detector.min_views; with support=points every frame counts)."""
 
 
 def back_project(depth: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray, pixels: np.ndarray) -> np.ndarray:
@@ -88,19 +92,22 @@ def frame_points(depth: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray, mas
     return np.concatenate(pts), np.concatenate(labs)
 
 
-def vote(points: np.ndarray, labels: np.ndarray, cfg: LiftingConfig, frames: np.ndarray | None = None
-         ) -> dict[tuple, tuple[int, int, float]]:
+def vote(points: np.ndarray, labels: np.ndarray, cfg: LiftingConfig, frames: np.ndarray | None = None,
+         voters: dict | None = None) -> dict[tuple, tuple[int, int, float]]:
     """Pooled points -> {cell: (label, support, confidence)} on the delta_vote grid (majority label,
     cells under min_support dropped, ties dropped when exclude_ties). `frames` [M]: the frame of
-    each point (cfg.support == "views": one vote per frame, cell and label)."""
+    each point (cfg.support == "views": one vote per frame, cell and label). `voters`, when given,
+    receives {cell: frames that voted for its label} (the views behind each kept cell)."""
     if not len(points):
         return {}
     keys = voxel_keys(points, cfg.delta_vote)
+    if frames is not None:
+        frames = np.asarray(frames)
     if cfg.support == "views":
         if frames is None:
             raise ValueError("support='views' needs the frame of each point")
         _, first = np.unique(np.column_stack([keys, labels, frames]), axis=0, return_index=True)
-        keys, labels = keys[first], labels[first]
+        keys, labels, frames = keys[first], labels[first], frames[first]
     elif cfg.support != "points":
         raise ValueError(f"lifting.support={cfg.support!r}; choose views | points")
     cells, inv = np.unique(keys, axis=0, return_inverse=True)
@@ -114,6 +121,10 @@ def vote(points: np.ndarray, labels: np.ndarray, cfg: LiftingConfig, frames: np.
     keep = total >= cfg.min_support
     if cfg.exclude_ties and counts.shape[1] > 1:
         keep &= order[:, -1] > order[:, -2]
+    if voters is not None and frames is not None:
+        won = keep[inv] & (labels == cats[best[inv]])
+        for i, f in zip(inv[won], frames[won]):
+            voters.setdefault(tuple(cells[i]), set()).add(int(f))
     return {tuple(c): (int(cats[b]), int(t), float(counts[i, b] / t))
             for i, (c, b, t) in enumerate(zip(cells, best, total)) if keep[i]}
 
@@ -136,7 +147,8 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
             a list of them}).
         gaussian_means: [N, 3] scene Gaussian centres (the labels are transferred to them).
     Returns:
-        list of {label, center [3], min [3], max [3], support (Gaussians), confidence}.
+        list of {label, center [3], min [3], max [3], support (Gaussians), confidence, views (distinct
+        frames that voted for it), agreement (view_support)}; instances under cfg.min_views views dropped.
     """
     from sklearn.cluster import DBSCAN
 
@@ -149,8 +161,10 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
     points = np.concatenate(pts) if pts else np.zeros((0, 3))
     labels = np.concatenate(labs) if labs else np.zeros(0, np.int64)
     gkeys = voxel_keys(gaussian_means, cfg.delta_vote)
+    frames_of = np.concatenate(fids) if fids else np.zeros(0, np.int64)
+    voters: dict[tuple, set[int]] = {}
     if cfg.voting:
-        cells = vote(points, labels, cfg, np.concatenate(fids) if fids else np.zeros(0, np.int64))
+        cells = vote(points, labels, cfg, frames_of, voters)
         g_label = np.full(len(gaussian_means), -1, np.int64)
         g_conf = np.zeros(len(gaussian_means))
         for i, k in enumerate(map(tuple, gkeys)):
@@ -162,7 +176,8 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
         # overlap: one point per delta_down voxel and label)
         _, first = np.unique(np.column_stack([voxel_keys(points, cfg.delta_down), labels]), axis=0,
                              return_index=True)
-        points, labels = points[np.sort(first)], labels[np.sort(first)]
+        keep = np.sort(first)
+        points, labels, frames_of = points[keep], labels[keep], frames_of[keep]
         g_conf = None
         members = [(lab, np.flatnonzero(labels == lab)) for lab in np.unique(labels)]
         cloud = lambda idx: points[idx]  # noqa: E731
@@ -178,6 +193,24 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
                 continue
             p = xyz[sel]
             conf = float(g_conf[idx[sel]].mean()) if g_conf is not None else 1.0
+            views, agreement = view_support(voxel_keys(p, cfg.delta_vote), voters) if cfg.voting else \
+                (len(np.unique(frames_of[idx[sel]])), 1.0)
+            if views < cfg.min_views:
+                continue
             out.append({"label": int(lab), "center": p.mean(0), "min": p.min(0), "max": p.max(0),
-                        "support": int(sel.sum()), "confidence": conf})
+                        "support": int(sel.sum()), "confidence": conf, "views": views, "agreement": agreement})
     return out
+
+
+def view_support(cell_keys: np.ndarray, voters: dict[tuple, set[int]]) -> tuple[int, float]:
+    """(distinct views that voted for an instance's cells, their agreement: the mean share of the
+    instance's cells each of those views voted for; 1.0 = every view saw and labelled the whole
+    instance, low = views that each back the instance in a different small place)."""
+    cells = {tuple(k) for k in cell_keys}
+    per_frame: dict[int, int] = {}
+    for c in cells:
+        for f in voters.get(c, ()):
+            per_frame[f] = per_frame.get(f, 0) + 1
+    if not per_frame:
+        return 0, 0.0
+    return len(per_frame), float(np.mean([n / len(cells) for n in per_frame.values()]))

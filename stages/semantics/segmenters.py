@@ -4,7 +4,8 @@
     seg.segment_batch(rgbs, prompts, contexts) -> one such dict per frame (batched models override it)
 
 `rgb` is [H, W, 3] uint8. `context` carries what a privileged segmenter may use: the frame's
-camera (viewmat, K) and, when the segmenter declares per-Gaussian `gaussian_features`, their
+camera (viewmat, K, cam_to_world), its rendered depth ([H, W] metres, 0 where nothing) and, when
+the segmenter declares per-Gaussian `gaussian_features`, their
 composite rendered in the same pass as the frame (`extra`, [H, W, C]).
 
 Implementations by registry key (or "module:Class"), each built by `from_scene(scene, ...)`:
@@ -25,6 +26,7 @@ SEGMENTERS = Registry("segmenter", {
     "oracle": "stages.semantics.segmenters:OracleSegmenter",
     "sam3": "stages.semantics.sam3_segmenter:Sam3Segmenter",  # imports torch and sam3 when used
     "open_vocab": "stages.semantics.open_vocab:OpenVocabSegmenter",  # OWLv2 + SAM through transformers
+    "detector": "stages.semantics.detector:DetectorSegmenter",  # a COCO box detector (OpenCV DNN), depth masks
 })
 
 

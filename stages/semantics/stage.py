@@ -2,13 +2,15 @@
 
 Per scene: covering cameras (the source's capture cameras, or poses on free costmap cells at the
 embodiment's camera height looking all around), RGB-D rendered there with the scene renderer,
-per-category masks from the configured segmenter (registry key: oracle | sam3), the paper's lifting
+per-category masks from the configured segmenter (registry key: oracle | detector | open_vocab | sam3),
+the paper's lifting
 (lifting.py) -> the instance table data/04_semantics/{scene_id}/instances.parquet (INSTANCE_SCHEMA,
 source "model_predicted"), which the episodes stage's ObjectNav and the asset's labels.json read.
 """
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -41,7 +43,9 @@ def covering_cameras(scene, catalog, scfg: SemanticsConfig, emb, to_aligned: np.
         c2w, kind = to_aligned @ c2w, "source"
     else:
         valid = ~costmap.occupancy & (costmap.clearance >= 0)
-        poses = free_space_poses(costmap, valid, scfg.spacing, scfg.yaw_step_deg)
+        spacing, yaw_step = (scfg.detector.spacing, scfg.detector.yaw_step_deg) if scfg.segmenter == "detector" \
+            else (scfg.spacing, scfg.yaw_step_deg)
+        poses = free_space_poses(costmap, valid, spacing, yaw_step)
         c2w = np.stack([camera_to_world(x, y, yaw, emb.camera_height, emb.camera_pitch_deg) for x, y, yaw in poses]) \
             if len(poses) else np.zeros((0, 4, 4))
         ks, kind = np.repeat(intrinsics(scfg.width, scfg.height, emb.hfov_deg)[None], len(c2w), 0), "free_space"
@@ -78,8 +82,8 @@ def scene_frames(renderer, segmenter, c2w: np.ndarray, Ks: np.ndarray, scfg: Sem
             return
         rgb, depth, extra, vm, ks, cw = batch
         t1 = time.perf_counter()
-        segs = segmenter.segment_batch(rgb, prompts, [{"viewmat": v, "K": k, "extra": e}
-                                                      for v, k, e in zip(vm, ks, extra)])
+        segs = segmenter.segment_batch(rgb, prompts, [{"viewmat": v, "K": k, "extra": e, "depth": d, "cam_to_world": c}
+                                                      for v, k, e, d, c in zip(vm, ks, extra, depth, cw)])
         timings["render"] = timings.get("render", 0.0) + t1 - t0
         timings["segment"] = timings.get("segment", 0.0) + time.perf_counter() - t1
         for i, seg in enumerate(segs):
@@ -92,12 +96,19 @@ def category_masks(seg: dict, prompts: list[str]) -> dict[int, list[np.ndarray]]
     return {c: m for c, m in out.items() if m}
 
 
+def lifting_config(scfg: SemanticsConfig):
+    """The lifting of this segmenter: the detector's instances need detector.min_views views."""
+    if scfg.segmenter == "detector":
+        return replace(scfg.lifting, min_views=max(scfg.lifting.min_views, scfg.detector.min_views))
+    return scfg.lifting
+
+
 def predict_instances(renderer, segmenter, c2w, Ks, means: np.ndarray, scfg: SemanticsConfig):
     """Instance candidates of one scene: (labels.json entries with source model_predicted and ids
     1..n in (category, -support) order, their support, timings {render, segment, lift, total} s)."""
     timings: dict = {}
     t0 = time.perf_counter()
-    cands = lift(scene_frames(renderer, segmenter, c2w, Ks, scfg, timings), means, scfg.lifting)
+    cands = lift(scene_frames(renderer, segmenter, c2w, Ks, scfg, timings), means, lifting_config(scfg))
     total = time.perf_counter() - t0
     timings["lift"] = total - timings.get("render", 0.0) - timings.get("segment", 0.0)
     timings["total"] = total
@@ -107,7 +118,8 @@ def predict_instances(renderer, segmenter, c2w, Ks, means: np.ndarray, scfg: Sem
         labels.append({"instance_id": i, "category": scfg.categories[c["label"]],
                        "position": [float(v) for v in c["center"]],
                        "bounding_box": {"min": [float(v) for v in c["min"]], "max": [float(v) for v in c["max"]]},
-                       "confidence": round(float(c["confidence"]), 6), "source": "model_predicted"})
+                       "confidence": round(float(c["confidence"]), 6), "source": "model_predicted",
+                       "views": int(c["views"]), "agreement": round(float(c["agreement"]), 6)})
         support[i] = c["support"]
     return labels, support, timings
 

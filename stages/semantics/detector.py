@@ -1,0 +1,261 @@
+"""The `detector` segmenter: a box detector on the rendered views, boxes turned into masks by depth.
+
+A real, shippable model: Yolo-Fastest-1.1-XL (COCO, 80 classes, 3.7 MB, public domain; shipped in
+models/yolo_fastest_1.1_coco/ with its provenance, checked by sha256 on load), run on the CPU through
+OpenCV's DNN module (Darknet cfg + weights, or an ONNX file for other detectors). Its COCO classes map
+onto the goal vocabulary by a written table (COCO_TO_GOAL); the goal categories it cannot name
+(cabinet) are never produced.
+
+A box frames an object and whatever lies behind it (wall, floor). The mask the lifting needs is
+taken from the view's rendered depth inside the box (`box_mask`): pixels on the floor (below
+`floor_margin` in the aligned frame) are dropped, the depths left are histogrammed, and the nearest
+depth mode holding at least `mode_share` of them is the object; the mask is the box's pixels within
+`depth_band` metres behind that mode (and a little in front), its largest 4-connected component. So
+the wall behind a chair and the floor under it get no vote.
+
+Per-view precision of a small COCO detector on renders is low; what makes a goal is multi-view
+consistency (lifting: a cell needs votes from `lifting.min_support` views, and a detector instance
+needs `min_views` distinct views whose masks agree in 3D). The per-category thresholds and the
+allow-list below were chosen on the real labelled ScanNet scan (benchmarks/semantics_detector.py):
+see docs/bench_semantics_detector.md.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from stages.semantics.segmenters import Segmenter
+
+MODEL_DIR = Path(__file__).resolve().parent / "models" / "yolo_fastest_1.1_coco"
+"""The shipped default weights (Yolo-Fastest-1.1-XL, COCO; provenance in its README.md)."""
+MODEL_FILES = {
+    "yolo-fastest-1.1-xl.weights": "fac5fb41786c1f38f04972a658443b189f48720d7d117f9a044100e98a35b0c5",
+    "yolo-fastest-1.1-xl.cfg": "c458427acc4fbeabceff4528ef7b65b066c0308ce599460f8ba299eba63abad3",
+    "coco.names": "634a1132eb33f8091d60f2c346ababe8b905ae08387037aed883953b7329af84",
+}
+"""sha256 of the shipped files (as published by dog-qiuqiu/Yolo-Fastest)."""
+
+COCO_TO_GOAL = {
+    "bed": "bed",
+    "chair": "chair",
+    "couch": "sofa", "sofa": "sofa",
+    "dining table": "table", "diningtable": "table",
+    "toilet": "toilet",
+    "tv": "tv_monitor", "tvmonitor": "tv_monitor",
+    "potted plant": "plant", "pottedplant": "plant",
+}
+"""COCO class -> ObjectNav goal category, under both spellings of the class names: COCO's own
+(couch, dining table, tv, potted plant) and Darknet's coco.names, which the shipped model uses
+(sofa, diningtable, tvmonitor, pottedplant). COCO has no cabinet; its sink, refrigerator, oven and
+bench name no default goal category (add them to semantics.categories and detector.class_map)."""
+
+
+@dataclass
+class DetectorConfig:
+    """The `detector` segmenter (semantics.segmenter=detector)."""
+
+    model: str | None = None
+    """Folder of a Darknet model (*.cfg, *.weights, *.names) or an ONNX file (*.onnx with a
+    *.names beside it); null = the shipped Yolo-Fastest-1.1-XL (COCO)."""
+    class_map: dict[str, str] = field(default_factory=lambda: dict(COCO_TO_GOAL))
+    """Detector class name -> goal category (COCO_TO_GOAL); classes not in it are ignored."""
+    categories: list[str] = field(default_factory=lambda: ["bed", "chair", "sofa", "table", "tv_monitor", "plant"])
+    """Goal categories the detector may produce (an allow-list chosen by measurement: toilet is off,
+    its boxes on real renders land on bins, counters and dark doors, and in 996 views of the ScanNet
+    room it never once boxed the room's toilet; docs/bench_semantics_detector.md)."""
+    confidence: dict[str, float] = field(default_factory=dict)
+    """Per-category score threshold (objectness x class score); a category not named here uses
+    default_confidence."""
+    default_confidence: float = 0.4
+    """Threshold of an allowed category missing from `confidence`: on the ScanNet room's trained
+    3DGS, 0.4 keeps every lifted centre valid (1 of 1, the bed), 0.3 adds a chair found and a false
+    chair (2 of 3 valid)."""
+    spacing: float = 0.75
+    """Free-space pose spacing for this segmenter, metres (semantics.spacing is for the others): a
+    COCO detector needs objects large and near in a view; at the stage's 1.5 m / 60 deg it boxed the
+    ScanNet room's bed in 2 of 198 views and lifted nothing, at 0.75 m / 30 deg in 20 of 996."""
+    yaw_step_deg: float = 30.0
+    """Yaw step of the free-space poses for this segmenter, degrees."""
+    input_size: int = 320
+    """Network input side, pixels (a multiple of 32; the model's cfg says 320)."""
+    nms: float = 0.45
+    """Non-maximum suppression IoU, per category."""
+    threads: int = 0
+    """OpenCV threads (0 = OpenCV's default: every core)."""
+    mask: str = "depth"
+    """depth: the box's nearest depth mode (module doc) | box: the whole box (for comparison)."""
+    depth_band: float = 0.6
+    """Metres behind the nearest depth mode a mask reaches (an object's depth extent)."""
+    front_band: float = 0.15
+    """Metres in front of the mode a mask reaches."""
+    mode_share: float = 0.15
+    """The object's mode is the nearest one holding at least this share of the box's depths."""
+    floor_margin: float = 0.05
+    """Pixels whose point lies below this height (aligned frame, floor z = 0) are floor."""
+    min_mask_px: int = 30
+    """Masks with fewer pixels are dropped."""
+    min_views: int = 3
+    """An instance needs detections from at least this many distinct views (lifting)."""
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def load_net(model: str | None):
+    """(cv2.dnn net, class names) of a model folder / ONNX file, or of the shipped model (checked)."""
+    import cv2
+
+    if model is None:
+        for name, digest in MODEL_FILES.items():
+            p = MODEL_DIR / name
+            if not p.is_file():
+                raise FileNotFoundError(f"the shipped detector weights {p} are missing (reinstall the project)")
+            if _sha256(p) != digest:
+                raise ValueError(f"{p}: sha256 differs from the shipped model's; the file is damaged")
+        folder = MODEL_DIR
+    else:
+        folder = Path(model)
+    if folder.suffix == ".onnx":
+        names = folder.with_suffix(".names")
+        net = cv2.dnn.readNetFromONNX(str(folder))
+    else:
+        cfgs, weights, namess = (sorted(folder.glob(p)) for p in ("*.cfg", "*.weights", "*.names"))
+        if not (cfgs and weights and namess):
+            raise FileNotFoundError(f"detector model {folder}: needs a Darknet *.cfg, *.weights and *.names (or an *.onnx)")
+        names = namess[0]
+        net = cv2.dnn.readNetFromDarknet(str(cfgs[0]), str(weights[0]))
+    if not names.is_file():
+        raise FileNotFoundError(f"detector model {folder}: class names file {names} is missing")
+    return net, [n.strip() for n in names.read_text().splitlines() if n.strip()]
+
+
+def detect(net, rgb: np.ndarray, size: int) -> np.ndarray:
+    """Raw detections of one frame: [M, 4 + 1 + C] (cx, cy, w, h normalised, objectness, class scores)."""
+    import cv2
+
+    blob = cv2.dnn.blobFromImage(rgb, 1 / 255.0, (size, size), swapRB=False, crop=False)  # rgb is RGB already
+    net.setInput(blob)
+    outs = net.forward(net.getUnconnectedOutLayersNames())
+    return np.concatenate([o.reshape(-1, o.shape[-1]) for o in outs])
+
+
+def boxes_of(raw: np.ndarray, names: list[str], cfg: DetectorConfig, width: int, height: int
+             ) -> list[tuple[str, np.ndarray, float]]:
+    """(goal category, box [x0, y0, x1, y1] pixels, score) of the allowed categories after
+    per-category thresholds and NMS."""
+    import cv2
+
+    if not len(raw):
+        return []
+    cls = raw[:, 5:].argmax(1)
+    score = raw[:, 4] * raw[np.arange(len(raw)), 5 + cls]
+    out = []
+    by_cat: dict[str, list[int]] = {}
+    for i in np.flatnonzero(score > min([cfg.default_confidence, *cfg.confidence.values()])):
+        cat = cfg.class_map.get(names[cls[i]] if cls[i] < len(names) else "")
+        if cat in cfg.categories and score[i] >= cfg.confidence.get(cat, cfg.default_confidence):
+            by_cat.setdefault(cat, []).append(int(i))
+    for cat, idx in sorted(by_cat.items()):
+        cx, cy, w, h = (raw[idx, k] for k in range(4))
+        xywh = np.stack([(cx - w / 2) * width, (cy - h / 2) * height, w * width, h * height], 1)
+        keep = cv2.dnn.NMSBoxes(xywh.tolist(), score[idx].tolist(), 0.0, cfg.nms)
+        for k in np.asarray(keep).reshape(-1):
+            x, y, bw, bh = xywh[k]
+            box = np.array([max(0.0, x), max(0.0, y), min(float(width), x + bw), min(float(height), y + bh)])
+            if box[2] > box[0] and box[3] > box[1]:
+                out.append((cat, box, float(score[idx[k]])))
+    return out
+
+
+def box_mask(box: np.ndarray, depth: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray, cfg: DetectorConfig
+             ) -> np.ndarray | None:
+    """The object's pixels of a box: the nearest substantial depth mode off the floor, grown over
+    `depth_band`, its largest connected component ([H, W] bool), or None."""
+    from scipy import ndimage
+
+    h, w = depth.shape
+    x0, y0, x1, y1 = int(box[0]), int(box[1]), int(np.ceil(box[2])), int(np.ceil(box[3]))
+    mask = np.zeros((h, w), bool)
+    if cfg.mask == "box":
+        mask[y0:y1, x0:x1] = depth[y0:y1, x0:x1] > 0
+        return mask if mask.sum() >= cfg.min_mask_px else None
+    if cfg.mask != "depth":
+        raise ValueError(f"semantics.detector.mask={cfg.mask!r}; choose depth | box")
+    d = depth[y0:y1, x0:x1]
+    rows, cols = np.mgrid[y0:y1, x0:x1]
+    z = d
+    x = (cols + 0.5 - K[0, 2]) / K[0, 0] * z
+    y = (rows + 0.5 - K[1, 2]) / K[1, 1] * z
+    height = cam_to_world[2, 0] * x + cam_to_world[2, 1] * y + cam_to_world[2, 2] * z + cam_to_world[2, 3]
+    ok = (d > 0) & (height > cfg.floor_margin)
+    if ok.sum() < cfg.min_mask_px:
+        return None
+    vals = d[ok]
+    bins = np.arange(vals.min(), vals.max() + 0.1, 0.05)
+    hist = np.histogram(vals, bins)[0] if len(bins) > 1 else np.array([len(vals)])
+    smooth = np.convolve(hist, np.ones(3) / 3, mode="same")
+    # the nearest local maximum whose +-band window holds enough of the box's depths
+    mode = None
+    for i in range(len(smooth)):
+        if (i == 0 or smooth[i] >= smooth[i - 1]) and (i == len(smooth) - 1 or smooth[i] >= smooth[i + 1]):
+            centre = bins[i] + 0.025 if len(bins) > 1 else float(vals[0])
+            share = np.mean((vals >= centre - cfg.front_band) & (vals <= centre + cfg.depth_band))
+            if share >= cfg.mode_share:
+                mode = centre
+                break
+    if mode is None:
+        return None
+    sel = ok & (d >= mode - cfg.front_band) & (d <= mode + cfg.depth_band)
+    lab, n = ndimage.label(sel)
+    if n == 0:
+        return None
+    sizes = np.bincount(lab.ravel())[1:]
+    sel = lab == (1 + int(sizes.argmax()))
+    if sel.sum() < cfg.min_mask_px:
+        return None
+    mask[y0:y1, x0:x1] = sel
+    return mask
+
+
+class DetectorSegmenter(Segmenter):
+    """Boxes of a COCO detector on the rendered RGB, masks from the rendered depth (module doc).
+
+    Needs context["depth"] and context["cam_to_world"] (the semantics stage passes them)."""
+
+    def __init__(self, cfg: DetectorConfig, prompts_of: dict[str, str]):
+        import cv2
+
+        self.cfg = cfg
+        if cfg.threads:
+            cv2.setNumThreads(int(cfg.threads))
+        self.net, self.names = load_net(cfg.model)
+        self.prompts_of = prompts_of  # goal category -> the stage's prompt string
+        self.last_boxes: list = []  # the boxes of the last frame (category, box, score): benchmarks read them
+
+    @classmethod
+    def from_scene(cls, scene, catalog, renderer, cfg, seed: int) -> "DetectorSegmenter":
+        return cls(cfg.detector, {c: cfg.prompt(c) for c in cfg.categories})
+
+    def segment(self, rgb: np.ndarray, prompts: list[str], context: dict) -> dict[str, list[tuple[np.ndarray, float]]]:
+        if context.get("depth") is None or context.get("cam_to_world") is None:
+            raise ValueError("the detector segmenter needs the view's rendered depth and camera pose in its context")
+        h, w = rgb.shape[:2]
+        out: dict[str, list] = {p: [] for p in prompts}
+        self.last_boxes = boxes_of(detect(self.net, np.ascontiguousarray(rgb), self.cfg.input_size), self.names,
+                                   self.cfg, w, h)
+        for cat, box, score in self.last_boxes:
+            p = self.prompts_of.get(cat)
+            if p not in out:
+                continue
+            m = box_mask(box, context["depth"], context["K"], context["cam_to_world"], self.cfg)
+            if m is not None:
+                out[p].append((m, score))
+        return out

@@ -1,0 +1,124 @@
+"""The `detector` segmenter (issue 47): the shipped real weights, the class table, box -> mask by
+depth, and the lifting's multi-view support."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from stages.semantics.detector import COCO_TO_GOAL, MODEL_FILES, DetectorConfig, box_mask, boxes_of, detect, load_net
+from stages.semantics.lifting import LiftingConfig, lift, view_support
+
+
+@pytest.fixture(scope="module")
+def net():
+    return load_net(None)
+
+
+def test_shipped_weights_load_and_are_the_published_ones(net, tmp_path):
+    n, names = net
+    assert len(names) == 80 and names[56] == "chair" and names[57] == "sofa"  # Darknet's spelling of couch
+    mapped = {COCO_TO_GOAL[n] for n in names if n in COCO_TO_GOAL}
+    assert mapped == set(COCO_TO_GOAL.values())  # every goal of the table is reachable with the shipped names
+    out = detect(n, np.zeros((240, 320, 3), np.uint8), 320)
+    assert out.shape[1] == 85 and len(out) == 300 + 1200  # two heads: 10 x 10 and 20 x 20 cells, 3 anchors
+    assert (out[:, 4] * out[:, 5:].max(1) < 0.2).all()  # nothing in a black frame
+    bad = tmp_path / "m"
+    bad.mkdir()
+    with pytest.raises(FileNotFoundError, match="Darknet"):
+        load_net(str(bad))
+    assert len(MODEL_FILES) == 3
+
+
+def test_class_table_agrees_with_the_goal_vocabulary():
+    from navcore.labels import GOAL_ALIASES, GOAL_CATEGORIES
+
+    for coco, goal in COCO_TO_GOAL.items():
+        assert goal in GOAL_CATEGORIES
+        assert GOAL_ALIASES.get(coco, goal) == goal  # the shared alias table says the same where it knows the name
+    assert "cabinet" not in COCO_TO_GOAL.values()  # COCO cannot name it
+    assert set(DetectorConfig().categories) <= set(COCO_TO_GOAL.values())
+    assert "toilet" not in DetectorConfig().categories  # off by default: measured precision (module doc)
+
+
+def _raw(rows):
+    """Detections as the network gives them: cx, cy, w, h, objectness, 80 class scores."""
+    out = np.zeros((len(rows), 85), np.float32)
+    for i, (cx, cy, w, h, obj, cls, p) in enumerate(rows):
+        out[i, :5] = cx, cy, w, h, obj
+        out[i, 5 + cls] = p
+    return out
+
+
+def test_boxes_threshold_map_and_nms(net):
+    _, names = net
+    cfg = DetectorConfig()
+    raw = _raw([(0.5, 0.5, 0.2, 0.4, 0.9, 57, 0.9),      # couch 0.81 -> sofa
+                (0.51, 0.5, 0.2, 0.4, 0.9, 57, 0.8),     # the same couch, suppressed by NMS
+                (0.2, 0.2, 0.1, 0.1, 0.9, 59, 0.5),      # bed 0.45 < bed threshold 0.5
+                (0.8, 0.8, 0.1, 0.1, 0.9, 61, 0.9),      # toilet: not allowed by default
+                (0.3, 0.7, 0.1, 0.2, 0.9, 0, 0.9)])      # person: not a goal
+    got = boxes_of(raw, names, cfg, 320, 240)
+    assert [c for c, _, _ in got] == ["sofa"]
+    cat, box, score = got[0]
+    assert np.allclose(box, [0.4 * 320, 0.3 * 240, 0.6 * 320, 0.7 * 240]) and score == pytest.approx(0.81, abs=1e-6)
+
+
+def test_box_mask_keeps_the_nearest_depth_mode_off_the_floor():
+    # camera at 1 m height looking along +x (OpenCV axes: x right, y down, z forward)
+    h, w = 120, 160
+    K = np.array([[100.0, 0, w / 2], [0, 100.0, h / 2], [0, 0, 1]])
+    c2w = np.eye(4)
+    c2w[:3, :3] = np.array([[0, 0, 1], [-1, 0, 0], [0, -1, 0]])  # camera z -> world x, camera y -> world -z
+    c2w[2, 3] = 1.0
+    depth = np.full((h, w), 4.0)  # a wall 4 m ahead
+    rows = np.arange(h)[:, None] + 0.5
+    floor_d = 1.0 / np.maximum((rows - K[1, 2]) / K[1, 1], 1e-6)  # rays below the horizon hit the floor
+    depth = np.where((rows > K[1, 2]) & (floor_d < 4.0), floor_d, depth) * np.ones((1, w))
+    obj = np.zeros((h, w), bool)
+    obj[50:100, 60:100] = True  # an object 2 m ahead (its lower rows would be at the floor's depth)
+    depth[obj] = 2.0
+    box = np.array([50.0, 40.0, 110.0, 110.0])  # the detector's box: object, wall and floor
+    m = box_mask(box, depth, K, c2w, DetectorConfig())
+    assert m is not None
+    assert m[obj].mean() > 0.95  # the object
+    assert not m[~obj].any()  # neither the wall behind nor the floor
+    whole = box_mask(box, depth, K, c2w, DetectorConfig(mask="box"))
+    assert whole[40:110, 50:110].all()
+
+
+def test_lifting_counts_views_and_drops_what_one_view_saw():
+    from stages.semantics.lifting import vote
+
+    # a 0.3 m cube of Gaussians, seen by 3 views; a 0.3 m false blob seen by one view only
+    g = np.random.default_rng(0)
+    cube = g.uniform(0, 0.3, (2000, 3)) + [1.0, 1.0, 0.2]
+    blob = g.uniform(0, 0.3, (2000, 3)) + [3.0, 1.0, 0.2]
+    means = np.concatenate([cube, blob])
+    pts = np.concatenate([cube, cube, cube, blob])
+    labels = np.zeros(len(pts), np.int64)
+    frames = np.repeat([0, 1, 2, 3], 2000)
+    voters: dict = {}
+    cfg = LiftingConfig(min_support=1, erosion_px=0)
+    cells = vote(pts, labels, cfg, frames, voters)
+    assert cells and all(v for v in voters.values())
+    views, agree = view_support(np.floor(cube / cfg.delta_vote).astype(np.int64), voters)
+    assert views == 3 and agree == pytest.approx(1.0)
+
+    class Frames:  # lift() takes back-projected frames; feed it points through a trivial camera
+        def __iter__(self):
+            for f in range(4):
+                p = pts[frames == f]
+                depth = np.ones((1, len(p)))
+                yield depth, None, None, {0: p}
+
+    import stages.semantics.lifting as L
+
+    orig = L.frame_points
+    L.frame_points = lambda depth, K, c2w, masks, cfg: (masks[0], np.zeros(len(masks[0]), np.int64))
+    try:
+        keep1 = lift(Frames(), means, LiftingConfig(min_support=1, min_cluster=10))
+        keep2 = lift(Frames(), means, LiftingConfig(min_support=1, min_cluster=10, min_views=2))
+    finally:
+        L.frame_points = orig
+    assert sorted(c["views"] for c in keep1) == [1, 3]
+    assert [c["views"] for c in keep2] == [3] and np.allclose(keep2[0]["center"], cube.mean(0), atol=0.05)
