@@ -166,8 +166,8 @@ def right(mask, imap: np.ndarray, cat_of_id: dict, prompt_to_cat: dict, cat: str
     return bool(hit.mean() > 0.5)
 
 
-DEFAULT_KEY = "0.4/depth_mask/3"
-"""The lifted result at the defaults (detector.default_confidence 0.4, depth masks, min_views 3)."""
+DEFAULT_KEY = "0.4/depth_mask/4"
+"""The lifted result at the defaults (detector.default_confidence 0.4, depth masks, min_views 4)."""
 
 
 def section(rep: dict) -> list[str]:
@@ -195,10 +195,17 @@ def section(rep: dict) -> list[str]:
         L.append(f"| {r['threshold']} | {r['mask']} | {r['min_views']} | {r['predicted']} | {r['valid']} | "
                  f"{'-' if vcr != vcr else f'{vcr:.1%}'} | {r['found']} of {r['objects']} | "
                  f"{'-' if med is None else round(med, 2)} |")
+    from stages.semantics.detector import DetectorConfig
+
     d = rep["lifted"][DEFAULT_KEY]
-    L += ["", "At the defaults, per category (instances / valid / objects / found): " + "; ".join(
-        f"{c} {v['predicted']} / {v['valid']} / {v['objects']} / {v['found']}" for c, v in d["per_category"].items()
-        if v["predicted"] or v["objects"]) + ".", ""]
+    allowed = DetectorConfig().categories
+    kept = {c: v for c, v in d["per_category"].items() if c in allowed and (v["predicted"] or v["objects"])}
+    n, valid = sum(v["predicted"] for v in kept.values()), sum(v["valid"] for v in kept.values())
+    head = (f"At the defaults (score 0.4, depth masks, 4 views, categories {', '.join(allowed)}): {n} instance(s), "
+            f"{valid} valid ({valid / n:.0%} valid centres)" if n else
+            f"At the defaults (categories {', '.join(allowed)}): no instance")
+    L += ["", head + "; per category (instances / valid / objects / found): " + "; ".join(
+        f"{c} {v['predicted']} / {v['valid']} / {v['objects']} / {v['found']}" for c, v in kept.items()) + ".", ""]
     return L
 
 

@@ -37,7 +37,7 @@ def test_class_table_agrees_with_the_goal_vocabulary():
         assert GOAL_ALIASES.get(coco, goal) == goal  # the shared alias table says the same where it knows the name
     assert "cabinet" not in COCO_TO_GOAL.values()  # COCO cannot name it
     assert set(DetectorConfig().categories) <= set(COCO_TO_GOAL.values())
-    assert "toilet" not in DetectorConfig().categories  # off by default: measured precision (module doc)
+    assert not {"toilet", "chair"} & set(DetectorConfig().categories)  # off by default: measured precision
 
 
 def _raw(rows):
@@ -52,9 +52,10 @@ def _raw(rows):
 def test_boxes_threshold_map_and_nms(net):
     _, names = net
     cfg = DetectorConfig()
-    raw = _raw([(0.5, 0.5, 0.2, 0.4, 0.9, 57, 0.9),      # couch 0.81 -> sofa
+    raw = _raw([(0.5, 0.5, 0.2, 0.4, 0.9, 57, 0.9),      # sofa (COCO's couch) 0.81
                 (0.51, 0.5, 0.2, 0.4, 0.9, 57, 0.8),     # the same couch, suppressed by NMS
-                (0.2, 0.2, 0.1, 0.1, 0.9, 59, 0.5),      # bed 0.45 < bed threshold 0.5
+                (0.2, 0.2, 0.1, 0.1, 0.9, 59, 0.4),      # bed 0.36 < the threshold 0.4
+                (0.6, 0.2, 0.1, 0.1, 0.9, 56, 0.9),      # chair: off by default
                 (0.8, 0.8, 0.1, 0.1, 0.9, 61, 0.9),      # toilet: not allowed by default
                 (0.3, 0.7, 0.1, 0.2, 0.9, 0, 0.9)])      # person: not a goal
     got = boxes_of(raw, names, cfg, 320, 240)
@@ -122,3 +123,21 @@ def test_lifting_counts_views_and_drops_what_one_view_saw():
         L.frame_points = orig
     assert sorted(c["views"] for c in keep1) == [1, 3]
     assert [c["views"] for c in keep2] == [3] and np.allclose(keep2[0]["center"], cube.mean(0), atol=0.05)
+
+
+def test_the_stage_runs_the_detector_end_to_end(tmp_path, make_cfg):
+    """semantics.segmenter=detector on a generated scene: renders, the real network, depth masks and the
+    lifting run through the stage; the instance table carries views and agreement."""
+    import pyarrow.parquet as pq
+
+    from pipeline.executor import execute
+
+    s = execute(make_cfg(tmp_path, "stages=[semantics]", "semantics.segmenter=detector", "semantics.shipped_labels=false",
+                         "semantics.detector.spacing=1.5", "semantics.detector.yaw_step_deg=90"))
+    assert not s["failures"], s["failures"]
+    info = next(r for r in s["results"] if r["stage"] == "semantics")
+    table = pq.read_table(next(tmp_path.glob("04_semantics/*/instances.parquet")))
+    assert {"views", "agreement"} <= set(table.column_names)
+    assert all(v >= 4 for v in table["views"].to_pylist())  # detector.min_views
+    assert set(table["category"].to_pylist()) <= set(DetectorConfig().categories)
+    assert info["status"] == "done"
