@@ -97,7 +97,8 @@ bench-semantics: $(STAMP)
 	$(BIN)/python -m benchmarks.semantics $(ARGS)
 	# the lifting on real labelled geometry, where ../shared/data/real_labelled is present
 	if [ -d ../shared/data/real_labelled/scannet_scene0000_02 ]; then \
-	  $(BIN)/python -m benchmarks.semantics_real --docs --scan ../shared/data/real_labelled/scannet_scene0000_02; fi
+	  $(BIN)/python -m benchmarks.semantics_real --docs --scan ../shared/data/real_labelled/scannet_scene0000_02; \
+	  $(BIN)/python -m benchmarks.semantics_detector --docs --scan ../shared/data/real_labelled/scannet_scene0000_02; fi
 
 bench-semantics-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.semantics --gpu $(ARGS)

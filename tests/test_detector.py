@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stages.semantics.detector import COCO_TO_GOAL, MODEL_FILES, DetectorConfig, box_mask, boxes_of, detect, load_net
+from navcore.io.models import MODEL_FILES, load_net
+from stages.semantics.detector import COCO_TO_GOAL, DetectorConfig, box_mask, boxes_of, detect
 from stages.semantics.lifting import LiftingConfig, lift, view_support
 
 

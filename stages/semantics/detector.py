@@ -1,7 +1,7 @@
 """The `detector` segmenter: a box detector on the rendered views, boxes turned into masks by depth.
 
 A real, shippable model: Yolo-Fastest-1.1-XL (COCO, 80 classes, 3.7 MB, public domain; shipped in
-models/yolo_fastest_1.1_coco/ with its provenance, checked by sha256 on load), run on the CPU through
+navcore/models/yolo_fastest_1.1_coco/ with its provenance, checked by sha256 on load: navcore/io/models.py), run on the CPU through
 OpenCV's DNN module (Darknet cfg + weights, or an ONNX file for other detectors). Its COCO classes map
 onto the goal vocabulary by a written table (COCO_TO_GOAL); the goal categories it cannot name
 (cabinet) are never produced.
@@ -21,22 +21,12 @@ see docs/bench_semantics_detector.md.
 """
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
+from navcore.io.models import load_net
 from stages.semantics.segmenters import Segmenter
-
-MODEL_DIR = Path(__file__).resolve().parent / "models" / "yolo_fastest_1.1_coco"
-"""The shipped default weights (Yolo-Fastest-1.1-XL, COCO; provenance in its README.md)."""
-MODEL_FILES = {
-    "yolo-fastest-1.1-xl.weights": "fac5fb41786c1f38f04972a658443b189f48720d7d117f9a044100e98a35b0c5",
-    "yolo-fastest-1.1-xl.cfg": "c458427acc4fbeabceff4528ef7b65b066c0308ce599460f8ba299eba63abad3",
-    "coco.names": "634a1132eb33f8091d60f2c346ababe8b905ae08387037aed883953b7329af84",
-}
-"""sha256 of the shipped files (as published by dog-qiuqiu/Yolo-Fastest)."""
 
 COCO_TO_GOAL = {
     "bed": "bed",
@@ -103,42 +93,6 @@ class DetectorConfig:
     min_views: int = 4
     """An instance needs detections from at least this many distinct views (lifting): on the ScanNet
     scan's renders 3 views kept a false bed beside the real one, 4 only the real one."""
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def load_net(model: str | None):
-    """(cv2.dnn net, class names) of a model folder / ONNX file, or of the shipped model (checked)."""
-    import cv2
-
-    if model is None:
-        for name, digest in MODEL_FILES.items():
-            p = MODEL_DIR / name
-            if not p.is_file():
-                raise FileNotFoundError(f"the shipped detector weights {p} are missing (reinstall the project)")
-            if _sha256(p) != digest:
-                raise ValueError(f"{p}: sha256 differs from the shipped model's; the file is damaged")
-        folder = MODEL_DIR
-    else:
-        folder = Path(model)
-    if folder.suffix == ".onnx":
-        names = folder.with_suffix(".names")
-        net = cv2.dnn.readNetFromONNX(str(folder))
-    else:
-        cfgs, weights, namess = (sorted(folder.glob(p)) for p in ("*.cfg", "*.weights", "*.names"))
-        if not (cfgs and weights and namess):
-            raise FileNotFoundError(f"detector model {folder}: needs a Darknet *.cfg, *.weights and *.names (or an *.onnx)")
-        names = namess[0]
-        net = cv2.dnn.readNetFromDarknet(str(cfgs[0]), str(weights[0]))
-    if not names.is_file():
-        raise FileNotFoundError(f"detector model {folder}: class names file {names} is missing")
-    return net, [n.strip() for n in names.read_text().splitlines() if n.strip()]
 
 
 def detect(net, rgb: np.ndarray, size: int) -> np.ndarray:

@@ -1,0 +1,54 @@
+"""Pretrained models that ship with the project (navcore/models/, provenance beside each), read
+with their published sha256 checked, and other models of the same kinds from a user's folder."""
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+MODEL_DIR = Path(__file__).resolve().parents[1] / "models" / "yolo_fastest_1.1_coco"
+"""The `detector` segmenter's default weights: Yolo-Fastest-1.1-XL, COCO (its README.md)."""
+MODEL_FILES = {
+    "yolo-fastest-1.1-xl.weights": "fac5fb41786c1f38f04972a658443b189f48720d7d117f9a044100e98a35b0c5",
+    "yolo-fastest-1.1-xl.cfg": "c458427acc4fbeabceff4528ef7b65b066c0308ce599460f8ba299eba63abad3",
+    "coco.names": "634a1132eb33f8091d60f2c346ababe8b905ae08387037aed883953b7329af84",
+}
+"""sha256 of the shipped files (as published by dog-qiuqiu/Yolo-Fastest)."""
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def load_net(model: str | None):
+    """(cv2.dnn net, class names) of a Darknet model folder (*.cfg, *.weights, *.names) or an ONNX
+    file (with *.names beside it), or of the shipped model (None; its files checked by sha256)."""
+    import cv2
+
+    if model is None:
+        for name, digest in MODEL_FILES.items():
+            p = MODEL_DIR / name
+            if not p.is_file():
+                raise FileNotFoundError(f"the shipped detector weights {p} are missing (reinstall the project)")
+            if _sha256(p) != digest:
+                raise ValueError(f"{p}: sha256 differs from the shipped model's; the file is damaged")
+        folder = MODEL_DIR
+    else:
+        folder = Path(model)
+    if folder.suffix == ".onnx":
+        names = folder.with_suffix(".names")
+        if not folder.is_file():
+            raise FileNotFoundError(f"detector model {folder} does not exist")
+        net = cv2.dnn.readNetFromONNX(str(folder))
+    else:
+        cfgs, weights, namess = (sorted(folder.glob(p)) for p in ("*.cfg", "*.weights", "*.names"))
+        if not (cfgs and weights and namess):
+            raise FileNotFoundError(f"detector model {folder}: needs a Darknet *.cfg, *.weights and *.names (or an *.onnx)")
+        names = namess[0]
+        net = cv2.dnn.readNetFromDarknet(str(cfgs[0]), str(weights[0]))
+    if not names.is_file():
+        raise FileNotFoundError(f"detector model {folder}: class names file {names} is missing")
+    return net, [n.strip() for n in names.read_text().splitlines() if n.strip()]
