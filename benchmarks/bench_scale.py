@@ -24,7 +24,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-from benchmarks import write_report
+from benchmarks import run_polled, write_report
 from benchmarks.pages import write_page
 
 PROJECT = Path(__file__).resolve().parent.parent
@@ -42,23 +42,11 @@ PER_EPISODE_STAGES = ("episodes", "goal_images", "export")
 
 def run_pipeline(root: Path, overrides: list[str], log: Path, env=None) -> dict:
     """python -m pipeline in a subprocess: wall time, the client's peak RSS (polled), exit code."""
-    import psutil
-
-    log.parent.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    with open(log, "w") as f:
-        p = subprocess.Popen([sys.executable, "-m", "pipeline", f"data_root={root}", *overrides], cwd=PROJECT,
-                             stdout=f, stderr=subprocess.STDOUT, env={**os.environ, **(env or {})})
-        proc, peak = psutil.Process(p.pid), 0
-        while p.poll() is None:
-            try:
-                peak = max(peak, proc.memory_info().rss)
-            except psutil.Error:
-                pass
-            time.sleep(0.5)
-    if p.returncode != 0:
-        raise SystemExit(f"pipeline run failed (exit {p.returncode}); see {log}")
-    return {"wall_s": time.perf_counter() - t0, "client_peak_rss_mb": peak / 2 ** 20, "rc": p.returncode}
+    r = run_polled([sys.executable, "-m", "pipeline", f"data_root={root}", *overrides], log, cwd=PROJECT,
+                   env={**os.environ, **(env or {})}, interval=0.5)
+    if r["exit"] != 0:
+        raise SystemExit(f"pipeline run failed (exit {r['exit']}); see {log}")
+    return {"wall_s": r["wall_s"], "client_peak_rss_mb": r["peak_rss_mb"], "rc": r["exit"]}
 
 
 def scheduler_gaps(results: list[dict]) -> dict:

@@ -16,44 +16,31 @@ import argparse
 import json
 import math
 import shutil
-import subprocess
 import sys
-import time
 from pathlib import Path
 
-from benchmarks import machine, write_report
+from benchmarks import machine, run_polled, write_report
 from benchmarks.bench_scale import RELEASE, RELEASE_SCENES, SIM
 from benchmarks.pages import write_page
+from navcore.io.release import read_manifest
 
 PROJECT = Path(__file__).resolve().parent.parent
 RELEASE_EPISODES = RELEASE_SCENES * sum(RELEASE.values())
 
 
 def polled(cmd: list[str], log: Path) -> dict:
-    """Run cmd; wall seconds, peak RSS of the process (polled every 0.2 s), exit code."""
-    import psutil
-
-    log.parent.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    with open(log, "w") as f:
-        p = subprocess.Popen(cmd, cwd=PROJECT, stdout=f, stderr=subprocess.STDOUT)
-        proc, peak = psutil.Process(p.pid), 0
-        while p.poll() is None:
-            try:
-                peak = max(peak, proc.memory_info().rss)
-            except psutil.Error:
-                pass
-            time.sleep(0.2)
-    return {"wall_s": round(time.perf_counter() - t0, 2), "peak_rss_mb": round(peak / 2**20, 1), "exit": p.returncode}
+    """Run cmd in the project: wall seconds, peak RSS in MB (polled every 0.2 s), exit code."""
+    r = run_polled(cmd, log, cwd=PROJECT)
+    return {"wall_s": round(r["wall_s"], 2), "peak_rss_mb": round(r["peak_rss_mb"], 1), "exit": r["exit"]}
 
 
 def folder_bytes(manifest: Path) -> dict:
-    rows = [line.split("\t") for line in manifest.read_text().splitlines()[1:]]
+    rows = read_manifest(manifest)
     by = {}
-    for path, size, _ in rows:
+    for path, (size, _) in rows.items():
         top = path.split("/")[0] if "/" in path else "(top level)"
-        by[top] = by.get(top, 0) + int(size)
-    return {"files": len(rows) + 1, "bytes": sum(int(r[1]) for r in rows), "by_folder": dict(sorted(by.items()))}
+        by[top] = by.get(top, 0) + size
+    return {"files": len(rows) + 1, "bytes": sum(size for size, _ in rows.values()), "by_folder": dict(sorted(by.items()))}
 
 
 def one_size(root: Path, n: int | None, out: Path, logs: Path) -> dict:
@@ -82,11 +69,10 @@ def table_bytes(folder: Path, sample: int = 400) -> dict:
     their bytes per episode are mostly overhead that a release-density file amortises."""
     import pyarrow.parquet as pq
 
-    rows = [line.split("\t") for line in (folder / "MANIFEST.tsv").read_text().splitlines()[1:]]
-    eps = [r for r in rows if r[0].startswith("episodes/")]
+    eps = [rel for rel in read_manifest(folder / "MANIFEST.tsv") if rel.startswith("episodes/")]
     step = max(1, len(eps) // sample)
     footer = data = n = files = 0
-    for rel, size, _ in eps[::step]:
+    for rel in eps[::step]:
         tr = rel.replace("episodes/", "trajectories/", 1)
         for f in (rel, tr):
             md = pq.read_metadata(folder / f)

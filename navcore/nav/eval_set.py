@@ -147,6 +147,14 @@ def episodes_stamp(catalog, scene) -> str | None:
         return None
 
 
+def settings_json(cfg: EvalSetConfig) -> str:
+    """The settings that decide a listing, as its metadata records them."""
+    import json
+
+    return json.dumps({"name": cfg.name, "size": cfg.size, "proportions": cfg.proportions,
+                       "from_splits": list(cfg.from_splits), "seed": cfg.seed}, sort_keys=True)
+
+
 def build_listing(catalog, scenes, cfg: EvalSetConfig):
     """(selected rows, per-task report, the listing as a pyarrow table whose metadata records the
     episodes each held-out scene had: `listing` redraws it when they change)."""
@@ -157,8 +165,7 @@ def build_listing(catalog, scenes, cfg: EvalSetConfig):
     chosen, report = select(candidates(catalog, scenes, list(cfg.from_splits)), cfg)
     stamps = {s.scene_id: episodes_stamp(catalog, s) for s in scenes}
     table = pa.Table.from_pandas(chosen, preserve_index=False)
-    meta = {"eval_set": json.dumps({"name": cfg.name, "size": cfg.size, "proportions": cfg.proportions,
-                                    "from_splits": list(cfg.from_splits), "seed": cfg.seed}, sort_keys=True),
+    meta = {"eval_set": settings_json(cfg),
             "episodes_stamps": json.dumps(stamps, sort_keys=True)}
     table = table.replace_schema_metadata({k: v.encode() for k, v in meta.items()})
     return chosen, report, table
@@ -174,9 +181,7 @@ def listing(catalog, scenes, cfg: EvalSetConfig, scene=None) -> pd.DataFrame:
     if ds.exists():
         t = ds.load()
         meta = {k.decode(): v.decode() for k, v in (t.schema.metadata or {}).items()}
-        same_cfg = meta.get("eval_set") == json.dumps({"name": cfg.name, "size": cfg.size, "proportions": cfg.proportions,
-                                                       "from_splits": list(cfg.from_splits), "seed": cfg.seed},
-                                                      sort_keys=True)
+        same_cfg = meta.get("eval_set") == settings_json(cfg)
         stamps = json.loads(meta.get("episodes_stamps", "{}"))
         if same_cfg and (scene is None or stamps.get(scene.scene_id) == episodes_stamp(catalog, scene)):
             return t.to_pandas()

@@ -112,12 +112,9 @@ def link_or_copy(src: Path, dst: Path) -> str:
 class Builder:
     """One release build: a temporary folder filled scene by scene (see the module docstring)."""
 
-    def __init__(self, cfg, catalog, scenes, out: Path, previous: Path | None):
-        self.cfg, self.catalog, self.scenes = cfg, catalog, scenes
+    def __init__(self, cfg, catalog, tmp: Path, previous: Path | None):
+        self.cfg, self.catalog, self.tmp, self.previous = cfg, catalog, tmp, previous
         self.rcfg = cfg.release
-        self.out = out
-        self.previous = previous
-        self.tmp: Path | None = None
         self.links = {"link": 0, "copy": 0, "written": 0}
         self.stats = Stats()
         self.scene_rows: list[dict] = []
@@ -138,26 +135,32 @@ class Builder:
             self.scene_files[scene_id].append(rel)
 
     # -- one scene ---------------------------------------------------------------------------------
-    def add_scene(self, scene, eval_ids: dict[str, set[str]], redistributable: bool = True) -> None:
+    def write_split(self, task: str, split: str, sid: str, episodes: pa.Table, trajectories: pa.Table) -> None:
+        """One split's episodes of a (task, scene) and their expert steps, written (not linked)."""
         from navcore.io.episode_schema import TRAJECTORY_WRITE
 
+        self.write_table(episodes_file(task, split, sid), episodes, sid)
+        self.write_table(trajectories_file(task, split, sid),
+                         trajectories.filter(pc.is_in(trajectories["episode_id"], value_set=episodes["episode_id"])), sid,
+                         **TRAJECTORY_WRITE)
+
+    def add_scene(self, scene, eval_ids: dict[str, set[str]], redistributable: bool = True) -> None:
         cat, sid = self.catalog, scene.scene_id
         counts = {}
         for task, ds in cat.find("episodes", scene).items():
             ep = ds.load()
             tr_ds = cat.dataset("trajectories", scene, task=task)
+            tr = None  # the task's trajectories, read once when a file has to be written
             splits = sorted(set(ep["split"].to_pylist()))
             for split in splits:
-                part = ep.filter(pc.equal(ep["split"], split)) if len(splits) > 1 else ep
                 if len(splits) == 1:
+                    part = ep
                     self.link(episodes_file(task, split, sid), ds.path, sid)
                     self.link(trajectories_file(task, split, sid), tr_ds.path, sid)
                 else:
-                    self.write_table(episodes_file(task, split, sid), part, sid)
-                    tr = tr_ds.load()
-                    self.write_table(trajectories_file(task, split, sid),
-                                     tr.filter(pc.is_in(tr["episode_id"], value_set=part["episode_id"])), sid,
-                                     **TRAJECTORY_WRITE)
+                    part = ep.filter(pc.equal(ep["split"], split))
+                    tr = tr if tr is not None else tr_ds.load()
+                    self.write_split(task, split, sid, part, tr)
                 self.stats.add(task, split, scene.group, part)
                 counts[f"{task}/{split}"] = part.num_rows
             chosen = eval_ids.get(task)
@@ -166,11 +169,7 @@ class Builder:
                 part = ep.filter(pc.is_in(ep["episode_id"], value_set=pa.array(sorted(chosen))))
                 part = part.set_column(part.schema.get_field_index("split"), "split",
                                        pa.array([name] * part.num_rows, pa.string()))
-                tr = tr_ds.load()
-                self.write_table(episodes_file(task, name, sid), part, sid)
-                self.write_table(trajectories_file(task, name, sid),
-                                 tr.filter(pc.is_in(tr["episode_id"], value_set=part["episode_id"])), sid,
-                                 **TRAJECTORY_WRITE)
+                self.write_split(task, name, sid, part, tr if tr is not None else tr_ds.load())
                 self.stats.add(task, name, scene.group, part, total=False)
                 counts[f"{task}/{name}"] = part.num_rows
         inst = cat.dataset("instances", scene)
@@ -305,8 +304,7 @@ def build_release(cfg, out: Path | None = None, console=None) -> dict:
                   f"({len(excluded)} left out) from {catalog.root} -> {out}")
     with atomic_path(out) as tmp:
         tmp.mkdir()
-        b = Builder(cfg, catalog, [s for s, _ in included], out, previous)
-        b.tmp = tmp
+        b = Builder(cfg, catalog, tmp, previous)
         for s, ok in included:
             b.add_scene(s, eval_ids.get(s.scene_id, {}), ok)
         eval_dir = tmp / "eval_sets"

@@ -48,13 +48,10 @@ def metadata(root: Path, info: dict, rcfg):
     import mlcroissant as mlc
 
     docs = []
-    for name, fmt in ((CARD, "text/markdown"), (RELEASE_JSON, "application/json"), ("MANIFEST.tsv", "text/tab-separated-values"),
-                      (SCENES, "application/x-parquet")):
-        if (root / name).exists():
+    for name, fmt in ((CARD, "text/markdown"), (RELEASE_JSON, "application/json"), (SCENES, "application/x-parquet")):
+        if (root / name).exists():  # not MANIFEST.tsv: it is written after this file, its hash cannot be here
             docs.append(mlc.FileObject(id=name, name=name, content_url=name, encoding_formats=[fmt],
-                                       sha256=sha256_file(root / name) if name != "MANIFEST.tsv" else None,
-                                       description="every file's path, bytes and sha256" if name == "MANIFEST.tsv" else None))
-    docs = [d for d in docs if d.id != "MANIFEST.tsv"]  # written after this file: its hash cannot be here
+                                       sha256=sha256_file(root / name)))
     sets, records = [], []
     for task in info["counts"]:
         for kind, schema in (("episodes", EPISODE_SCHEMA), ("trajectories", TRAJECTORY_SCHEMA)):
