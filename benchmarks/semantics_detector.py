@@ -17,6 +17,7 @@ ground truth. Measured:
 from __future__ import annotations
 
 import argparse
+import json
 import tempfile
 import time
 from pathlib import Path
@@ -42,7 +43,8 @@ def per_category(pred: list[dict], truth: list[dict], categories, tol: float) ->
 
 
 def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int = 320, model: Path | None = None,
-               transfer_radius: float = 0.05, spacing: float | None = None, yaw_step: float | None = None) -> dict:
+               transfer_radius: float = 0.05, spacing: float | None = None, yaw_step: float | None = None,
+               camera_height: float | None = None, pitch: float | None = None, robot_camera: bool = False) -> dict:
     """The measures of the module doc on the scan (or, with `model`, on a 3DGS trained in the scan's
     frame, whose Gaussians take the instance of the nearest scanned point within transfer_radius)."""
     from omegaconf import OmegaConf
@@ -64,6 +66,10 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
         scfg.segmenter = "detector"  # its pose density (detector.spacing, detector.yaw_step_deg) unless given
         scfg.detector.spacing = spacing or scfg.detector.spacing
         scfg.detector.yaw_step_deg = yaw_step or scfg.detector.yaw_step_deg
+        scfg.detector.camera_height = scfg.detector.camera_height if camera_height is None else camera_height
+        scfg.detector.camera_pitch_deg = scfg.detector.camera_pitch_deg if pitch is None else pitch
+        if robot_camera:  # the embodiment's own camera
+            scfg.detector.camera_height = scfg.detector.camera_pitch_deg = None
         emb = OmegaConf.to_object(cfg.embodiment)
         gs, attrs = catalog.dataset("aligned", scene).load()
         t = np.asarray(attrs["source_to_aligned"])
@@ -117,7 +123,10 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
                 views.append((depth[i], kk[i], cw[i], boxes))
             t1 = time.perf_counter()
         gt_cats_present = sorted({x["category"] for x in truth if x["category"] in all_cats})
-        rep = {"scene": name, "camera_height_m": emb.camera_height, "spacing_m": scfg.detector.spacing,
+        d = scfg.detector
+        rep = {"scene": name, "camera_height_m": emb.camera_height if d.camera_height is None else d.camera_height,
+               "camera_pitch_deg": emb.camera_pitch_deg if d.camera_pitch_deg is None else d.camera_pitch_deg,
+               "spacing_m": scfg.detector.spacing,
                "yaw_step_deg": scfg.detector.yaw_step_deg,
                "gaussians": int(renderer.num_gaussians), "views": len(views), "input": input_size,
                "resolution": [width, height], "renderer": renderer.backend, "tolerance_m": tol,
@@ -153,6 +162,23 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
                         "predicted": s["predicted"], "valid": s["valid"], "valid_center_rate": s["valid_center_rate"],
                         "objects": s["objects"], "found": s["found"], "centre_error_m": s["centre_error_m"],
                         "per_category": per_category(pred, truth, all_cats, tol)}
+        # the defaults: per-category thresholds (detector.confidence), the allow-list, detector.min_views
+        d0 = DetectorConfig()
+        frames = []
+        for d, k, c, bs in views:
+            masks = {}
+            for b in bs:
+                if b["category"] in d0.categories and b["category"] in cat_index and b["depth_mask"] is not None \
+                        and b["score"] >= d0.confidence.get(b["category"], d0.default_confidence):
+                    masks.setdefault(cat_index[b["category"]], []).append(b["depth_mask"])
+            frames.append((d, k, c, masks))
+        pred = [{"category": scfg.categories[x["label"]], "position": x["center"], "views": x["views"]}
+                for x in lift(frames, gs.means, scfg.lifting) if x["views"] >= d0.min_views]
+        s = score_real(pred, truth, all_cats, tol)
+        rep["defaults"] = {"confidence": d0.confidence, "default_confidence": d0.default_confidence,
+                           "min_views": d0.min_views, "categories": d0.categories, "predicted": s["predicted"],
+                           "valid": s["valid"], "valid_center_rate": s["valid_center_rate"],
+                           "centre_error_m": s["centre_error_m"], "per_category": per_category(pred, truth, all_cats, tol)}
         rep["categories_in_scan"] = gt_cats_present
         return rep
 
@@ -166,14 +192,11 @@ def right(mask, imap: np.ndarray, cat_of_id: dict, prompt_to_cat: dict, cat: str
     return bool(hit.mean() > 0.5)
 
 
-DEFAULT_KEY = "0.4/depth_mask/4"
-"""The lifted result at the defaults (detector.default_confidence 0.4, depth masks, min_views 4)."""
-
-
 def section(rep: dict) -> list[str]:
     L = [f"## {rep['scene']}", "",
          f"{rep['gaussians']:,} Gaussians, {rep['views']} views at free-space poses {rep['spacing_m']} m apart every "
-         f"{rep['yaw_step_deg']:g} deg (camera {rep['camera_height_m']} m), {rep['resolution'][0]} x {rep['resolution'][1]}, "
+         f"{rep['yaw_step_deg']:g} deg (camera {rep['camera_height_m']} m, pitch {rep['camera_pitch_deg']:g} deg), "
+         f"{rep['resolution'][0]} x {rep['resolution'][1]}, "
          f"renderer {rep['renderer']}, detector input {rep['input']}. Seconds on this machine: pipeline to the costmap "
          f"{rep['seconds']['pipeline_to_costmap']}, rendering {rep['seconds']['render']}, detection {rep['seconds']['detect']} "
          f"({rep['seconds']['detect_per_view'] * 1000:.0f} ms a view).", "",
@@ -195,21 +218,61 @@ def section(rep: dict) -> list[str]:
         L.append(f"| {r['threshold']} | {r['mask']} | {r['min_views']} | {r['predicted']} | {r['valid']} | "
                  f"{'-' if vcr != vcr else f'{vcr:.1%}'} | {r['found']} of {r['objects']} | "
                  f"{'-' if med is None else round(med, 2)} |")
-    from stages.semantics.detector import DetectorConfig
-
-    d = rep["lifted"][DEFAULT_KEY]
-    allowed = DetectorConfig().categories
-    kept = {c: v for c, v in d["per_category"].items() if c in allowed and (v["predicted"] or v["objects"])}
-    n, valid = sum(v["predicted"] for v in kept.values()), sum(v["valid"] for v in kept.values())
-    head = (f"At the defaults (score 0.4, depth masks, 4 views, categories {', '.join(allowed)}): {n} instance(s), "
-            f"{valid} valid ({valid / n:.0%} valid centres)" if n else
-            f"At the defaults (categories {', '.join(allowed)}): no instance")
-    L += ["", head + "; per category (instances / valid / objects / found): " + "; ".join(
-        f"{c} {v['predicted']} / {v['valid']} / {v['objects']} / {v['found']}" for c, v in kept.items()) + ".", ""]
+    L += ["", defaults_line(rep["defaults"]), ""]
     return L
 
 
-def markdown(reps: list[dict], machine_name: str) -> str:
+def defaults_line(d: dict) -> str:
+    thresholds = ", ".join(f"{c} {v}" for c, v in d["confidence"].items())
+    kept = {c: v for c, v in d["per_category"].items() if c in d["categories"] and (v["predicted"] or v["objects"])}
+    n, valid = d["predicted"], d["valid"]
+    head = (f"At the defaults (score >= {d['default_confidence']}, {thresholds}; depth masks; {d['min_views']} views; "
+            f"categories {', '.join(d['categories'])}): ")
+    head += f"{n} instance(s), {valid} valid ({valid / n:.0%} valid centres)" if n else "no instance"
+    return head + "; per category (instances / valid / objects / found): " + "; ".join(
+        f"{c} {v['predicted']} / {v['valid']} / {v['objects']} / {v['found']}" for c, v in kept.items()) + "."
+
+
+def geometry_section(rows: list[dict]) -> list[str]:
+    """The view-geometry sweep on the scan: boxes per category at the default thresholds, lifted at the defaults."""
+    L = ["## View geometry (the scan)", "",
+         "The same scan rendered from the free-space poses at other camera heights and pitches "
+         "(`--camera-height`, `--pitch`; the detector's views need not be the robot's camera). Boxes right / all at "
+         "score >= 0.4, and what the defaults lift:", "",
+         "| camera height (m) | pitch (deg) | views | bed boxes | sofa boxes | other boxes | lifted at the defaults | valid | found |",
+         "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        b = r["boxes"]
+        at = lambda c: b.get(c, {}).get("0.4", {"right_depth_mask": 0, "boxes": 0})  # noqa: E731
+        other = sum(at(c)["boxes"] for c in b if c not in ("bed", "sofa"))
+        d = r["defaults"]
+        found = [c for c, v in d["per_category"].items() if v["found"]]
+        L.append(f"| {r['camera_height_m']} | {r['camera_pitch_deg']:g} | {r['views']} | {at('bed')['right_depth_mask']} / "
+                 f"{at('bed')['boxes']} | {at('sofa')['right_depth_mask']} / {at('sofa')['boxes']} | {other} | "
+                 f"{d['predicted']} | {d['valid']} | {', '.join(found) or '-'} |")
+    return L + [""]
+
+
+def gpu_section(gpu: dict, cpu_seconds: dict) -> list[str]:
+    """Rendering the detector's views on a GPU (benchmarks.semantics_detector_gpu) against the CPU."""
+    L = ["## Seconds per real capture, CPU and GPU", "",
+         f"The detector's views of the real captures (../shared/data/real_indoor) rendered with gsplat on {gpu['gpu']} "
+         f"and with the CPU renderer on the same machine ({gpu['cores']} threads; first 64 views, scaled), by "
+         "`python -m benchmarks.semantics_detector_gpu run` (the device tool; the views from `prepare` on this "
+         "machine). Detection and lifting run on the CPU on either machine (OpenCV DNN's CPU path): their seconds are "
+         "the stage's on this 2-core machine (`semantics.segmenter=detector` on the capture, its marker's timings).", "",
+         "| capture | Gaussians | views | render, gsplat (s) | render, CPU renderer there (s) | render, CPU here (s) | "
+         "detect here (s) | lift here (s) | stage here (s) |", "|---|---|---|---|---|---|---|---|---|"]
+    for name, row in gpu["scenes"].items():
+        c = cpu_seconds.get(name, {})
+        L.append(f"| {name} | {row['gaussians']:,} | {row['views']:,} | {row['gsplat']['seconds_all_views']} | "
+                 f"{row['cpu']['seconds_all_views']} | {c.get('render', '-')} | {c.get('segment', '-')} | "
+                 f"{c.get('lift', '-')} | {c.get('total', '-')} |")
+    return L + [""]
+
+
+def markdown(reps: list[dict], machine_name: str, geometry: list[dict] | None = None, gpu: dict | None = None,
+             cpu_seconds: dict | None = None) -> str:
     L = [f"# bench-semantics: the detector on real scenes ({machine_name})", "",
          "The `detector` segmenter (the shipped Yolo-Fastest-1.1-XL, COCO, through OpenCV DNN; masks from the rendered "
          "depth inside each box) against the real labelled ScanNet scene0000_02: the scan itself (one Gaussian a "
@@ -218,6 +281,10 @@ def markdown(reps: list[dict], machine_name: str) -> str:
          "the same views; per instance: its cleaned instance table (paper Table 5 measure: 92.25 % valid centres).", ""]
     for rep in reps:
         L += section(rep)
+    if geometry:
+        L += geometry_section(geometry)
+    if gpu:
+        L += gpu_section(gpu, cpu_seconds or {})
     return "\n".join(L)
 
 
@@ -230,20 +297,56 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--input", type=int, default=320, help="detector input side (multiple of 32)")
     ap.add_argument("--spacing", type=float, default=None, help="free-space pose spacing, m (detector.spacing: 0.75)")
     ap.add_argument("--yaw-step", type=float, default=None, help="yaw step of the poses, degrees (detector.yaw_step_deg: 30)")
+    ap.add_argument("--camera-height", type=float, default=None, help="view camera height, m (detector.camera_height)")
+    ap.add_argument("--pitch", type=float, default=None, help="view camera pitch, deg (detector.camera_pitch_deg)")
     ap.add_argument("--model", default="data/trained_scan/model.ply",
                     help="a 3DGS trained in the scan's frame (make bench-trained-scan); skipped when absent")
+    ap.add_argument("--geometry", default="robot 1.2,-10 1.5,-20 1.5,-30",
+                    help="view geometries of the sweep on the scan besides the defaults: 'robot' (the embodiment's "
+                         "camera) or HEIGHT,PITCH, space-separated; '' skips the sweep")
+    ap.add_argument("--gpu", default="data/08_reports/semantics_detector_gpu.json",
+                    help="output of `python -m benchmarks.semantics_detector_gpu run` (a GPU machine); skipped when absent")
+    ap.add_argument("--real-root", default=None,
+                    help="a data root where the real captures ran with semantics.segmenter=detector (their CPU seconds)")
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--docs", action="store_true")
     a = ap.parse_args(argv)
     scan = Path(a.scan).resolve()
     models = [None] + ([Path(a.model).resolve()] if a.model and Path(a.model).is_file() else [])
-    reps = [bench_scan(scan, a.width, a.height, a.tol, a.input, m, spacing=a.spacing, yaw_step=a.yaw_step) for m in models]
-    write_report(a.out, "bench_semantics_detector.json", {"machine": machine(), "scenes": reps}, omit=("scenes",))
-    md = markdown(reps, machine())
+    reps = [bench_scan(scan, a.width, a.height, a.tol, a.input, m, spacing=a.spacing, yaw_step=a.yaw_step,
+                       camera_height=a.camera_height, pitch=a.pitch) for m in models]
+    geometry = [reps[0]]
+    for g in a.geometry.split():
+        h, p = (None, None) if g == "robot" else map(float, g.split(","))
+        geometry.append(bench_scan(scan, a.width, a.height, a.tol, a.input, None, spacing=a.spacing, yaw_step=a.yaw_step,
+                                   camera_height=h, pitch=p, robot_camera=g == "robot"))
+    gpu = json.loads(Path(a.gpu).read_text()) if a.gpu and Path(a.gpu).is_file() else None
+    cpu = real_seconds(Path(a.real_root)) if a.real_root else {}
+    write_report(a.out, "bench_semantics_detector.json", {"machine": machine(), "scenes": reps, "geometry": geometry[1:],
+                                                         "gpu": gpu, "real_cpu_seconds": cpu}, omit=("scenes", "geometry"))
+    md = markdown(reps, machine(), geometry if len(geometry) > 1 else None, gpu, cpu)
     (Path(a.out) / "bench_semantics_detector.md").write_text(md)
     if a.docs:
         write_page("bench_semantics_detector.md", md)
     return reps
+
+
+def real_seconds(root: Path) -> dict:
+    """{capture name: the detector semantics stage's seconds (render, segment, lift, total) and counts} of a
+    data root run on catalogs/real_indoor.yaml."""
+    from navcore.io.catalog import Catalog
+    from pipeline.config import CONF_DIR
+
+    catalog = Catalog(CONF_DIR.parent / "catalogs/real_indoor.yaml", root)
+    out = {}
+    for scene in catalog.scenes:
+        m = catalog.path("markers", scene, stage="semantics")
+        if m.is_file():
+            info = json.loads(m.read_text()).get("info", {})
+            if info.get("segmenter") == "detector":
+                out[scene.name] = {**info.get("seconds", {}), "views": info.get("views"),
+                                   "instances": info.get("by_category", {})}
+    return out
 
 
 if __name__ == "__main__":

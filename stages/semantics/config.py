@@ -20,11 +20,17 @@ class OracleConfig:
     the preset's, e.g. semantics.oracle.miss_rate=0.25."""
 
     level: str = "moderate"
+    """Corruption preset: none | moderate | heavy (segmenters.CORRUPTION_LEVELS)."""
     bleed_px: Optional[int] = None
+    """Boundary bleeding: each mask dilated or eroded (sign at random) by up to this many pixels (null: the preset's)."""
     miss_rate: Optional[float] = None
+    """Probability that an object is not detected in a frame (null: the preset's)."""
     confusion_rate: Optional[float] = None
+    """Probability that a detected object is reported under another category (null: the preset's)."""
     fp_blobs: Optional[float] = None
+    """Mean number (Poisson) of false-positive blobs per frame, under a random category (null: the preset's)."""
     fp_radius_px: Optional[int] = None
+    """Radius of a false-positive disc, pixels (drawn in [r / 2, r]; null: the preset's)."""
     min_weight: float = 0.5
     """A pixel belongs to the instance whose composited label weight is largest, if at least this."""
 
@@ -45,6 +51,7 @@ class Sam3Config:
     bpe_path: Optional[str] = None
     """CLIP BPE vocabulary (bpe_simple_vocab_16e6.txt.gz); default: next to the checkpoint."""
     device: str = "cuda"
+    """Torch device the model runs on."""
     confidence: float = 0.5
     """Detections whose score (presence x box probability) is below this are dropped."""
     resolution: int = 1008
@@ -85,8 +92,9 @@ class SemanticsConfig:
     max_views: int = 0
     """Keep at most this many views (evenly spread over the list; 0 = all)."""
     width: int = 320
+    """Render width of the views, pixels (source cameras keep their field of view)."""
     height: int = 240
-    """Render size of the views (source cameras keep their field of view)."""
+    """Render height of the views, pixels."""
     renderer: str = "auto"
     """auto (gsplat on CUDA, else the CPU renderer) | cpu | gsplat."""
     batch: int = 16

@@ -43,10 +43,14 @@ def covering_cameras(scene, catalog, scfg: SemanticsConfig, emb, to_aligned: np.
         c2w, kind = to_aligned @ c2w, "source"
     else:
         valid = ~costmap.occupancy & (costmap.clearance >= 0)
-        spacing, yaw_step = (scfg.detector.spacing, scfg.detector.yaw_step_deg) if scfg.segmenter == "detector" \
-            else (scfg.spacing, scfg.yaw_step_deg)
+        spacing, yaw_step, height, pitch = scfg.spacing, scfg.yaw_step_deg, emb.camera_height, emb.camera_pitch_deg
+        if scfg.segmenter == "detector":
+            d = scfg.detector
+            spacing, yaw_step = d.spacing, d.yaw_step_deg
+            height = height if d.camera_height is None else d.camera_height
+            pitch = pitch if d.camera_pitch_deg is None else d.camera_pitch_deg
         poses = free_space_poses(costmap, valid, spacing, yaw_step)
-        c2w = np.stack([camera_to_world(x, y, yaw, emb.camera_height, emb.camera_pitch_deg) for x, y, yaw in poses]) \
+        c2w = np.stack([camera_to_world(x, y, yaw, height, pitch) for x, y, yaw in poses]) \
             if len(poses) else np.zeros((0, 4, 4))
         ks, kind = np.repeat(intrinsics(scfg.width, scfg.height, emb.hfov_deg)[None], len(c2w), 0), "free_space"
     keep = spread(len(c2w), scfg.max_views)
