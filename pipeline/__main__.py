@@ -1,6 +1,6 @@
-"""CLI: ``python -m pipeline [overrides]`` or ``navarena [overrides]`` (Hydra); ``navarena
-render-episodes ...``, ``navarena export-lerobot ...``, ``navarena release ...`` and ``navarena
-verify-release DIR`` are tools over a finished data root or release."""
+"""The ``navarena`` command: ``navarena run [overrides]`` runs the pipeline (Hydra; plain
+``navarena [overrides]`` and ``python -m pipeline [overrides]`` too); the other subcommands are
+tools over a scene file, this machine, a finished data root or a release (``navarena --help``)."""
 from __future__ import annotations
 
 import sys
@@ -22,19 +22,50 @@ def _app(cfg) -> None:
         sys.exit(code)
 
 
-TOOLS = {"render-episodes": "navarena.render_episodes", "export-lerobot": "navarena.lerobot",
-         "release": "pipeline.release.__main__", "verify-release": "navarena.verify_release"}
-"""Subcommands beside the Hydra pipeline run: ``navarena render-episodes --help``."""
+TOOLS = {"inspect": ("pipeline.inspect_scene", "a 3DGS file before any run: format, size, extent, up axis, picture"),
+         "doctor": ("pipeline.doctor", "what this machine has: Python, packages, GPU, gsplat, FFmpeg, extras"),
+         "export-lerobot": ("navarena.lerobot", "a split of a data root as a LeRobot dataset"),
+         "render-episodes": ("navarena.render_episodes", "episode videos and an HTML report"),
+         "serve-agent": ("stages.evaluate.protocol.cli", "serve an agent over the agent-server protocol"),
+         "release": ("pipeline.release.__main__", "assemble a release folder from a finished data root"),
+         "verify-release": ("navarena.verify_release", "check a release folder (files, tables, episodes)")}
+"""Subcommands beside the pipeline run: module (with main(argv)) and one line of help."""
+
+USAGE = """usage: navarena [run] [OVERRIDES ...]
+       navarena COMMAND [ARGS ...]     (navarena COMMAND --help)
+
+NavArena: navigation benchmarks from frozen 3D Gaussian Splatting scenes.
+
+commands:
+  run              the pipeline; Hydra overrides as arguments, e.g.
+                   navarena run scenes=real_indoor stages=[costmap] costmap.resolution=0.02
+                   (navarena run --help: Hydra's help; --cfg job: the resolved config)
+{tools}
+Every configuration key: docs/configuration.md. Documentation: make docs, docs/index.md.
+"""
+
+
+def usage() -> str:
+    return USAGE.format(tools="\n".join(f"  {name:<16} {line}" for name, (_, line) in TOOLS.items()))
 
 
 def main() -> None:
-    if len(sys.argv) > 1 and sys.argv[1] in TOOLS:
+    args = sys.argv[1:]
+    if args and args[0] in ("-h", "--help", "help"):
+        print(usage())
+        return
+    if args and args[0] in TOOLS:
         import importlib
 
-        code = importlib.import_module(TOOLS[sys.argv[1]]).main(sys.argv[2:])
+        code = importlib.import_module(TOOLS[args[0]][0]).main(args[1:])
         if isinstance(code, int) and code:  # the tools that report failure by their exit status
             sys.exit(code)
         return
+    if args and args[0] == "run":
+        sys.argv = [sys.argv[0], *args[1:]]
+    elif args and "=" not in args[0] and not args[0].startswith("-"):
+        print(f"navarena: unknown command {args[0]!r}\n\n{usage()}", file=sys.stderr)
+        sys.exit(2)
     _app()
 
 

@@ -300,6 +300,8 @@ def fit_floor(scene: GaussianScene, cfg: AlignConfig, cameras_c2w: np.ndarray | 
         raise ValueError("no floor candidate: no horizontal surface found along the up axis"
                          + (" below the capture cameras" if cam_pos is not None else ""))
     top_s = max(f["strength"] for f in floors)
+    if top_s <= 0:
+        raise ValueError("no floor candidate: no floor layer covers any area (is this a room, in metres?)")
     top_f = max(f["furniture"] for f in floors)
     for f in floors:
         f["strength"] /= top_s

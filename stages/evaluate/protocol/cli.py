@@ -5,13 +5,14 @@ from stages.evaluate.protocol.server import serve_agent
 
 
 def main(argv=None) -> None:
-    """python -m stages.evaluate.protocol --agent depth_reactive --port 8000: serve a registered agent."""
+    """Serve an agent over the NavArena agent-server protocol (msgpack over WebSocket)."""
     import argparse
 
     from stages.evaluate.agents import make_agent
 
-    ap = argparse.ArgumentParser(description=main.__doc__)
-    ap.add_argument("--agent", default="depth_reactive")
+    ap = argparse.ArgumentParser(prog="navarena serve-agent", description=main.__doc__)
+    ap.add_argument("--agent", default="depth_reactive",
+                    help="a registered agent (oracle, depth_reactive, random, ...) or package.module:Class")
     ap.add_argument("--host", default="127.0.0.1")
     ap.add_argument("--port", type=int, default=8000)
     ap.add_argument("--port-file", default=None, help="write the bound port here once listening (port 0 = any)")

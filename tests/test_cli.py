@@ -1,0 +1,74 @@
+"""The `navarena` command line: subcommands with a help that fits a screen, `inspect` on a scene file
+before any run, `doctor`."""
+import dataclasses
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from pipeline.__main__ import TOOLS
+
+
+def navarena(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "pipeline", *args], capture_output=True, text=True, timeout=timeout)
+
+
+def test_help_lists_every_command_and_each_help_fits_a_screen():
+    p = navarena("--help")
+    assert p.returncode == 0 and "run" in p.stdout
+    for name in TOOLS:
+        assert f"\n  {name} " in p.stdout
+        h = navarena(name, "--help")
+        lines = h.stdout.splitlines()
+        assert h.returncode == 0 and lines[0].startswith(f"usage: navarena {name}"), (name, h.stderr[-500:])
+        assert len(lines) <= 40 and max(map(len, lines)) <= 100, name
+    bad = navarena("bogus")
+    assert bad.returncode == 2 and "unknown command 'bogus'" in bad.stderr
+
+
+@pytest.fixture(scope="module")
+def tilted_scene(small_scene, tmp_path_factory):
+    """The generated room stored with -y up (its +z turned onto -y) as SPZ, and the same in centimetres."""
+    from navcore.gaussians.formats.spz import write_spz
+
+    t = np.eye(4)
+    t[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]  # z -> -y
+    d = tmp_path_factory.mktemp("inspect")
+    metres = small_scene.gaussians.transformed(t @ np.linalg.inv(small_scene.transform))  # canonical (z up), then -y up
+    write_spz(d / "room.spz", metres)
+    write_spz(d / "room_cm.spz", dataclasses.replace(metres, means=metres.means * 100,
+                                                     log_scales=metres.log_scales + np.log(100).astype(np.float32)))
+    return d
+
+
+def test_inspect_finds_the_up_axis_and_the_units(tilted_scene, small_scene):
+    from pipeline.inspect_scene import main
+
+    p = navarena("inspect", str(tilted_scene / "room.spz"), "--json", "--picture", str(tilted_scene / "top.png"))
+    assert p.returncode == 0, p.stderr[-1000:]
+    info = json.loads(p.stdout)
+    assert info["format"] == "spz" and info["gaussians"] == len(small_scene.gaussians)
+    assert info["up_axis"] == "-y" and abs(info["up_vector"][1] + 1) < 1e-3
+    assert 2.3 < info["floor_to_top_m"] < 2.8 and info["units_hint"] == "plausible for metres"
+    assert (tilted_scene / "top.png").stat().st_size > 10_000
+    cm = navarena("inspect", str(tilted_scene / "room_cm.spz"), "--json", "--picture", str(tilted_scene / "cm.png"))
+    assert "centimetres" in json.loads(cm.stdout)["units_hint"]
+    assert main([str(tilted_scene / "missing.spz")]) == 2
+
+
+def test_inspect_says_file_not_found(tmp_path, capsys):
+    from pipeline.inspect_scene import main
+
+    assert main([str(tmp_path / "nothing.ply")]) == 2
+    assert "file not found" in capsys.readouterr().err
+
+
+def test_doctor_reports_the_core_of_this_machine():
+    p = navarena("doctor", "--json")
+    checks = {c["name"]: c for c in json.loads(p.stdout)}
+    assert p.returncode == 0, [c for c in checks.values() if c["core"] and not c["ok"]]
+    assert {"python", "packages", "torch", "gpu", "gsplat", "ompl", "detector weights"} <= set(checks)
+    assert all(c["detail"] for c in checks.values())
+    assert checks["detector weights"]["ok"] and checks["packages"]["ok"]
