@@ -17,8 +17,11 @@ $(STAMP): pyproject.toml
 	# the CPU build of torch (an unpinned torch would pull several GB of CUDA packages)
 	$(BIN)/python -m pip install -q "torch==2.13.0" || $(BIN)/python -m pip install -q torch --index-url https://download.pytorch.org/whl/cpu
 	$(BIN)/python -m pip install -q -e ".[test,bench,lerobot,open_vocab]"
-	# the lerobot package and the torchvision / torchcodec it imports, next to our CPU torch 2.13
-	$(BIN)/python -m pip install -q --no-deps "lerobot==0.4.4" "torchvision==0.25.0" "torchcodec==0.13.0"
+	# the lerobot package and the torchvision / torchcodec it imports, next to our CPU torch 2.13:
+	# torchvision 0.28.0 is the release made for torch 2.13, but PyPI builds it for CUDA torch, so its
+	# operators cannot load here; navarena.torchvision_fix (a .pth import hook) lets its Python part load
+	$(BIN)/python -m pip install -q --no-deps "lerobot==0.4.4" "torchvision==0.28.0" "torchcodec==0.13.0"
+	$(BIN)/python -m navarena.torchvision_fix install
 	sh scripts/system_packages.sh
 	touch $(STAMP)
 

@@ -44,17 +44,11 @@ def scannet_scan() -> Path:
 
 @pytest.fixture(scope="session")
 def torchvision_shim():
-    """The CPU torch here has no matching CPU torchvision wheel: the PyPI one is built against CUDA
-    torch, its C++ operators cannot load, and its Python part then fails at import on one unguarded
-    fake registration (torchvision::nms). Declaring that operator's schema first lets the
-    pure-Python torchvision (transforms, which lerobot and transformers import) load; nothing here
-    calls the operator. With a matching torchvision this does nothing."""
-    import torch
+    """torchvision's Python part next to the CPU torch (navarena.torchvision_fix, which make setup
+    also installs as a start-up hook; with a matching torchvision this does nothing)."""
+    from navarena.torchvision_fix import apply
 
-    try:
-        torch.ops.torchvision.nms
-    except (AttributeError, RuntimeError):
-        torch.library.define("torchvision::nms", "(Tensor dets, Tensor scores, float iou_threshold) -> Tensor")
+    apply()
 
 
 @pytest.fixture(scope="session")

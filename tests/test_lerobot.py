@@ -30,6 +30,22 @@ def exported(episode_run, tmp_path_factory):
     return root, out, res
 
 
+def test_a_user_loads_the_export_in_a_fresh_interpreter(exported):
+    """As a user does: a new interpreter of the venv, lerobot's own class, no test fixture (the
+    venv's start-up hook from make setup lets torchvision load next to the CPU torch)."""
+    import subprocess
+    import sys
+
+    _lerobot()
+    _, out, res = exported
+    code = ("from lerobot.datasets.lerobot_dataset import LeRobotDataset\n"
+            f"ds = LeRobotDataset('navarena/test_train', root={str(out)!r})\n"
+            "print(ds.num_episodes, len(ds), tuple(ds[0]['observation.images.rgb'].shape))")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert p.stdout.split("\n")[-2] == f"{res['episodes']} {res['frames']} (3, 36, 48)"
+
+
 def test_lerobot_dataset_class_loads_the_export(exported, torchvision_shim):
     from navcore.io.catalog import Catalog
     from navcore.nav.embodiment import Embodiment
