@@ -6,15 +6,18 @@ module ties them together.
 """
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 from pathlib import Path
 
+from omegaconf import OmegaConf
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from navcore.io.atomic import sweep_stale_temporaries
 from navcore.io.catalog import Catalog, SceneEntry
 from pipeline.backends import run_on_dask
+from pipeline.episode_progress import EpisodeWatcher, rate_column
 from pipeline.graph import closure, config_hashes, scene_hash
 from pipeline.summary import build_summary, print_summary, write_summary
 from pipeline.tasks import finalize_due, run_finalize, run_task
@@ -49,7 +52,7 @@ def execute(cfg, console: Console | None = None) -> dict:
                   f"data in {root}")
     results: list[dict] = []
     progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                        console=console, transient=False)
+                        rate_column(), console=console, transient=False)
 
     def chain(submit):
         """Submit every (stage, scene), each after its own scene's upstream stages only."""
@@ -68,7 +71,14 @@ def execute(cfg, console: Console | None = None) -> dict:
             progress.console.print(f"[red]failed[/] {r['stage']} {r['scene_id']} ({r['scene']}): {r['error']}")
         progress.advance(bar)
 
-    with progress:
+    watch = contextlib.nullcontext()
+    if any(st.name == "evaluate" for st in stages):  # one task a scene for hours: a bar of episodes too
+        from stages.evaluate.stage import run_name
+
+        run = run_name(OmegaConf.to_object(cfg.evaluate))
+        watch = EpisodeWatcher(progress, catalog.path("eval_progress", run=run, scene_id="x").parent,
+                               started.timestamp())
+    with progress, watch:
         bar = progress.add_task("tasks", total=len(scenes) * len(stages))
         if cfg.executor.kind == "sync" and not cfg.executor.address:
             def run_now(st, scene, h, force, ups):

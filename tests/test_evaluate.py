@@ -249,10 +249,16 @@ def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run, make
     root, over, _ = episode_run
     common = [*over[:-1], "export.chunk_size=8", "stages=[evaluate]", "evaluate.tasks=[pointnav,objectnav]",
               "evaluate.episodes_per_scene=3"]
+    from rich.console import Console
+
+    console = Console(record=True, width=80, force_terminal=False)
     s = execute(make_cfg(root, *common, "evaluate.agent=oracle", "evaluate.width=32", "evaluate.height=24",
                          "evaluate.renderer=cpu", "evaluate.videos=1", "evaluate.trajectory_plots=1",
-                         "evaluate.protocol=explicit_stop"))
+                         "evaluate.protocol=explicit_stop"), console)
     assert not s["failures"], s["failures"]
+    # the console counts episodes (not only stage tasks) and logs each one as it finishes
+    shown = console.export_text()
+    assert "episodes" in shown and "steps/s" in shown and shown.count(": success, ") == 6, shown[-3000:]
     assert not execute(make_cfg(root, *common, "evaluate.agent=random", "evaluate.render=false",
                                 "evaluate.difficulty=easy", "evaluate.batch_slots=2"))["failures"]
     run = root / "07_eval" / "oracle_explicit_stop"
@@ -264,6 +270,11 @@ def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run, make
     assert summary["tasks"]["objectnav"]["overall"]["spl"] > 0.9
     rnd = pd.read_parquet(root / "07_eval" / "random_distance" / "results")
     assert (rnd["difficulty"] == "easy").all() and len(rnd) <= 6
+    from navcore.io.progress_log import read_log
+
+    for name, n in (("oracle_explicit_stop", 6), ("random_distance", len(rnd))):  # sequential and batched loops
+        logs = [read_log(p) for p in (root / "07_eval" / name / "_progress").glob("*.jsonl")]
+        assert sum(h["total"] for h, _ in logs) == sum(len(items) for _, items in logs) == n
     tables = (root / "07_eval" / "tables.md").read_text()
     assert "random_distance" in tables and "oracle_explicit_stop" in tables and "Table 7" in tables
     from PIL import Image

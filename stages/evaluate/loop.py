@@ -83,7 +83,7 @@ class InProcessBatch:
 
 
 def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | None = None,
-                         max_connect_failures: int = 2) -> list[dict]:
+                         max_connect_failures: int = 2, on_result=None) -> list[dict]:
     """Episodes through a batch agent (`client`: start(tasks by slot), act(observations by slot) ->
     actions by slot, end(results by slot); e.g. protocol.RemoteBatchAgent), `slots` at a time,
     one render call per step (BatchNavEnv).
@@ -91,7 +91,9 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
     Every episode gets a result row. A client failure fails the episodes in flight, and the queue
     goes on (a RemoteBatchAgent reconnects); after `max_connect_failures` consecutive failures to
     reach the server at all, the rest of the queue fails with that reason instead of waiting for
-    each. An action the environment rejects (NaN, malformed) fails only its own slot."""
+    each. An action the environment rejects (NaN, malformed) counts as an invalid step of its own
+    slot's episode (recorded in `invalid_actions`), which goes on. `on_result(row)` is called as each
+    episode finishes."""
     from stages.evaluate.batch import BatchNavEnv
 
     benv = BatchNavEnv(ctx, slots, cfg)
@@ -109,6 +111,8 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
         if error:
             env.state.fail()
         rows.append(result_row(env, ep, d0, error, time.perf_counter() - t0))
+        if on_result is not None:
+            on_result(rows[-1])
         s = env.state
         return {"episode_id": ep.episode_id, "success": bool(s.success), "steps": s.steps, "end_reason": s.end_reason}
 

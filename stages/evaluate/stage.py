@@ -16,6 +16,7 @@ from omegaconf import OmegaConf
 
 from navcore.gaussians.content import camera_scene
 from navcore.io.licences import redistributable
+from navcore.io.progress_log import ProgressLog
 from navcore.nav.eval_set import EvalSetConfig, listing
 from navcore.nav.geodesic import NavGraph, eligible_cells
 from navcore.seeds import stream_seed
@@ -126,6 +127,14 @@ def run(scene, cfg, catalog) -> dict:
     remote = ecfg.agent.startswith(("ws://", "wss://"))
     run = run_name(ecfg)
     videos = []
+    log = ProgressLog(catalog.dataset("eval_progress", scene, run=run).path)
+    log.start(len(episodes), scene_id=scene.scene_id, scene=scene.name, run=run)
+
+    def logged(row: dict) -> dict:
+        log.item(task=row["task"], episode_id=row["episode_id"], success=bool(row["sr"]), spl=row["spl"],
+                 steps=int(row["steps"]), end_reason=row["end_reason"], error=row["error"])
+        return row
+
     if ecfg.batch_slots > 1:  # batched: no videos (frames of many slots interleave)
         from stages.evaluate.loop import InProcessBatch, run_episodes_batched
 
@@ -135,12 +144,12 @@ def run(scene, cfg, catalog) -> dict:
             client = RemoteBatchAgent(ecfg.agent, timeout=ecfg.timeout_s, **ecfg.agent_args)
         else:
             client = InProcessBatch(lambda: make_scene_agent(ecfg, seed))
-        rows = run_episodes_batched(ctx, episodes, client, ecfg.batch_slots, env_cfg)
+        rows = run_episodes_batched(ctx, episodes, client, ecfg.batch_slots, env_cfg, on_result=logged)
     else:
         env, agent, rows = NavEnv(ctx, env_cfg), make_scene_agent(ecfg, seed), []
         for ep in episodes:
             frames = [] if (ecfg.render and len(videos) < ecfg.videos) else None
-            rows.append(run_episode(env, agent, ep, frames))
+            rows.append(logged(run_episode(env, agent, ep, frames)))
             if frames:
                 videos.append(write_video(frames, catalog.dataset("eval_video", scene, run=run, task=ep.task,
                                                                   episode_id=ep.episode_id)))

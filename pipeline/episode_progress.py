@@ -1,0 +1,93 @@
+"""The evaluation's progress on the run's console: episodes done / total, steps/s, time left, and
+one line per finished episode, read from the evaluate tasks' progress logs
+(navcore.io.progress_log) while they run, wherever they run (sync, local workers, batch jobs on a
+shared filesystem). The stage-task bar counts (stage, scene) tasks; an evaluation is one task a
+scene that can take hours, so it gets this bar of its own."""
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+from navcore.io.progress_log import read_log
+
+
+class EpisodeWatcher:
+    """Polls `folder`/*.jsonl (logs written after `since`, epoch seconds) every `period` seconds into
+    an "episodes" task of a rich Progress, printing each finished episode on its console."""
+
+    def __init__(self, progress, folder: Path, since: float, period: float = 1.0, log_each: bool = True):
+        self.progress, self.folder, self.since, self.period, self.log_each = progress, Path(folder), since, period, log_each
+        self.seen: dict[Path, tuple[int, int]] = {}  # log -> (its header's total, items read)
+        self.steps = 0
+        self.task = None
+        self.t0 = time.monotonic()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="episode-progress", daemon=True)
+
+    def __enter__(self) -> "EpisodeWatcher":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+        self.poll()
+
+    def _loop(self) -> None:
+        while not self._stop.wait(self.period):
+            self.poll()
+
+    def poll(self) -> None:
+        if not self.folder.is_dir():
+            return
+        for log in sorted(self.folder.glob("*.jsonl")):
+            try:
+                if log.stat().st_mtime < self.since:
+                    continue
+            except OSError:
+                continue
+            total, read = self.seen.get(log, (0, 0))
+            header, items = read_log(log, read)
+            if header is None:
+                continue
+            if log not in self.seen:
+                total = int(header.get("total", 0))
+            self.seen[log] = (total, read + len(items))
+            for it in items:
+                self.steps += int(it.get("steps") or 0)
+                if self.log_each:
+                    self.progress.console.print(line(header, it))
+        if not self.seen:
+            return
+        total = sum(t for t, _ in self.seen.values())
+        done = sum(min(n, t) for t, n in self.seen.values())
+        rate = self.steps / max(time.monotonic() - self.t0, 1e-9)
+        if self.task is None:
+            self.task = self.progress.add_task("episodes", total=total, rate=rate)
+        self.progress.update(self.task, total=total, completed=done, rate=rate)
+
+
+def line(header: dict, it: dict) -> str:
+    """One finished episode, as the console logs it."""
+    how = "[green]success[/]" if it.get("success") else f"[yellow]{it.get('end_reason') or 'failed'}[/]"
+    err = f" [red]{it['error']}[/]" if it.get("error") else ""
+    spl = it.get("spl")
+    return (f"  {header.get('scene', header.get('scene_id', '?'))} {it.get('task')} {it.get('episode_id')}: {how}, "
+            f"{it.get('steps')} steps" + (f", SPL {spl:.2f}" if isinstance(spl, (int, float)) else "") + err)
+
+
+def rate_column():
+    """A rich progress column: steps/s and the time left, for the tasks that carry a `rate` field."""
+    from rich.progress import ProgressColumn, TimeRemainingColumn
+    from rich.text import Text
+
+    left = TimeRemainingColumn()
+
+    class RateColumn(ProgressColumn):
+        def render(self, task):
+            if "rate" not in task.fields:
+                return Text("")
+            return Text(f"{task.fields['rate']:,.0f} steps/s, left ") + left.render(task)
+
+    return RateColumn()
