@@ -155,11 +155,15 @@ class NavArenaConfig:
     stages: list[str] = field(default_factory=lambda: list(DEFAULT_STAGES))
     """Stages to run (their missing or stale upstream stages run too); evaluate is not a default."""
     force: bool = False
-    """Recompute the selected stages even when their markers are current."""
+    """Recompute the selected stages even when their markers are current; also lets the run recompute
+    outputs of stages it does not name whose settings changed (without it such a run is refused,
+    naming the keys that differ: pipeline.config_guard)."""
     data_root: str = "data"
     """Root of the data layout."""
-    strict: bool = False
-    """Exit with status 1 when any (stage, scene) failed (the run still completes the others)."""
+    allow_failures: bool = False
+    """Exit with status 0 even when some (stage, scene) failed. By default a run whose tasks failed
+    (or that refused to overwrite outputs, see `force`) exits with status 1 after completing
+    everything else; the run summary lists the failures either way."""
     verify: str = "size"
     """How a finished (stage, scene)'s outputs are checked against its marker's manifest before it
     counts as done: size (every file present with its recorded size: a stat each), checksum (also

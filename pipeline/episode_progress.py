@@ -53,6 +53,8 @@ class EpisodeWatcher:
                 continue
             if log not in self.seen:
                 total = int(header.get("total", 0))
+                if not self.seen:  # steps/s from the first evaluation's start, not the run's
+                    self.t0 = time.monotonic()
             self.seen[log] = (total, read + len(items))
             for it in items:
                 self.steps += int(it.get("steps") or 0)

@@ -12,11 +12,14 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from navcore.io.atomic import sweep_stale_temporaries
 from navcore.io.catalog import Catalog, SceneEntry
 from pipeline.backends import run_on_dask
+from pipeline.config_guard import config_changes, describe, refusal
+from pipeline.config_reference import unknown_keys
 from pipeline.episode_progress import EpisodeWatcher, rate_column
 from pipeline.graph import closure, config_hashes, scene_hash
 from pipeline.summary import build_summary, print_summary, write_summary
@@ -41,6 +44,10 @@ def open_catalog(cfg) -> tuple[Catalog, list[SceneEntry], Path]:
 def execute(cfg, console: Console | None = None) -> dict:
     """Run the configured stages over the configured scenes; returns (and writes) the run summary."""
     console = console or Console()
+    unknown = unknown_keys(cfg)
+    if unknown:  # a misspelt key added with `+` would otherwise be accepted and ignored
+        raise UnknownKeysError(f"unknown configuration key(s): {'; '.join(unknown)}. Every key: docs/configuration.md "
+                               f"(navarena run --cfg job prints the resolved config)")
     catalog, scenes, cat_file = open_catalog(cfg)
     root = catalog.root
     stages = closure(list(cfg.stages))
@@ -50,6 +57,21 @@ def execute(cfg, console: Console | None = None) -> dict:
     console.print(f"[bold]navarena[/]: {len(scenes)} scene(s) from {cat_file.name} "
                   f"(shard {cfg.scenes.shard}/{cfg.scenes.num_shards}), stages {[s.name for s in stages]}, "
                   f"data in {root}")
+    changes = config_changes(cfg, catalog, scenes, stages, hashes)
+    blocked = [] if cfg.force else [s for s in changes if s not in selected]
+    if blocked:  # outputs of stages the run does not name would be overwritten: refuse, touch nothing
+        msg = refusal(changes, blocked)
+        console.print(f"[red]refused[/]: {escape(msg)}")
+        summary = build_summary([], started, cat_file, [cfg.scenes.shard, cfg.scenes.num_shards], stages, hashes)
+        summary["refused"] = msg
+        summary["config_changes"] = {k: v | {"keys": [list(x) for x in v["keys"]]} for k, v in changes.items()}
+        summary["failures"].append({"stage": "run", "scene_id": "*", "scene": "dataset", "status": "failed",
+                                    "error": "refused: " + msg.splitlines()[0]})
+        return summary
+    if changes:
+        console.print("[yellow]recomputing because the settings changed[/] (old -> new):")
+        for line in describe(changes):
+            console.print(f"  {escape(line)}")
     results: list[dict] = []
     progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                         rate_column(), console=console, transient=False)
@@ -98,6 +120,9 @@ def execute(cfg, console: Console | None = None) -> dict:
     # (a fully cached stage leaves its dataset-level files as they are)
     results += [run_finalize(st, cfg, catalog) for st in stages if finalize_due(st, results, catalog)]
     summary = build_summary(results, started, cat_file, [cfg.scenes.shard, cfg.scenes.num_shards], stages, hashes)
+    if changes:
+        summary["config_changes"] = {k: v | {"keys": [list(x) for x in v["keys"]]} for k, v in changes.items()}
+    summary["allow_failures"] = bool(cfg.get("allow_failures", False))
     print_summary(summary, console)
     try:
         latest = write_summary(summary, catalog, started, cfg.scenes.shard)
@@ -109,6 +134,16 @@ def execute(cfg, console: Console | None = None) -> dict:
     return summary
 
 
+class UnknownKeysError(ValueError):
+    """The composed config holds keys the schema does not know."""
+
+
 def main_cfg(cfg) -> int:
-    summary = execute(cfg)
-    return 1 if (cfg.strict and summary["failures"]) else 0
+    """The exit status of a run: 1 when a (stage, scene) failed or the run was refused, unless
+    allow_failures=true; 2 for a config with unknown keys (nothing runs)."""
+    try:
+        summary = execute(cfg)
+    except UnknownKeysError as e:
+        Console(stderr=True).print(f"[red]navarena[/]: {escape(str(e))}")
+        return 2
+    return 1 if (summary["failures"] and not cfg.allow_failures) else 0

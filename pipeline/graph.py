@@ -128,6 +128,23 @@ def scene_hash(stage_hash: str, stage: str, scene) -> str:
     return hashlib.sha256(json.dumps({"hash": stage_hash, "scene": opts}, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def stage_config(cfg, name: str) -> dict:
+    """What a stage's hash covers of the config: its sections (resolved; the storage keys of every
+    stage left out) and what its `inputs` reads beyond them (key "_inputs"). Recorded in its
+    markers, so that a later run can say which keys changed."""
+    s = BY_NAME[name]
+    storage = [st for x in STAGES for st in x.storage]
+    part = {}
+    for k in s.config:
+        part[k] = OmegaConf.to_container(OmegaConf.select(cfg, k), resolve=True)
+        for sec, key, _ in storage:
+            if sec == k and isinstance(part[k], dict):
+                part[k].pop(key, None)
+    if s.inputs and (extra := s.inputs(cfg)) is not None:  # None: nothing read beyond the sections
+        part["_inputs"] = extra
+    return part
+
+
 def config_hashes(cfg) -> dict[str, str]:
     """Hash per stage of its config sections, its version and its upstream hashes: a changed
     config recomputes that stage and everything downstream of it.
@@ -136,18 +153,10 @@ def config_hashes(cfg) -> dict[str, str]:
     that changing one recomputes no later stage (what they read is the same); the stage itself
     is recomputed, its hash mixing in the key's value, but only when the value is not the default:
     a data root written before the key existed stays valid."""
-    storage = [st for s in STAGES for st in s.storage]
     chain: dict[str, str] = {}
     out: dict[str, str] = {}
     for s in STAGES:
-        part = {}
-        for k in s.config:
-            part[k] = OmegaConf.to_container(OmegaConf.select(cfg, k), resolve=True)
-            for sec, key, _ in storage:
-                if sec == k:
-                    part[k].pop(key, None)
-        if s.inputs and (extra := s.inputs(cfg)) is not None:  # None: nothing read beyond the sections
-            part["_inputs"] = extra
+        part = stage_config(cfg, s.name)
         blob = json.dumps({"stage": s.name, "version": s.version, "config": part,
                            "needs": [chain[n] for n in s.needs]}, sort_keys=True, default=str)
         chain[s.name] = out[s.name] = hashlib.sha256(blob.encode()).hexdigest()[:16]

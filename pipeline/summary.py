@@ -6,6 +6,7 @@ import datetime as dt
 import os
 
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from navcore.io import jsonio
@@ -115,13 +116,22 @@ def print_summary(summary: dict, console: Console) -> None:
     for stage, c in summary["counts"].items():
         t.add_row(stage, *[str(c.get(s, 0)) for s in statuses])
     console.print(t)
+    if summary.get("config_changes"):
+        f = Table(title="recomputed because the settings changed (old -> new)")
+        for col in ("stage", "scenes", "what changed"):
+            f.add_column(col, overflow="fold")
+        for stage, c in summary["config_changes"].items():
+            f.add_row(stage, str(len(c["scenes"])), escape("; ".join(f"{k}: {a} -> {b}" for k, a, b in c["keys"]) or c["cause"]))
+        console.print(f)
     if summary["failures"]:
         f = Table(title="failures", show_lines=False)
         for col in ("scene", "stage", "status", "error"):
             f.add_column(col, overflow="fold")
         for r in summary["failures"]:
-            f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], r["status"], r.get("error", ""))
+            f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], r["status"], escape(r.get("error", "")))
         console.print(f)
+        console.print("[red]some tasks failed[/]: the run exits with status 1" if not summary.get("allow_failures")
+                      else "some tasks failed; allow_failures=true: the run exits with status 0")
     if summary["shortfalls"]:
         f = Table(title="scenes that could not yield the requested outputs")
         for col in ("scene", "stage", "what", "got / asked", "rejections by reason"):

@@ -267,16 +267,53 @@ def test_failing_scene_is_recorded_and_others_complete(tmp_path, make_cfg):
     bad.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 1000\nproperty float x\nend_header\n")
     cat = tmp_path / "cat.yaml"
     cat.write_text(f"scenes:\n  - {{name: broken, group: test, path: {bad}, format: inria_ply}}\n"
+                   f"  - {{name: gone, group: test, path: {tmp_path / 'gone.ply'}}}\n"
                    "synthetic: {prefix: s, group: synthetic, count: 1, first_seed: 3, num_gaussians: 60000}\n")
-    s = execute(make_cfg(tmp_path / "d", f"scenes.catalog={cat}", "scenes.count=null", "stages=[align]"))
+    cfg = make_cfg(tmp_path / "d", f"scenes.catalog={cat}", "scenes.count=null", "stages=[align]")
+    s = execute(cfg)
     by_scene = {}
     for r in s["results"]:
         by_scene.setdefault(r["scene"], {})[r["stage"]] = r
+    gone = by_scene["gone"]["ingest"]
+    assert gone["status"] == "failed" and "file not found" in gone["error"] and "gone.ply" in gone["error"]
+    assert gone["error"].startswith("SceneFileNotFoundError: scene ")
+    # a run with a failed task exits non-zero unless failures are allowed
+    from pipeline.executor import main_cfg
+
+    assert main_cfg(cfg) == 1
+    cfg.allow_failures = True
+    assert main_cfg(cfg) == 0
     assert by_scene["broken"]["ingest"]["status"] == "failed"
     assert "bad.ply" in by_scene["broken"]["ingest"]["error"] and "declares 1,000" in by_scene["broken"]["ingest"]["error"]
     assert by_scene["broken"]["align"]["status"] == "skipped"
     assert by_scene["s_0003"]["align"]["status"] == "done"
     assert not (tmp_path / "d" / "_markers" / "ingest" / f"{by_scene['broken']['ingest']['scene_id']}.json").exists()
+
+
+def test_changed_settings_of_a_stage_the_run_does_not_name_are_refused(tmp_path, make_cfg):
+    """stages=[screen] with another costmap resolution would overwrite the costmaps made before:
+    refused (nothing touched) with the keys that differ and how to keep or recompute; naming the
+    stage recomputes, and the run summary says what changed."""
+    from pipeline.executor import UnknownKeysError, main_cfg
+
+    s = execute(make_cfg(tmp_path, "stages=[costmap]"))
+    sid = s["results"][0]["scene_id"]
+    marker = tmp_path / "_markers" / "costmap" / f"{sid}.json"
+    before = marker.read_bytes()
+    assert json.loads(before)["config"]["costmap"]["resolution"] == 0.05  # markers record their settings
+    refused = execute(make_cfg(tmp_path, "stages=[screen]", "costmap.resolution=0.1"))
+    assert refused["failures"] and not refused["results"] and marker.read_bytes() == before
+    assert "costmap (1 scene(s)): costmap.resolution: 0.05 -> 0.1" in refused["refused"]
+    assert "costmap.resolution=0.05" in refused["refused"] and "force=true" in refused["refused"]
+    assert main_cfg(make_cfg(tmp_path, "stages=[screen]", "costmap.resolution=0.1")) == 1
+    s2 = execute(make_cfg(tmp_path, "stages=[costmap,screen]", "costmap.resolution=0.1"))
+    assert statuses(s2)["costmap"] == "done" and not s2["failures"]
+    assert s2["config_changes"]["costmap"]["keys"] == [["costmap.resolution", "0.05", "0.1"]]
+    assert "costmap" not in s2["config_changes"] or s2["config_changes"]["costmap"]["scenes"] == [sid]
+    # a misspelt key added with `+` is refused with the closest key
+    with pytest.raises(UnknownKeysError, match=r"evaluate.agnet \(did you mean evaluate.agent\?\)"):
+        execute(make_cfg(tmp_path, "+evaluate.agnet=oracle"))
+    assert main_cfg(make_cfg(tmp_path, "+evaluate.agnet=oracle")) == 2
 
 
 def test_same_config_same_bytes_whatever_the_workers(tmp_path, make_cfg):

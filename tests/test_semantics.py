@@ -226,6 +226,10 @@ def test_stage_is_deterministic_and_reads_its_config(semantics_run, tmp_path, ma
     assert [r["stage"] for r in s["shortfalls"]] == ["semantics"] and not s["failures"]
     assert "ground truth" in s["shortfalls"][0]["shortfall"][0]["reason"]
     assert pq.read_table(copy / "04_semantics" / sid / "instances.parquet").num_rows == 0
+    # no ObjectNav asked for: nothing fell short (the reason stays in the stage's result)
+    s = execute(make_cfg(copy, *over, "stages=[semantics]", "force=true", "task=[pointnav]"))
+    sem = next(r for r in s["results"] if r["stage"] == "semantics")
+    assert not s["shortfalls"] and not s["failures"] and sem["status"] == "done"
 
 
 def test_cameras_in_both_layouts():

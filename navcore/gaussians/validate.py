@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from navcore.gaussians.errors import SceneFormatError
+from navcore.gaussians.errors import SceneFileNotFoundError, SceneFormatError
 from navcore.gaussians.model import GaussianScene
 
 
@@ -86,6 +86,8 @@ def read_validated(path, fmt: str | None, scene_id: str | None = None, level: in
 
     try:
         raw = read_gaussians(path, fmt, level=level)
+    except SceneFileNotFoundError as e:
+        raise SceneFileNotFoundError(e.path, scene_id) from None
     except SceneFormatError as e:
         raise SceneFormatError(e.path, e.problem, scene_id) from None
     if scale != 1.0:  # the source's units -> metres

@@ -163,8 +163,12 @@ def run(scene, cfg, catalog) -> dict:
         seg = SEGMENTERS.get_class(scfg.segmenter).from_scene(scene, catalog, renderer, scfg, seed)
     except SegmenterUnavailable as e:  # an empty table: the scene's other tasks go on, the summary says why
         out.save(labels_to_table([]))
-        return {"outputs": [str(out.path)], "instances": 0, "segmenter": scfg.segmenter,
-                "shortfall": [{"task": "objectnav instances", "episodes": 0, "requested": None, "reason": str(e)}]}
+        res = {"outputs": [str(out.path)], "instances": 0, "segmenter": scfg.segmenter, "unavailable": str(e)}
+        objectnav = (cfg.get("task") or {}).get("objectnav")
+        if objectnav is not None:  # a shortfall only where ObjectNav episodes were asked for
+            res["shortfall"] = [{"task": "objectnav", "episodes": 0, "requested": objectnav.get("episodes_per_scene"),
+                                 "reason": f"no goal instances: {e}"}]
+        return res
     labels, support, timings = predict_instances(renderer, seg, c2w, ks, gs.means, scfg)
     table = labels_to_table(labels, support)
     out.save(table)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from navcore.gaussians.errors import SceneFormatError
+from navcore.gaussians.errors import SceneFileNotFoundError, SceneFormatError
 from navcore.gaussians.formats.npy_folder import read_npy_folder, write_npy_folder  # noqa: F401 (public API)
 from navcore.gaussians.formats.ply import read_ply, write_inria_ply
 from navcore.gaussians.formats.sog import LOD_META, META, read_sog, write_sog, write_sog_lod
@@ -79,7 +79,7 @@ def read_gaussians(path: str | Path, fmt: str | None = None, level: int | None =
     """
     p = Path(path)
     if not p.exists():
-        raise SceneFormatError(p, "file does not exist")
+        raise SceneFileNotFoundError(p)
     fmt = fmt or detect_format(p)
     if fmt not in READERS:
         raise SceneFormatError(p, f"unknown format {fmt!r}; known: {', '.join(FORMATS)}")

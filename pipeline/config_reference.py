@@ -1,0 +1,204 @@
+"""The configuration reference (docs/configuration.md), generated from the config dataclasses.
+
+One source of truth: every key's type and default come from the dataclass field, its meaning from
+the string literal written right under the field (the attribute docstring, read with `ast`); a
+nested section's meaning is its class docstring. `missing()` lists the keys without one (a test
+keeps it empty); `markdown()` is the page, `main` writes it or checks it is current:
+
+    python -m pipeline.config_reference [--check] [--out docs/configuration.md]
+"""
+from __future__ import annotations
+
+import argparse
+import ast
+import dataclasses
+import inspect
+import sys
+import textwrap
+import typing
+from dataclasses import MISSING, dataclass
+from functools import lru_cache
+from pathlib import Path
+
+OUT = Path(__file__).resolve().parents[1] / "docs" / "configuration.md"
+
+
+@dataclass(frozen=True)
+class Key:
+    path: str
+    type: str
+    default: str
+    doc: str
+    section: bool = False
+    """A nested config section (its doc is the class docstring)."""
+
+
+@lru_cache(maxsize=None)
+def field_docs(cls: type) -> dict[str, str]:
+    """{field name: the string literal right under its annotated assignment} of a dataclass and its bases."""
+    out: dict[str, str] = {}
+    for klass in reversed(cls.__mro__):
+        if not dataclasses.is_dataclass(klass):
+            continue
+        try:
+            tree = ast.parse(textwrap.dedent(inspect.getsource(klass)))
+        except (OSError, TypeError):
+            continue
+        body = tree.body[0].body
+        for node, nxt in zip(body, body[1:] + [None]):
+            if isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name) and isinstance(nxt, ast.Expr) \
+                    and isinstance(nxt.value, ast.Constant) and isinstance(nxt.value.value, str):
+                out[node.target.id] = inspect.cleandoc(nxt.value.value)
+    return out
+
+
+def _type_name(tp) -> str:
+    if isinstance(tp, type) and not typing.get_args(tp):
+        return tp.__name__
+    s = str(tp).replace("typing.", "").replace("NoneType", "None")
+    return s.replace("Optional[", "").rstrip("]") + " | None" if s.startswith("Optional[") else s
+
+
+def _default(f: dataclasses.Field):
+    if f.default is not MISSING:
+        return f.default
+    if f.default_factory is not MISSING:
+        return f.default_factory()
+    return MISSING
+
+
+def _fmt(v) -> str:
+    if v is MISSING:
+        return "(required)"
+    if v is None:
+        return "null"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return repr(v)
+    if isinstance(v, str):
+        return f'"{v}"' if v else '""'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k}: {_fmt(x)}" for k, x in v.items()) + "}"
+    return str(v)
+
+
+def keys(cls: type | None = None, prefix: str = "") -> list[Key]:
+    """Every key of the config (NavArenaConfig by default), depth first, sections before their keys."""
+    if cls is None:
+        from pipeline.config import NavArenaConfig
+
+        cls = NavArenaConfig
+    hints = typing.get_type_hints(cls)
+    docs = field_docs(cls)
+    out: list[Key] = []
+    for f in dataclasses.fields(cls):
+        path = f"{prefix}{f.name}"
+        tp = hints.get(f.name, f.type)
+        value = _default(f)
+        if dataclasses.is_dataclass(tp):
+            doc = docs.get(f.name) or inspect.cleandoc(tp.__doc__ or "")
+            if doc.startswith(f"{tp.__name__}("):  # dataclass's generated signature: no docstring
+                doc = ""
+            out.append(Key(path, tp.__name__, "", doc, section=True))
+            out += keys(tp, path + ".")
+            continue
+        args = typing.get_args(tp)
+        if typing.get_origin(tp) is dict and len(args) == 2 and dataclasses.is_dataclass(args[1]):
+            out.append(Key(path, f"dict[str, {args[1].__name__}]", _fmt(value), docs.get(f.name, ""), section=True))
+            out += keys(args[1], path + ".<name>.")
+            continue
+        out.append(Key(path, _type_name(tp), _fmt(value), docs.get(f.name, "")))
+    return out
+
+
+def missing() -> list[str]:
+    """Keys (and sections) without a description."""
+    return [k.path for k in keys() if not k.doc.strip()]
+
+
+def _cell(s: str) -> str:
+    return " ".join(s.split()).replace("|", "\\|")
+
+
+def markdown() -> str:
+    ks = keys()
+    top = [k for k in ks if "." not in k.path]
+    L = ["# Configuration reference", "",
+         "Every key of the pipeline's configuration, generated from the config dataclasses "
+         "(`pipeline/config.py` and the stage modules: one source of truth) by "
+         "`python -m pipeline.config_reference`; a test fails when a key has no description or this page is "
+         "not current. Set any key on the command line (`navarena run costmap.resolution=0.02`), in a preset "
+         "(`conf/preset/`) or in a config group file (`conf/`). Units are in the descriptions (metres, seconds, "
+         "degrees unless said).", "",
+         "## Top-level keys", "", "| key | type | default | meaning |", "|---|---|---|---|"]
+    for k in top:
+        if not k.section:
+            L.append(f"| `{k.path}` | `{_cell(k.type)}` | `{_cell(k.default)}` | {_cell(k.doc)} |")
+    for s in [k for k in top if k.section]:
+        L += ["", f"## `{s.path}`", "", s.doc, "", "| key | type | default | meaning |", "|---|---|---|---|"]
+        for k in ks:
+            if k.path.startswith(s.path + ".") and not k.section:
+                L.append(f"| `{k.path}` | `{_cell(k.type)}` | `{_cell(k.default)}` | {_cell(k.doc)} |")
+            elif k.path.startswith(s.path + ".") and k.section:
+                L.append(f"| **`{k.path}`** | section | | {_cell(k.doc)} |")
+    return "\n".join(L) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", default=str(OUT))
+    ap.add_argument("--check", action="store_true", help="exit 1 when the page is not current or a key has no description")
+    a = ap.parse_args(argv)
+    text, gaps = markdown(), missing()
+    if a.check:
+        stale = not Path(a.out).is_file() or Path(a.out).read_text() != text
+        for g in gaps:
+            print(f"no description: {g}", file=sys.stderr)
+        if stale:
+            print(f"{a.out} is not current: python -m pipeline.config_reference", file=sys.stderr)
+        return 1 if gaps or stale else 0
+    Path(a.out).write_text(text)
+    print(f"{a.out}: {sum(not k.section for k in keys())} keys, {len(gaps)} without a description")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
+
+def unknown_keys(cfg) -> list[str]:
+    """Keys of a composed config that the schema does not know (`+evaluate.agnet=oracle` adds one
+    Hydra accepts), each with the closest known key as a suggestion: ["evaluate.agnet (did you mean
+    evaluate.agent?)"]. Free dicts of the schema (task names, goal maps, splits, ...) take any key."""
+    import difflib
+
+    from omegaconf import OmegaConf
+
+    from pipeline.config import NavArenaConfig
+
+    data = OmegaConf.to_container(cfg, resolve=False) if not isinstance(cfg, dict) else cfg
+    out: list[str] = []
+
+    def walk(d: dict, cls: type, prefix: str) -> None:
+        hints = typing.get_type_hints(cls)
+        names = [f.name for f in dataclasses.fields(cls)]
+        for k, v in d.items():
+            if k not in names:
+                near = difflib.get_close_matches(str(k), names, n=1, cutoff=0.6)
+                out.append(f"{prefix}{k}" + (f" (did you mean {prefix}{near[0]}?)" if near else ""))
+                continue
+            tp = hints.get(k)
+            if dataclasses.is_dataclass(tp) and isinstance(v, dict):
+                walk(v, tp, f"{prefix}{k}.")
+            elif typing.get_origin(tp) is dict and isinstance(v, dict):
+                args = typing.get_args(tp)
+                if len(args) == 2 and dataclasses.is_dataclass(args[1]):
+                    for name, sub in v.items():
+                        if isinstance(sub, dict):
+                            walk(sub, args[1], f"{prefix}{k}.{name}.")
+
+    walk(data, NavArenaConfig, "")
+    return out
