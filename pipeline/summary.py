@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 import os
 
+from rich import box
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
@@ -151,18 +152,25 @@ def print_summary(summary: dict, console: Console) -> None:
                 f.add_row(f"{r['scene_id']} ({r['scene']})", goal, ", ".join(f"{c} {n}" for c, n in sorted(classes.items())))
         console.print(f)
     if summary.get("screening"):
-        f = Table(title="scene screening (quality score: share of valid cells not flagged)")
-        for col in ("scene", "score", "blobs", "floor holes", "views: blur", "views: holes", "unseen", "verdict",
-                    "episodes"):
-            f.add_column(col, overflow="fold")
+        f = Table(title="scene screening (score: share of valid cells not flagged)", box=box.SIMPLE_HEAD,
+                  padding=(0, 1), collapse_padding=True)
+        f.add_column("scene", no_wrap=True, overflow="ellipsis", max_width=18)
+        for col in ("score", "blobs", "holes", "blur", "v.holes", "unseen"):
+            f.add_column(col, justify="right", no_wrap=True)
+        f.add_column("verdict", no_wrap=True)
+        f.add_column("episodes", no_wrap=True)
         style = {"pass": "green", "warn": "yellow", "reject": "red"}
         for r in summary["screening"]:
-            f.add_row(f"{r['scene_id']} ({r['scene']})", f"{r['score']:.2f}",
-                      *(f"{100 * r[k]:.1f} %" for k in ("blur_share", "hole_share", "view_blur_share", "view_hole_share",
-                                                         "unseen_share")),
-                      f"[{style[r['verdict']]}]{r['verdict']}[/]" if r.get("verdict") else "- (episodes not run)",
-                      "-" if r.get("kept") is None else "kept" if r["kept"] else "rejected (screen.reject)")
+            f.add_row(escape(r["scene"]), f"{r['score']:.2f}",
+                      *(f"{100 * r[k]:.1f}%" for k in ("blur_share", "hole_share", "view_blur_share", "view_hole_share",
+                                                        "unseen_share")),
+                      f"[{style[r['verdict']]}]{r['verdict']}[/]" if r.get("verdict") else "-",
+                      "-" if r.get("kept") is None else "kept" if r["kept"] else "rejected")
         console.print(f)
+        console.print("  blobs: floor under blurry blobs; holes: floor holes; blur / v.holes: rendered views blurred / "
+                      "with holes; unseen: cells no view covers. A warn keeps the scene, its episodes avoid the flagged "
+                      "cells: look at data/03_costmaps/screen/<scene_id>.png (legend on it); screen.reject=true drops "
+                      "rejected scenes. Scene ids: data/_runs/latest.json.", style="dim")
     placed = summary.get("placement")
     if placed and any(w["gpu"] for w in placed["workers"].values()):
         f = Table(title="where tasks ran (GPU workers; CPU workers summed)")

@@ -59,7 +59,15 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
     occ, sup = np.asarray(g["occ"][...]), np.asarray(g["support"][...])
     assert np.array_equal(read_pgm(asset / "nav_map.pgm"), occ)  # PGM rows flipped, 0 = occupied
     assert np.array_equal(np.asarray(Image.open(asset / "nav_mask.png"))[::-1] > 0, sup)
-    assert np.asarray(Image.open(asset / "costmap_topdown.png")).shape[:2] == occ.shape
+    # the costmap picture: the map enlarged k times, a scale bar on it, its legend under it
+    from stages.asset.stage import topdown_image
+
+    pic = np.asarray(Image.open(asset / "costmap_topdown.png"))
+    k = int(np.ceil(480 / max(occ.shape)))
+    layers = {n: np.asarray(g[n][...]) for n in ("raw", "components")}
+    cells = pic[:occ.shape[0] * k:k, :occ.shape[1] * k:k]
+    assert cells.shape[:2] == occ.shape and pic.shape[0] > occ.shape[0] * k + 60  # legend rows below
+    assert (cells != topdown_image(layers["raw"], sup, occ, layers["components"])).any(-1).mean() < 0.03
     assert man["map_info"]["size"] == [occ.shape[1], occ.shape[0]]
     ros = (asset / "nav_map.yaml").read_text()
     assert "image: nav_map.pgm" in ros and f"resolution: {man['map_info']['resolution']}" in ros
@@ -744,3 +752,16 @@ def test_screening_through_the_pipeline_and_screen_reject(tmp_path, make_cfg):
     assert entry["verdict"] == "reject" and not entry["kept"]
     for task in ("pointnav", "imagenav"):
         assert pq.read_table(tmp_path / "05_episodes" / f"task={task}" / f"scene_id={sid}" / "part-0.parquet").num_rows == 0
+
+
+def test_map_pictures_carry_a_scale_bar_of_the_right_length():
+    from navcore.io.map_picture import annotated
+
+    img = np.full((100, 200, 3), 255, np.uint8)  # 10 m x 5 m at 0.05 m
+    pic = annotated(img, 0.05, [((255, 0, 0), "red")])
+    k = 3  # 480 / 200 rounded up
+    assert pic.shape[1] == 600 and pic.shape[0] > 300
+    bar_row = pic[300 - 14 + 2]  # the bar: 4 px high, 14 px above the map's bottom edge
+    black = np.flatnonzero((bar_row == 0).all(-1))
+    assert len(black) == 2 / 0.05 * k + 1  # 2 m: the longest step within a quarter of 10 m
+    assert ((pic[300:] == (255, 0, 0)).all(-1)).sum() > 50  # the legend's swatch

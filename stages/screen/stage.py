@@ -9,6 +9,7 @@ from omegaconf import OmegaConf
 
 from navcore.gaussians.cameras import camera_file, read_cameras
 from navcore.gaussians.content import camera_scene, content_of
+from navcore.io.map_picture import annotated
 from stages.screen.quality import QualityConfig, scene_score, screen_layers
 
 # top-down picture colours: outside the supported map, obstacles, blobs, holes, view flags, unseen (free cells white)
@@ -33,6 +34,23 @@ def picture(layers: dict, support: np.ndarray, valid: np.ndarray, view: dict | N
         for (j, i), b in zip(cells, view["blur"]):
             img[max(i - 1, 0):i + 2, max(j - 1, 0):j + 2] = (0, 0, 0) if b >= 0.5 else (0, 160, 0)
     return img[::-1]
+
+
+SCREEN_LEGEND = [((255, 255, 255), "valid cell, nothing flagged"),
+                 (_OBSTACLE, "obstacle or within the robot's radius (not a valid cell)"),
+                 (_OUTSIDE, "unsupported: no floor seen"),
+                 (_BLUR, "blob: floor under a blurry blob (episodes avoid it)"),
+                 (_HOLE, "floor hole (episodes avoid it)"),
+                 (_VIEW, "rendered views from here mostly blur or holes (avoided)"),
+                 (_UNSEEN, "no capture camera saw it (scenes with cameras)"),
+                 ((0, 160, 0), "dot: a pose whose views were rendered, its worst view fine"),
+                 ((0, 0, 0), "black dot: a pose whose worst view is mostly blur")]
+
+
+def screen_picture(layers: dict, support, valid, view, origin, resolution: float, verdict_note: str) -> np.ndarray:
+    """The screening picture: `picture` enlarged, a scale bar, its legend and what a verdict means."""
+    return annotated(picture(layers, support, valid, view, origin, resolution), resolution, SCREEN_LEGEND,
+                     note=verdict_note)
 
 
 def run(scene, cfg, catalog) -> dict:
@@ -65,7 +83,10 @@ def run(scene, cfg, catalog) -> dict:
                                 "embodiment": emb.name, **score, "views_rendered": rendered,
                                 "capture_cameras": 0 if capture is None else len(capture[0])})
     pic = catalog.dataset("quality_picture", scene)
-    pic.save(picture(out, support, valid, view, cm.origin, cm.resolution))
+    pic.save(screen_picture(out, support, valid, view, cm.origin, cm.resolution,
+                            f"score {score['score']:.2f}: the share of valid cells not flagged\n"
+                            "warn: the scene is kept, its episodes avoid the flagged cells\n"
+                            "reject: dropped when screen.reject=true"))
     # the run summary's screening table shows the score at once; the verdict is the episodes stage's
     screening = {k: v for k, v in score.items() if k == "score" or k.endswith("_share")}
     return {"outputs": [str(ds.path), str(pic.path)], "quality": score, "views_rendered": rendered,

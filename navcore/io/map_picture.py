@@ -1,0 +1,42 @@
+"""Top-down map pictures for people: the map enlarged to a readable size, a scale bar on it and a
+legend under it (the costmap picture of the asset stage, the screening picture of the screen stage)."""
+from __future__ import annotations
+
+import numpy as np
+
+SCALE_STEPS = (0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
+"""Scale-bar lengths, metres: the longest that spans at most a quarter of the map's width."""
+
+
+def annotated(img: np.ndarray, resolution: float, legend: list[tuple[tuple[int, int, int], str]],
+              min_side: int = 480, note: str | None = None) -> np.ndarray:
+    """`img` ([ny, nx, 3] uint8, one pixel a map cell of `resolution` metres, north up) enlarged by
+    the integer factor that brings its longer side to at least `min_side` pixels, a scale bar in
+    its lower-left corner, and under it one legend row per (colour, label) and the note's lines."""
+    from PIL import Image, ImageDraw
+
+    k = max(1, int(np.ceil(min_side / max(img.shape[:2]))))
+    big = np.repeat(np.repeat(img, k, 0), k, 1)
+    h, w = big.shape[:2]
+    metres = max([s for s in SCALE_STEPS if s / resolution * k <= w / 4] or [SCALE_STEPS[0]])
+    bar = max(int(round(metres / resolution * k)), 1)
+    row, pad = 16, 8
+    notes = note.split("\n") if note else []
+    lines = len(legend) + len(notes)
+    width = max(w, 420)
+    canvas = Image.new("RGB", (width, h + pad * 2 + row * lines), (255, 255, 255))
+    canvas.paste(Image.fromarray(big), (0, 0))
+    d = ImageDraw.Draw(canvas)
+    x0, y0 = 10, h - 14
+    d.rectangle([x0 - 4, y0 - 14, x0 + bar + 4, y0 + 8], fill=(255, 255, 255))
+    d.rectangle([x0, y0, x0 + bar, y0 + 4], fill=(0, 0, 0))
+    d.text((x0, y0 - 13), f"{metres:g} m", fill=(0, 0, 0))
+    y = h + pad
+    for colour, label in legend:
+        d.rectangle([10, y + 2, 22, y + 12], fill=tuple(colour), outline=(0, 0, 0))
+        d.text((30, y + 1), label, fill=(0, 0, 0))
+        y += row
+    for text in notes:
+        d.text((10, y + 1), text, fill=(80, 80, 80))
+        y += row
+    return np.asarray(canvas)
