@@ -9,14 +9,14 @@ ARGS ?=
 CUDA ?=
 WHEELS ?=
 
-.PHONY: release verify-release bench-release bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: docs release verify-release bench-release bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	# the CPU build of torch (an unpinned torch would pull several GB of CUDA packages)
 	$(BIN)/python -m pip install -q "torch==2.13.0" || $(BIN)/python -m pip install -q torch --index-url https://download.pytorch.org/whl/cpu
-	$(BIN)/python -m pip install -q -e ".[test,bench,lerobot,open_vocab]"
+	$(BIN)/python -m pip install -q -e ".[test,bench,lerobot,open_vocab,docs]"
 	# the lerobot package and the torchvision / torchcodec it imports, next to our CPU torch 2.13:
 	# torchvision 0.28.0 is the release made for torch 2.13, but PyPI builds it for CUDA torch, so its
 	# operators cannot load here; navarena.torchvision_fix (a .pth import hook) lets its Python part load
@@ -26,6 +26,11 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 setup: $(STAMP)
+
+# the documentation site into site/ (MkDocs Material; --strict: a broken link or a missing page fails)
+docs: $(STAMP)
+	$(BIN)/python -m pipeline.config_reference --check
+	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict
 
 # a CUDA machine in one command (scripts/setup_gpu.sh): CUDA torch matching the driver (CUDA=12.8 to
 # choose), gsplat 1.5.3 with its kernels compiled once, the segmenter extras, then the ready check;

@@ -178,7 +178,14 @@ def export_lerobot(root, out, split: str | None = "train", tasks=("pointnav", "i
                     ep_index += 1
                     bar.advance(1, n)
         if not ep_index:
-            raise ValueError(f"no episodes of split {split!r} and tasks {list(tasks)} under {root}")
+            import pyarrow.dataset as pads
+
+            eps = Path(root) / "05_episodes"
+            present = sorted(set(pads.dataset(eps, partitioning="hive").to_table(columns=["split"])
+                                 .column("split").to_pylist())) if eps.is_dir() else []
+            raise ValueError(f"no episodes of split {split!r} and tasks {list(tasks)} under {root}; the splits there: "
+                             f"{', '.join(present) or 'none'} (whole scenes are held out as val_unseen / test by "
+                             "episodes.scene_splits)")
         features = _features(width, height, fps, depth)
         _write_data(tmp, data_rows, features)
         _write_meta(tmp, episodes_meta, task_index, features, fps, frames_total, split, robot_type or emb.name,

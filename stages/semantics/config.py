@@ -44,7 +44,7 @@ class OracleConfig:
 
 @dataclass
 class Sam3Config:
-    """The `sam3` segmenter (optional extra: pip install -e '.[sam3]'; weights: README)."""
+    """The `sam3` segmenter (optional extra: pip install -e '.[sam3]'; weights: docs/tasks.md)."""
 
     checkpoint: Optional[str] = None
     """Local path of sam3.pt (never downloaded at run time)."""

@@ -34,7 +34,7 @@ WEIGHT_FILES = ("model.safetensors", "pytorch_model.bin", "model.safetensors.ind
 
 @dataclass
 class OpenVocabConfig:
-    """The `open_vocab` segmenter (pip install -e '.[open_vocab]'; weights: README)."""
+    """The `open_vocab` segmenter (pip install -e '.[open_vocab]'; weights: docs/tasks.md)."""
 
     detector: Optional[str] = None
     """Local folder of a text-prompted detector (OWLv2 / OWL-ViT: config.json, weights,
