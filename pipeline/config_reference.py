@@ -1,4 +1,5 @@
-"""The configuration reference (docs/configuration.md), generated from the config dataclasses.
+"""The configuration reference (docs/configuration.md), generated from the config dataclasses, and
+the command-line reference (docs/reference/cli.md), from the commands' own help.
 
 One source of truth: every key's type and default come from the dataclass field, its meaning from
 the string literal written right under the field (the attribute docstring, read with `ast`); a
@@ -21,6 +22,7 @@ from functools import lru_cache
 from pathlib import Path
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "configuration.md"
+CLI_OUT = OUT.parent / "reference" / "cli.md"
 
 
 @dataclass(frozen=True)
@@ -147,21 +149,67 @@ def markdown() -> str:
     return "\n".join(L) + "\n"
 
 
+def command_help(name: str) -> str:
+    """`navarena NAME --help` as printed in an 100-column terminal."""
+    import contextlib
+    import importlib
+    import io
+    import os
+
+    from pipeline.__main__ import TOOLS
+
+    old = os.environ.get("COLUMNS")
+    os.environ["COLUMNS"] = "100"
+    buf = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(buf), contextlib.suppress(SystemExit):
+            importlib.import_module(TOOLS[name][0]).main(["--help"])
+    finally:
+        if old is None:
+            os.environ.pop("COLUMNS", None)
+        else:
+            os.environ["COLUMNS"] = old
+    return buf.getvalue().rstrip()
+
+
+def cli_markdown() -> str:
+    """docs/reference/cli.md: `navarena --help` and every subcommand's help."""
+    from pipeline.__main__ import TOOLS, usage
+
+    L = ["# Command line", "",
+         "`navarena` is installed into the venv (`.venv/bin/navarena`; `python -m pipeline` is the same). Generated "
+         "from the commands' own help by `python -m pipeline.config_reference`.", "", "```text", usage().rstrip(), "```", "",
+         "## navarena run", "",
+         "The pipeline. Arguments are Hydra overrides: `key=value` for any key of the "
+         "[configuration](../configuration.md), `group=option` for a config group (`scenes=real_indoor`, "
+         "`embodiment=stretch`, `task=[pointnav,objectnav]`, `executor=slurm`, `planner=rrtconnect`), `+preset=paper` "
+         "or `+preset=habitat` for a preset. `navarena run --cfg job` prints the resolved config, `navarena run --help` "
+         "Hydra's help. Exit status: 0; 1 when a (stage, scene) failed or the run was refused (`allow_failures=true`: "
+         "0); 2 for an unknown configuration key.", ""]
+    for name in TOOLS:
+        L += [f"## navarena {name}", "", "```text", command_help(name), "```", ""]
+    return "\n".join(L)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--check", action="store_true", help="exit 1 when the page is not current or a key has no description")
     a = ap.parse_args(argv)
-    text, gaps = markdown(), missing()
+    text, gaps, cli = markdown(), missing(), cli_markdown()
     if a.check:
-        stale = not Path(a.out).is_file() or Path(a.out).read_text() != text
+        # the CLI page is checked for its commands only: argparse's layout varies between Python versions
+        stale = not Path(a.out).is_file() or Path(a.out).read_text() != text or not CLI_OUT.is_file() or \
+            [x for x in cli.splitlines() if x.startswith("## ")] != [x for x in CLI_OUT.read_text().splitlines()
+                                                                     if x.startswith("## ")]
         for g in gaps:
             print(f"no description: {g}", file=sys.stderr)
         if stale:
-            print(f"{a.out} is not current: python -m pipeline.config_reference", file=sys.stderr)
+            print(f"{a.out} or {CLI_OUT} is not current: python -m pipeline.config_reference", file=sys.stderr)
         return 1 if gaps or stale else 0
     Path(a.out).write_text(text)
-    print(f"{a.out}: {sum(not k.section for k in keys())} keys, {len(gaps)} without a description")
+    CLI_OUT.write_text(cli)
+    print(f"{a.out}: {sum(not k.section for k in keys())} keys, {len(gaps)} without a description; {CLI_OUT}")
     return 0
 
 
