@@ -3,8 +3,12 @@
 On a data root's stored episodes (no rendering), two policies run under the rule before this change
 (a blocked step dropped its turn with its translation; re-implemented here as the reference) and
 under each of `evaluate.dynamics.blocked` = stay, truncate, slide:
-- forward_steer: every step a waypoint 0.25 m forward with a heading change that drifts in
-  [-0.3, 0.3] rad (a random walk), the shape of NavArena-Server's forward-and-steer ImageNav example;
+- server_example: the action statistics of NavArena-Server's forward-and-steer ImageNav example
+  (measured by hand against their code: every step a waypoint forward by a uniform 0-0.1 m and a
+  fresh, zero-mean uniform turn of at most 0.1 rad); a stand-in with their statistics, not their
+  code, which is not in this repository;
+- forward_steer: our own stand-in from before (0.25 m forward, a heading change that drifts as a
+  random walk in [-0.3, 0.3] rad): bolder than their example, kept as a second, named policy;
 - random: the discrete random agent (forward / left / right).
 Reports per rule: collision rate (per policy action), metres walked, SR, episodes.
 
@@ -19,6 +23,19 @@ from pathlib import Path
 import numpy as np
 
 from navcore.io import jsonio
+
+
+class ServerExample:
+    """NavArena-Server's ImageNav example's action statistics: forward U(0, 0.1) m, turn U(-0.1, 0.1) rad, fresh every step (seeded)."""
+
+    def __init__(self, seed: int = 0):
+        self.rng = np.random.default_rng(seed)
+
+    def reset(self, task: dict) -> None:
+        pass
+
+    def act(self, obs: dict):
+        return {"x": float(self.rng.uniform(0.0, 0.1)), "y": 0.0, "yaw": float(self.rng.uniform(-0.1, 0.1))}
 
 
 class ForwardSteer:
@@ -72,7 +89,7 @@ def run(root: Path, tasks: list[str], episodes: int) -> dict:
     cat = Catalog.for_root(root)
     emb = load_embodiment("locobot")
     rules = ["before", "stay", "truncate", "slide"]
-    agents = {"forward_steer": ForwardSteer, "random": RandomAgent}
+    agents = {"server_example": ServerExample, "forward_steer": ForwardSteer, "random": RandomAgent}
     acc = {(a, r): {"episodes": 0, "collisions": 0.0, "walked": 0.0, "sr": 0.0} for a in agents for r in rules}
     for sid in cat.scene_ids("episodes"):
         cm = cat.dataset("costmaps", cat.scene(sid)).load(emb.name)

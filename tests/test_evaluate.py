@@ -354,6 +354,20 @@ def test_blocked_move_known_poses_per_mode(ctx, make_episode):
     assert c == 1
 
 
+@pytest.mark.parametrize("angle_deg", [30, 60, 85])
+def test_slide_follows_habitats_sliding_rule_on_a_wall(ctx, make_episode, angle_deg):
+    """habitat-sim's allow_sliding: a step into a wall ends at the wall, moved along it by the step's
+    component along the wall (d cos theta for a wall met at theta). The wall of room_with_door at
+    x = 2 (contact at x = 1.925), a 1 m step from (1.8, 0.5) meeting it at 30, 60 and 85 degrees."""
+    env = _env_with(ctx, "slide")
+    theta = math.radians(angle_deg)
+    env.reset(make_episode(start=(1.8, 0.5, math.pi / 2 - theta)))  # heading theta away from the wall's +y direction
+    env.step({"x": 1.0})
+    assert env.state.collisions == 1
+    assert env.state.x == pytest.approx(1.925, abs=0.006) and env.state.x <= 1.925 + 1e-9
+    assert env.state.y - 0.5 == pytest.approx(math.cos(theta), abs=0.006)
+
+
 def test_swept_paths_never_enter_an_obstacle(ctx, room_with_door):
     """Random blocked and free moves in every mode: each leg is a valid motion of the costmap, and
     points every quarter cell along it keep the robot's disk clear of every obstacle cell."""

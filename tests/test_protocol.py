@@ -51,6 +51,10 @@ def test_frames_are_checked():
                 msgpack.packb({"type": "action", "payload": [], "seq": 1, "timestamp": 0})):
         with pytest.raises(ProtocolError):
             unpack(bad)
+    with pytest.raises(ProtocolError, match=r"FormatError: a byte no msgpack type starts with; 3 bytes starting c1 00 01"):
+        unpack(b"\xc1\x00\x01")  # msgpack's FormatError has no message of its own: ours says what came
+    with pytest.raises(ProtocolError, match=r"ExtraData: .*as text 'hello'"):
+        unpack(b"hello")
     assert error_message(unpack(pack("error", {"error": "boom", "fatal": True}, 1))) == "server error: boom (fatal)"
     with pytest.raises(ProtocolError):
         parse_action({"dance": 1})

@@ -139,12 +139,31 @@ def pack(kind: str, payload: dict, seq: int) -> bytes:
                          use_bin_type=True)
 
 
+def frame_detail(data, e: Exception) -> str:
+    """What was wrong with bytes that are not msgpack: the error (msgpack's FormatError has no
+    message of its own), the frame's size, its first bytes and whether it reads as text."""
+    reason = str(e) or {"FormatError": "a byte no msgpack type starts with",
+                        "StackError": "nested too deep"}.get(type(e).__name__, "invalid")
+    if isinstance(data, str):
+        return f"{type(e).__name__}: {reason}; a text frame of {len(data)} characters: {data[:40]!r}"
+    raw = bytes(data) if isinstance(data, (bytes, bytearray, memoryview)) else b""
+    head = raw[:16].hex(" ")
+    text = ""
+    try:
+        t = raw[:40].decode("utf-8")
+        if t.isprintable():
+            text = f", as text {t!r}"
+    except UnicodeDecodeError:
+        pass
+    return f"{type(e).__name__}: {reason}; {len(raw)} bytes starting {head or '(empty)'}{text}"
+
+
 def unpack(data) -> dict:
     """A frame, checked: msgpack map with type, payload (map), seq (int) and timestamp."""
     try:
         frame = msgpack.unpackb(data, raw=False)
     except Exception as e:  # noqa: BLE001
-        raise ProtocolError(f"not a msgpack frame: {type(e).__name__}: {e}") from e
+        raise ProtocolError(f"not a msgpack frame ({frame_detail(data, e)})") from e
     if not isinstance(frame, dict) or not {"type", "payload", "seq", "timestamp"} <= set(frame):
         raise ProtocolError(f"a frame must be a map with type, payload, seq and timestamp, got {brief(frame)}")
     kind, seq = frame["type"], frame["seq"]
