@@ -44,23 +44,23 @@ test-gpu:
 
 # every GPU figure in one report: data/08_reports/bench_gpu.{json,md} and docs/bench_gpu.md
 bench-gpu:
-	$(BIN)/python -m benchmarks.bench_gpu --docs $(ARGS)
+	$(BIN)/python -m benchmarks.gpu.bench_gpu --docs $(ARGS)
 
 REAL_INDOOR ?= ../shared/data/real_indoor/fungi_room_lod3.spz ../shared/data/real_indoor/wangsha_hall_lod3.spz
 # on a host with several GPUs (make setup-gpu first): the release stages over every GPU, 1 GPU vs
 # all, one env group per GPU; data/08_reports/multi_gpu.json, merged into bench-gpu's report
 bench-multi-gpu:
-	$(BIN)/python -m benchmarks.multi_gpu --real $(REAL_INDOOR) --out data/08_reports $(ARGS)
-	$(BIN)/python -m benchmarks.multi_gpu --markdown --out data/08_reports
+	$(BIN)/python -m benchmarks.gpu.multi_gpu --real $(REAL_INDOOR) --out data/08_reports $(ARGS)
+	$(BIN)/python -m benchmarks.gpu.multi_gpu --markdown --out data/08_reports
 
 # the render check's per-ray hits with every backend here (numba; PyTorch on CUDA when present)
 # at bench-real's poses (make bench-real first: its data root gives the poses and alignments)
 bench-render-check: $(STAMP)
-	$(BIN)/python -m benchmarks.render_check_gpu prepare --data data --out data/08_reports/render_check_poses
-	$(BIN)/python -m benchmarks.render_check_gpu run data/08_reports/render_check_poses \
+	$(BIN)/python -m benchmarks.captures.render_check_gpu prepare --data data --out data/08_reports/render_check_poses
+	$(BIN)/python -m benchmarks.captures.render_check_gpu run data/08_reports/render_check_poses \
 		--source fungi_room=$(word 1,$(REAL_INDOOR)) --source wangsha_hall=$(word 2,$(REAL_INDOOR)) \
 		--out data/08_reports/render_check_gpu.json $(ARGS)
-	$(BIN)/python -m benchmarks.render_check_gpu compare data/08_reports/render_check_gpu.json
+	$(BIN)/python -m benchmarks.captures.render_check_gpu compare data/08_reports/render_check_gpu.json
 
 dataset: $(STAMP)
 	$(BIN)/python -m pipeline $(ARGS)
@@ -84,32 +84,32 @@ bench-stale: $(STAMP)
 	$(BIN)/python -m benchmarks.pages stale --strict
 
 bench-spatial: $(STAMP)
-	$(BIN)/python -m benchmarks.spatial --docs $(ARGS)
+	$(BIN)/python -m benchmarks.map.spatial --docs $(ARGS)
 
 # the episode dataset of the default scenes: Table-4 style summary, throughput, re-checks
 bench-episodes: $(STAMP)
-	$(BIN)/python -m benchmarks.episodes --docs $(ARGS)
+	$(BIN)/python -m benchmarks.dataset.episodes --docs $(ARGS)
 
 # closed-loop figures on this machine (oracle / random on the dataset, env overhead, CPU renderer
 # steps/s); merges data/08_reports/eval_gpu.json when a CUDA run (bench-eval-gpu) left one there
 bench-eval: $(STAMP)
-	$(BIN)/python -m benchmarks.eval --docs $(ARGS)
+	$(BIN)/python -m benchmarks.closed_loop.eval --docs $(ARGS)
 
 bench-eval-gpu: $(STAMP)
-	$(BIN)/python -m benchmarks.eval --gpu $(ARGS)
+	$(BIN)/python -m benchmarks.closed_loop.eval --gpu $(ARGS)
 
 # semantic precision (valid-centre rate, recall; 3 corruption levels, ablations, naive baseline) on
 # 10 synthetic scenes and seconds per scene; merges data/08_reports/semantics_gpu.json when a CUDA
 # run (bench-semantics-gpu) left one there
 bench-semantics: $(STAMP)
-	$(BIN)/python -m benchmarks.semantics $(ARGS)
+	$(BIN)/python -m benchmarks.goals.semantics $(ARGS)
 	# the lifting on real labelled geometry, where ../shared/data/real_labelled is present
 	if [ -d ../shared/data/real_labelled/scannet_scene0000_02 ]; then \
-	  $(BIN)/python -m benchmarks.semantics_real --docs --scan ../shared/data/real_labelled/scannet_scene0000_02; \
-	  $(BIN)/python -m benchmarks.semantics_detector --docs --scan ../shared/data/real_labelled/scannet_scene0000_02; fi
+	  $(BIN)/python -m benchmarks.goals.semantics_real --docs --scan ../shared/data/real_labelled/scannet_scene0000_02; \
+	  $(BIN)/python -m benchmarks.goals.semantics_detector --docs --scan ../shared/data/real_labelled/scannet_scene0000_02; fi
 
 bench-semantics-gpu: $(STAMP)
-	$(BIN)/python -m benchmarks.semantics --gpu $(ARGS)
+	$(BIN)/python -m benchmarks.goals.semantics --gpu $(ARGS)
 
 # the release folder users download, from the finished data root (make dataset first; the same
 # ARGS as the dataset was made with, plus release.* keys), e.g. make release ARGS="--version 1.0.0"
@@ -124,37 +124,37 @@ verify-release: $(STAMP)
 # a release of the 2,000-scene simulation: time, peak memory, files, bytes, verify-release time and the
 # 22 M-episode projection -> data/08_reports/bench_release.{json,md}, docs/bench_release.md
 bench-release: $(STAMP)
-	$(BIN)/python -m benchmarks.release --docs $(ARGS)
+	$(BIN)/python -m benchmarks.publishing.release --docs $(ARGS)
 
 # evaluate an agent on the dataset, e.g. make eval ARGS="evaluate.agent=depth_reactive"
 eval: $(STAMP)
 	$(BIN)/python -m pipeline stages=[evaluate] $(ARGS)
 
 # on a CUDA machine: writes data/08_reports/voxelize_gpu.json; bench-spatial merges it (or
-# `python -m benchmarks.spatial --merge-gpu` folds it into an existing report)
+# `python -m benchmarks.map.spatial --merge-gpu` folds it into an existing report)
 # the real indoor scenes of ../shared/data/real_indoor end to end (catalogs/real_indoor.yaml), the
 # render-based costmap check, and the realistic synthetic scenes against the mesh
 bench-real: $(STAMP)
-	$(BIN)/python -m benchmarks.real $(ARGS)
+	$(BIN)/python -m benchmarks.captures.real $(ARGS)
 
 # on a CUDA machine (make setup-gpu first): a 3DGS trained with gsplat on views of the real ScanNet
 # scan, in the scan's frame -> data/trained_scan/ (model.ply, cameras.json, train.json); bench-real
-# then compares its costmap with the scan (benchmarks.scan_truth --model)
+# then compares its costmap with the scan (benchmarks.captures.scan_truth --model)
 SCAN ?= ../shared/data/real_labelled/scannet_scene0000_02
 bench-trained-scan:
-	$(BIN)/python -m benchmarks.train_on_scan $(SCAN) data/trained_scan $(ARGS)
+	$(BIN)/python -m benchmarks.captures.train_on_scan $(SCAN) data/trained_scan $(ARGS)
 
 # scene and region screening: the quality layer against injected blur and holes on realistic
 # synthetic scenes, and on the real indoor scenes (their screen stage run first; pictures and the
 # sharpness cross-check) -> data/08_reports/screening.json, docs/bench_screening.md
 bench-screening: $(STAMP)
 	$(BIN)/python -m pipeline stages=[screen] scenes=real_indoor data_root=data/real_indoor
-	$(BIN)/python -m benchmarks.screening --real-data data/real_indoor --docs $(ARGS)
+	$(BIN)/python -m benchmarks.captures.screening --real-data data/real_indoor --docs $(ARGS)
 
 # issue 13's proof (about two hours on two cores): storage of the default and real datasets, the
 # release cost (one-core sample runs of a real and a synthetic 1.5 M-Gaussian scene at 1/10 of the
 # release density; GPU stage times from release_gpu.json, written on a CUDA machine by
-# `python -m benchmarks.release_gpu`), the 2,000-scene simulation, the SLURM tests, the CPU renderer
+# `python -m benchmarks.publishing.release_gpu`), the 2,000-scene simulation, the SLURM tests, the CPU renderer
 COST = executor=sync goal_images.enabled=true task.pointnav.episodes_per_scene=400 \
        task.imagenav.episodes_per_scene=400 task.objectnav.episodes_per_scene=280
 ONE_CORE = NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 SOURCE_DATE_EPOCH=1700000000
@@ -165,16 +165,16 @@ bench-scale: $(STAMP)
 	    asset.aligned_format=spz voxelize.store_opacity=false
 	$(ONE_CORE) $(BIN)/python -m pipeline data_root=data/cost_real scenes=real_indoor scenes.limit=1 $(COST)
 	$(ONE_CORE) $(BIN)/python -m pipeline data_root=data/cost_synthetic scenes.count=1 scenes.num_gaussians=1500000 $(COST)
-	$(BIN)/python -m benchmarks.bench_scale cost data/cost_real data/cost_synthetic
-	$(BIN)/python -m benchmarks.render_cpu --real-root data/real_indoor
-	$(BIN)/python -m benchmarks.render_cpu --bound --real-root data/real_indoor
-	$(BIN)/python -m benchmarks.bench_scale sim --root data/sim
-	$(BIN)/python -m benchmarks.bench_scale slurm
-	$(BIN)/python -m benchmarks.bench_scale report --data data --real-root data/real_indoor \
+	$(BIN)/python -m benchmarks.scale.bench_scale cost data/cost_real data/cost_synthetic
+	$(BIN)/python -m benchmarks.scale.render_cpu --real-root data/real_indoor
+	$(BIN)/python -m benchmarks.scale.render_cpu --bound --real-root data/real_indoor
+	$(BIN)/python -m benchmarks.scale.bench_scale sim --root data/sim
+	$(BIN)/python -m benchmarks.scale.bench_scale slurm
+	$(BIN)/python -m benchmarks.scale.bench_scale report --data data --real-root data/real_indoor \
 	    --compact-root data/real_indoor_compact --docs docs/bench_scale.md
 
 bench-spatial-gpu: $(STAMP)
-	$(BIN)/python -m benchmarks.voxelize_gpu $(ARGS)
+	$(BIN)/python -m benchmarks.map.voxelize_gpu $(ARGS)
 
 # sharded array job on a batch cluster: make submit SHARDS=64 SCHEDULER=slurm ARGS="scenes=synthetic_large"
 # (SUBMIT_FLAGS: more options of pipeline.submit, e.g. "--wait --cpus 4 --mem 16G --queue cpu")
@@ -196,15 +196,15 @@ test-faults: $(STAMP)
 	mkdir -p data/08_reports
 	NAVARENA_FAULTS_KILLS=20 NAVARENA_FAULTS_REPORT=data/08_reports/faults_scenarios.json \
 	    $(BIN)/python -m pytest -q -m faults tests/test_faults.py $(ARGS)
-	$(BIN)/python -m benchmarks.fuzz_frames --cases 10000 > data/fuzz_frames.log 2>&1 & f=$$!; \
-	$(BIN)/python -m benchmarks.fuzz_readers --cases 10000 --kinds $(FUZZ_A) --work /tmp/navarena_fuzz_a \
+	$(BIN)/python -m benchmarks.robustness.fuzz_frames --cases 10000 > data/fuzz_frames.log 2>&1 & f=$$!; \
+	$(BIN)/python -m benchmarks.robustness.fuzz_readers --cases 10000 --kinds $(FUZZ_A) --work /tmp/navarena_fuzz_a \
 	    --out data/08_reports/fuzz_a > data/fuzz_a.log 2>&1 & a=$$!; \
-	$(BIN)/python -m benchmarks.fuzz_readers --cases 10000 --kinds $(FUZZ_B) --work /tmp/navarena_fuzz_b \
+	$(BIN)/python -m benchmarks.robustness.fuzz_readers --cases 10000 --kinds $(FUZZ_B) --work /tmp/navarena_fuzz_b \
 	    --out data/08_reports/fuzz_b; b=$$?; \
 	wait $$a; ra=$$?; wait $$f; rf=$$?; tail -3 data/fuzz_frames.log data/fuzz_a.log; test $$b$$ra$$rf = 000
-	$(BIN)/python -m benchmarks.fuzz_readers --merge data/08_reports/fuzz_a/fuzz_readers.json \
+	$(BIN)/python -m benchmarks.robustness.fuzz_readers --merge data/08_reports/fuzz_a/fuzz_readers.json \
 	    data/08_reports/fuzz_b/fuzz_readers.json
-	$(BIN)/python -m benchmarks.faults --docs --merge data/08_reports/faults_scenarios.json
+	$(BIN)/python -m benchmarks.robustness.faults --docs --merge data/08_reports/faults_scenarios.json
 
 test-slurm: $(STAMP)
 	scripts/slurm_localhost.sh

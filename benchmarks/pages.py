@@ -41,38 +41,38 @@ class Page:
 
 
 PAGES: dict[str, Page] = {
-    "bench_spatial.md": Page("make bench-spatial", _SPATIAL + ("benchmarks/spatial.py",)),
-    "bench_episodes.md": Page("make bench-episodes", _PIPELINE + ("benchmarks/episodes.py",)),
-    "bench_eval.md": Page("make bench-eval", _PIPELINE + ("benchmarks/eval.py",)),
-    "bench_real.md": Page("make bench-real", _PIPELINE + ("benchmarks/real.py", "benchmarks/scan_truth.py",
+    "bench_spatial.md": Page("make bench-spatial", _SPATIAL + ("benchmarks/map/spatial.py",)),
+    "bench_episodes.md": Page("make bench-episodes", _PIPELINE + ("benchmarks/dataset/episodes.py",)),
+    "bench_eval.md": Page("make bench-eval", _PIPELINE + ("benchmarks/closed_loop/eval.py",)),
+    "bench_real.md": Page("make bench-real", _PIPELINE + ("benchmarks/captures/real.py", "benchmarks/captures/scan_truth.py",
                                                           "catalogs/real_indoor.yaml")),
     "bench_screening.md": Page("make bench-screening", _SPATIAL + ("stages/screen", "navcore/nav/screening.py",
-                                                                   "navcore/render", "benchmarks/screening.py")),
-    "bench_reflections.md": Page("python -m benchmarks.reflections --docs",
+                                                                   "navcore/render", "benchmarks/captures/screening.py")),
+    "bench_reflections.md": Page("python -m benchmarks.map.reflections --docs",
                                  ("stages/align", "stages/synthesize", "navcore/gaussians",
-                                  "benchmarks/reflections.py", "benchmarks/spatial.py")),
+                                  "benchmarks/map/reflections.py", "benchmarks/map/spatial.py")),
     "bench_semantics.md": Page("make bench-semantics", ("stages/semantics", "navcore/instances.py", "navcore/render",
-                                                        "stages/synthesize", "benchmarks/semantics.py")),
+                                                        "stages/synthesize", "benchmarks/goals/semantics.py")),
     "bench_semantics_real.md": Page("make bench-semantics", ("stages/semantics", "navcore/instances.py",
-                                                             "navcore/labels", "benchmarks/semantics_real.py")),
+                                                             "navcore/labels", "benchmarks/goals/semantics_real.py")),
     "bench_semantics_detector.md": Page("make bench-semantics",
                                         ("stages/semantics", "navcore/instances.py", "navcore/labels", "navcore/io/models.py",
-                                         "benchmarks/semantics_detector.py", "benchmarks/semantics_real.py")),
-    "bench_semantics_views.md": Page("python -m benchmarks.semantics_views --data DATA",
-                                     ("stages/semantics", "navcore/instances.py", "benchmarks/semantics_views.py")),
-    "bench_blind_views.md": Page("python -m benchmarks.blind_views --docs docs/bench_blind_views.md",
+                                         "benchmarks/goals/semantics_detector.py", "benchmarks/goals/semantics_real.py")),
+    "bench_semantics_views.md": Page("python -m benchmarks.goals.semantics_views --data DATA",
+                                     ("stages/semantics", "navcore/instances.py", "benchmarks/goals/semantics_views.py")),
+    "bench_blind_views.md": Page("python -m benchmarks.dataset.blind_views --docs docs/bench_blind_views.md",
                                  ("stages/costmap", "stages/episodes", "navcore/render", "navcore/gaussians/content.py",
-                                  "benchmarks/blind_views.py")),
+                                  "benchmarks/dataset/blind_views.py")),
     "bench_faults.md": Page("make test-faults", ("pipeline", "navcore/io", "navcore/gaussians/formats",
-                                                 "benchmarks/faults.py", "benchmarks/fuzz_frames.py",
-                                                 "benchmarks/fuzz_readers.py", "tests/test_faults.py")),
+                                                 "benchmarks/robustness/faults.py", "benchmarks/robustness/fuzz_frames.py",
+                                                 "benchmarks/robustness/fuzz_readers.py", "tests/test_faults.py")),
     "bench_gpu.md": Page("make bench-gpu", ("navcore/render", "navcore/voxels", "stages/semantics", "stages/evaluate",
-                                            "benchmarks/bench_gpu.py", "benchmarks/multi_gpu.py",
-                                            "benchmarks/render_gpu.py")),
+                                            "benchmarks/gpu/bench_gpu.py", "benchmarks/gpu/multi_gpu.py",
+                                            "benchmarks/gpu/render_gpu.py")),
     "bench_release.md": Page("make bench-release", ("pipeline/release", "navarena/verify_release.py", "navcore/io/release.py",
-                                                    "navcore/nav/eval_set.py", "benchmarks/release.py")),
-    "bench_scale.md": Page("make bench-scale", _PIPELINE + ("benchmarks/bench_scale.py", "benchmarks/storage.py",
-                                                            "benchmarks/render_cpu.py")),
+                                                    "navcore/nav/eval_set.py", "benchmarks/publishing/release.py")),
+    "bench_scale.md": Page("make bench-scale", _PIPELINE + ("benchmarks/scale/bench_scale.py", "benchmarks/dataset/storage.py",
+                                                            "benchmarks/scale/render_cpu.py")),
 }
 
 
@@ -108,6 +108,19 @@ def read_stamp(path: Path) -> dict | None:
     return None if m is None else {"commit": m["commit"], "dirty": m["dirty"] == "1", "date": m["date"]}
 
 
+def changed_inputs(commit: str, inputs: tuple[str, ...], root: Path = ROOT) -> list[str]:
+    """Input files whose content changed between `commit` and the working tree; a file only moved
+    (a rename with identical content, e.g. benchmarks/ regrouped into sections) is not a change."""
+    under = lambda path: any(path == i or path.startswith(i.rstrip("/") + "/") for i in inputs)  # noqa: E731
+    out = []
+    for line in _git("diff", "--name-status", "-M", commit, cwd=root).splitlines():
+        status, *paths = line.split("\t")
+        if status == "R100":
+            continue
+        out += [p for p in paths[-1:] if under(p)] + [p for p in paths[:-1] if under(p) and status.startswith("R")]
+    return out
+
+
 def stale_pages(root: Path = ROOT) -> dict[str, list[str]]:
     """Page name -> why it is stale: the input files changed between its commit and the working
     tree (uncommitted changes included), or a missing / unknown stamp, or a dirty run."""
@@ -122,7 +135,7 @@ def stale_pages(root: Path = ROOT) -> dict[str, list[str]]:
             out[name] = ["no bench-page stamp"]
             continue
         try:
-            changed = _git("diff", "--name-only", st["commit"], "--", *page.inputs, cwd=root).splitlines()
+            changed = changed_inputs(st["commit"], page.inputs, root)
             changed += _git("ls-files", "--others", "--exclude-standard", "--", *page.inputs, cwd=root).splitlines()
         except subprocess.CalledProcessError:
             out[name] = [f"commit {st['commit'][:7]} is not in this repository's history"]

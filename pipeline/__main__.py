@@ -23,7 +23,7 @@ def _app(cfg) -> None:
 
 
 TOOLS = {"inspect": ("pipeline.inspect_scene", "a 3DGS file before any run: format, size, extent, up axis, picture"),
-         "doctor": ("pipeline.doctor", "what this machine has: Python, packages, GPU, gsplat, FFmpeg, extras"),
+         "doctor": ("navarena.doctor", "what this machine has: Python, packages, GPU, gsplat, FFmpeg, extras"),
          "export-lerobot": ("navarena.lerobot", "a split of a data root as a LeRobot dataset"),
          "render-episodes": ("navarena.render_episodes", "episode videos and an HTML report"),
          "serve-agent": ("stages.evaluate.protocol.cli", "serve an agent over the agent-server protocol"),

@@ -198,3 +198,38 @@ class NavArenaConfig:
 def register_configs() -> None:
     cs = ConfigStore.instance()
     cs.store(name="navarena_schema", node=NavArenaConfig)
+
+
+def unknown_keys(cfg) -> list[str]:
+    """Keys of a composed config that the schema does not know (`+evaluate.agnet=oracle` adds one
+    Hydra accepts), each with the closest known key as a suggestion: ["evaluate.agnet (did you mean
+    evaluate.agent?)"]. Free dicts of the schema (task names, goal maps, splits, ...) take any key."""
+    import dataclasses
+    import difflib
+    import typing
+
+    from omegaconf import OmegaConf
+
+    data = OmegaConf.to_container(cfg, resolve=False) if not isinstance(cfg, dict) else cfg
+    out: list[str] = []
+
+    def walk(d: dict, cls: type, prefix: str) -> None:
+        hints = typing.get_type_hints(cls)
+        names = [f.name for f in dataclasses.fields(cls)]
+        for k, v in d.items():
+            if k not in names:
+                near = difflib.get_close_matches(str(k), names, n=1, cutoff=0.6)
+                out.append(f"{prefix}{k}" + (f" (did you mean {prefix}{near[0]}?)" if near else ""))
+                continue
+            tp = hints.get(k)
+            if dataclasses.is_dataclass(tp) and isinstance(v, dict):
+                walk(v, tp, f"{prefix}{k}.")
+            elif typing.get_origin(tp) is dict and isinstance(v, dict):
+                args = typing.get_args(tp)
+                if len(args) == 2 and dataclasses.is_dataclass(args[1]):
+                    for name, sub in v.items():
+                        if isinstance(sub, dict):
+                            walk(sub, args[1], f"{prefix}{k}.{name}.")
+
+    walk(data, NavArenaConfig, "")
+    return out

@@ -18,8 +18,8 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from navcore.io.atomic import sweep_stale_temporaries
 from navcore.io.catalog import Catalog, SceneEntry
 from pipeline.backends import run_on_dask
+from pipeline.config import unknown_keys
 from pipeline.config_guard import config_changes, describe, refusal
-from pipeline.config_reference import unknown_keys
 from pipeline.episode_progress import EpisodeWatcher, rate_column
 from pipeline.graph import closure, config_hashes, scene_hash
 from pipeline.summary import build_summary, print_summary, write_summary

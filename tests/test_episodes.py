@@ -8,7 +8,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 
-from benchmarks.render_gpu import psnr
+from benchmarks.gpu.render_gpu import psnr
 from navcore.gaussians.content import without_splats
 from navcore.gaussians.model import GaussianScene
 from navcore.io.datasets import AlignedGaussianDataset, CostmapDataset, GaussianDataset
@@ -493,10 +493,10 @@ def test_imagenav_goal_cameras_do_not_face_a_wall_at_arms_length(room_with_door)
 
 
 def test_blind_views_benchmark_finds_none_where_the_costmap_knows_every_gaussian(episode_run, tmp_path):
-    """benchmarks.blind_views on the generated scene (no floaters: its costmap is made of all its
+    """benchmarks.dataset.blind_views on the generated scene (no floaters: its costmap is made of all its
     Gaussians): every view it counts is rendered, none is blocked by something the costmap lacks,
     and views facing the walls the costmap knows are not counted as blocked."""
-    import benchmarks.blind_views as bv
+    import benchmarks.dataset.blind_views as bv
 
     root, _, _ = episode_run
     rep = bv.main(["--root", str(root), "--per-kind", "12", "--out", str(tmp_path)])
@@ -799,7 +799,7 @@ def test_taut_path_wraps_a_disk_like_the_exact_geodesic():
     interval and stays valid, the grid graph's path through cell centres does not (issue 46); the
     benchmark's reference (a visibility graph over the valid region's boundary sampled finely)
     lies within it too."""
-    from benchmarks.episodes import VisibilityReference
+    from benchmarks.dataset.episodes import VisibilityReference
     from navcore.nav.geodesic import taut_path
 
     cm = _disk_costmap()

@@ -289,7 +289,7 @@ def test_real_scannet_scan_yields_objectnav_for_every_goal_category(tmp_path, sc
     import open3d as o3d
     from omegaconf import OmegaConf
 
-    from benchmarks.scan_truth import rates
+    from benchmarks.captures.scan_truth import rates
     from navcore.gaussians.formats import read_gaussians
     from pipeline.executor import open_catalog
 
@@ -325,13 +325,13 @@ def test_scannet_vertices_outside_every_group_keep_their_nyu40_class(tmp_path):
 
 
 def test_training_views_of_a_scan_stand_in_the_free_room_and_the_model_file_reads_back(tmp_path, scannet_scan):
-    """benchmarks.train_on_scan's CPU parts on the real ScanNet scan: every training camera stands
+    """benchmarks.captures.train_on_scan's CPU parts on the real ScanNet scan: every training camera stands
     where no scanned point is within 0.4 m horizontally in the 0.1-1.8 m band, 1.1-1.5 m above
     the floor, as a right-handed OpenCV frame pitched 10 degrees down; the model file it writes
     reads back through the project's INRIA reader to the same Gaussians."""
     from scipy.spatial import cKDTree
 
-    from benchmarks.train_on_scan import SH_C0, room_poses, write_ply
+    from benchmarks.captures.train_on_scan import SH_C0, room_poses, write_ply
     from navcore.gaussians.formats import read_gaussians
 
     coord = np.load(scannet_scan / "coord.npy").astype(np.float64)

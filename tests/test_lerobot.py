@@ -8,7 +8,7 @@ import pandas as pd
 import pytest
 import torch
 
-from benchmarks.render_gpu import psnr
+from benchmarks.gpu.render_gpu import psnr
 
 
 def _lerobot():

@@ -15,7 +15,7 @@ pytest.importorskip("transformers", reason="the open_vocab extra: pip install -e
 def models(tmp_path_factory, torchvision_shim):
     """(detector folder, masker folder): tiny OWLv2 (64 px, 16 px patches, a letters-only CLIP BPE
     vocabulary) and SAM (64 px) with random weights, written by save_pretrained."""
-    from benchmarks.open_vocab_timing import build_models
+    from benchmarks.goals.open_vocab_timing import build_models
 
     return build_models(tmp_path_factory.mktemp("open_vocab"), tiny=True)
 

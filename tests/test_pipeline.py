@@ -624,7 +624,7 @@ def test_catalog_datasets_round_trip_atomically_and_find_partitions(tmp_path, pr
 
 
 def test_compare_data_normalises_roots_and_reports_every_difference(tmp_path):
-    from benchmarks.compare_data import compare
+    from benchmarks.dataset.compare_data import compare
 
     for root in ("a", "b"):
         d = tmp_path / root / "01_scenes" / "s"
@@ -643,7 +643,7 @@ def test_compare_data_normalises_roots_and_reports_every_difference(tmp_path):
 def test_storage_measure_counts_a_hard_link_to_the_source_once_and_names_stale_ones(tmp_path):
     import os
 
-    from benchmarks.storage import measure
+    from benchmarks.dataset.storage import measure
 
     src = tmp_path / "src.ply"
     src.write_bytes(b"x" * 1000)

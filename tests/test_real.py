@@ -421,7 +421,7 @@ def test_floor_is_the_mirror_plane_of_a_faded_glossy_floor(seed):
     mirrors (a plane off by dz puts every reflected surface 2 dz off); two wall mirrors add rooms
     behind the walls. Floor within 5 cm and 0.2 deg, and the costmap's state FP / FN against the
     mesh within 1 point of the scene without reflections."""
-    from benchmarks.spatial import run_scene
+    from benchmarks.map.spatial import run_scene
     from navcore.nav.embodiment import Embodiment
     from navcore.voxels.field import VoxelizeConfig
 
@@ -475,7 +475,7 @@ def test_quality_layer_finds_injected_blur_and_holes():
     """The reconstruction-quality layer (stages.screen.quality.py) on a moderate synthetic scene
     with two blurred and two hole regions: recall >= 90 % and precision >= 80 % per kind (issue
     35's targets), and nothing flagged on the same scene without them beyond a few cells."""
-    from benchmarks.screening import synthetic
+    from benchmarks.captures.screening import synthetic
 
     r = synthetic(201, "moderate", 60_000, 2, 0.7)
     for kind in ("blur", "hole", "flagged"):
@@ -489,7 +489,7 @@ def test_capture_camera_cue_flags_what_no_camera_saw():
     capture path: with every camera little is unseen; with the cameras of one end only, every
     cell beyond the render range of all of them is unseen, and no cell is seen by more cameras
     than with all of them."""
-    from benchmarks.spatial import align_synthetic
+    from benchmarks.map.spatial import align_synthetic
     from navcore.gaussians.cameras import cameras_from_json
     from navcore.nav.costmap import Costmap
     from navcore.nav.embodiment import Embodiment

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from benchmarks.render_gpu import psnr
+from benchmarks.gpu.render_gpu import psnr
 from navcore.gaussians.model import GaussianScene
 from navcore.gaussians.sh import C0
 from navcore.render import Renderer
@@ -312,7 +312,7 @@ def test_gaussians_behind_a_finished_wall_change_nothing():
 
 
 def test_the_gaussians_the_rasteriser_reads_make_the_same_frame(small_scene):
-    # visits (benchmarks.render_cpu --bound): the Gaussians read are the ones a perfect occlusion
+    # visits (benchmarks.scale.render_cpu --bound): the Gaussians read are the ones a perfect occlusion
     # culling would keep, so rendering them alone gives the frame to the byte; hidden ones are not read
     from navcore.render import cpu_fast
 

@@ -44,7 +44,7 @@ def run(cmd, cwd, check=True, **kw):
 
 
 def same_outputs(a: Path, b: Path):
-    from benchmarks.compare_data import compare
+    from benchmarks.dataset.compare_data import compare
 
     rep = compare(a, b)
     assert rep["files"][0] > 20 and not (rep["only_first"] or rep["only_second"] or rep["differing"]), rep

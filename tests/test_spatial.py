@@ -169,7 +169,7 @@ def fcl_states(small_scene):
     """The small scene aligned, 1500 states in its rooms (aligned frame) and FCL's verdict on each
     against the ground-truth mesh."""
     pytest.importorskip("fcl")
-    from benchmarks.spatial import FclReference, sample_queries
+    from benchmarks.map.spatial import FclReference, sample_queries
     from stages.synthesize.surface import layout_mesh
 
     _, _, t = aligned_scene(small_scene)

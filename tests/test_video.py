@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from benchmarks.render_gpu import psnr
+from benchmarks.gpu.render_gpu import psnr
 from navcore.io.video import H264Writer
 
 

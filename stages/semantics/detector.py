@@ -16,7 +16,7 @@ the wall behind a chair and the floor under it get no vote.
 Per-view precision of a small COCO detector on renders is low; what makes a goal is multi-view
 consistency (lifting: a cell needs votes from `lifting.min_support` views, and a detector instance
 needs `min_views` distinct views whose masks agree in 3D). The per-category thresholds and the
-allow-list below were chosen on the real labelled ScanNet scan (benchmarks/semantics_detector.py):
+allow-list below were chosen on the real labelled ScanNet scan (benchmarks/goals/semantics_detector.py):
 see docs/bench_semantics_detector.md.
 """
 from __future__ import annotations

@@ -1,0 +1,1 @@
+"""Real captures: the pipeline on trained scenes and the labelled scan, screening, render checks."""

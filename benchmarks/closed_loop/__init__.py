@@ -1,0 +1,1 @@
+"""Closed-loop evaluation: metrics, blocked-move dynamics, observations for training."""

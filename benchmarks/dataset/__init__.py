@@ -1,0 +1,1 @@
+"""The episode dataset: episodes, their checks and throughput, views, storage."""

@@ -1,0 +1,1 @@
+"""GPU figures: gsplat, the vectorised environment, several GPUs."""

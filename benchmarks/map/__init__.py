@@ -1,0 +1,1 @@
+"""The spatial layer: costmaps against mesh references, alignment, voxelization."""

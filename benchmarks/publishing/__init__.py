@@ -1,0 +1,1 @@
+"""The release: building and verifying it."""

@@ -1,0 +1,1 @@
+"""Faults and hostile input: injected faults, fuzzed readers and frames."""

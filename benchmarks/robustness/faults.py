@@ -1,0 +1,420 @@
+"""Fault injection: the pipeline's promises (resumable, failure-isolated, deterministic) under the
+faults a release job meets on a shared cluster. Each scenario runs a small pipeline (two synthetic
+scenes), injects its fault, finishes or resumes, and compares every stored output byte for byte
+with an undisturbed reference run (benchmarks.dataset.compare_data; time stamps pinned with
+SOURCE_DATE_EPOCH).
+
+Scenarios: kill_run (SIGKILL of the whole run at points spread over the stages, then a rerun that
+must redo nothing already done), kill_worker (SIGKILL of a Dask worker in the middle of each
+stage), full_disk (a size-limited tmpfs; root only), concurrent (two identical runs, and two
+shards, on one data root at once), damaged (outputs truncated or deleted behind their markers),
+determinism (1, 2 and 4 workers, and 3 shards run one after the other).
+
+    python -m benchmarks.robustness.faults [--kills 20] [--only kill_run,full_disk]   # -> data/08_reports/bench_faults.{json,md}
+"""
+from __future__ import annotations
+
+import argparse
+import fcntl
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.dataset.compare_data import compare
+from benchmarks.pages import write_page
+
+PROJECT = Path(__file__).resolve().parents[2]
+BASE = ("scenes.count=2", "scenes.num_gaussians=40000", "task.pointnav.episodes_per_scene=10",
+        "task.imagenav.episodes_per_scene=10", "task.objectnav.episodes_per_scene=10", "executor.dashboard=false")
+ENV = {"SOURCE_DATE_EPOCH": "1700000000", "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+
+
+def command(root: Path, *over: str) -> list[str]:
+    return [sys.executable, "-m", "pipeline", f"data_root={root}", *BASE, *over]
+
+
+def start(root: Path, *over: str, log: Path | None = None) -> subprocess.Popen:
+    out = open(log or os.devnull, "ab")
+    return subprocess.Popen(command(root, *over), cwd=PROJECT, env={**os.environ, **ENV}, stdout=out,
+                            stderr=subprocess.STDOUT, start_new_session=True)
+
+
+def run(root: Path, *over: str, timeout: float = 1800, log: Path | None = None) -> dict:
+    p = start(root, *over, log=log or root.parent / f"{root.name}.log")
+    rc = p.wait(timeout)
+    summary = json.loads((root / "_runs" / "latest.json").read_text()) if (root / "_runs" / "latest.json").exists() \
+        else {}
+    return {"rc": rc, "summary": summary}
+
+
+def markers(root: Path) -> set[tuple[str, str]]:
+    return {(p.parent.name, p.stem) for p in (root / "_markers").glob("*/*.json") if not p.stem.startswith("_")}
+
+
+def statuses(summary: dict, status: str) -> set[tuple[str, str]]:
+    return {(r["stage"], r["scene_id"]) for r in summary.get("results", []) if r["status"] == status}
+
+
+def mismatches(ref: Path, root: Path) -> list[str]:
+    c = compare(ref, root)
+    return [f"only in reference: {x}" for x in c["only_first"]] + [f"only here: {x}" for x in c["only_second"]] + \
+        [f"differs: {x}" for x in c["differing"]]
+
+
+def result(kind: str, injected: int, survived: int, bad: list[str], **extra) -> dict:
+    return {"kind": kind, "injected": injected, "survived": survived, "byte_mismatches": len(bad),
+            "mismatched_files": bad[:20], **extra}
+
+
+def held_lock(root: Path, stage: str) -> int | None:
+    """The pid holding a lock of `stage` now (a task of that stage is running there), or None."""
+    for lock in sorted((root / "_locks" / stage).glob("*.lock")):
+        try:
+            fd = os.open(lock, os.O_RDONLY)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+        except BlockingIOError:
+            parts = lock.read_text().split()
+            if len(parts) == 2 and parts[1].isdigit():
+                return int(parts[1])
+        finally:
+            os.close(fd)
+    return None
+
+
+# ---- scenarios --------------------------------------------------------------------------------
+
+def kill_run(ref: Path, work: Path, kills: int = 20, seed: int = 0) -> dict:
+    """SIGKILL the whole run (its process group) at `kills` points spread over the stages: the k-th
+    kill comes once the k/kills share of the reference's (stage, scene) markers exist, after a
+    random extra delay; then a rerun must complete, redo nothing that was done, and match."""
+    root = work / "kill_run"
+    total = len(markers(ref))
+    rng = np.random.default_rng(seed)
+    killed, points = 0, []
+    for k in range(kills):
+        target = min(total - 1, round(k * total / kills))
+        p = start(root, log=work / "kill_run.log")
+        while p.poll() is None and len(markers(root)) < target:
+            time.sleep(0.05)
+        time.sleep(float(rng.uniform(0.0, 1.5)))
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+            killed += 1
+            points.append(len(markers(root)))
+    before = markers(root)
+    r = run(root)
+    redone = sorted(before & statuses(r["summary"], "done"))
+    bad = mismatches(ref, root)
+    ok = r["rc"] == 0 and not r["summary"].get("failures") and not redone
+    return result("kill_run", killed, killed if ok and not bad else 0, bad, markers_at_kills=points,
+                  redone_after_rerun=[f"{s}/{c}" for s, c in redone], total_tasks=total)
+
+
+def kill_worker(ref: Path, work: Path) -> dict:
+    """A Dask LocalCluster of 2 workers; while the run goes, SIGKILL the worker process running a
+    task of each stage in turn (found through the task's lock file): the scheduler reruns the task
+    elsewhere, the run completes and matches."""
+    root = work / "kill_worker"
+    stages = ["ingest", "voxelize", "align", "costmap", "semantics", "asset", "episodes", "export"]
+    p = start(root, "executor=local", "executor.n_workers=2", "executor.threads_per_worker=1",
+              log=work / "kill_worker.log")
+    killed, hit = 0, []
+    pending = list(stages)
+    while p.poll() is None and pending:
+        for st in list(pending):
+            pid = held_lock(root, st)
+            if pid and pid != p.pid:
+                try:
+                    os.kill(pid, signal.SIGKILL)
+                    killed += 1
+                    hit.append(st)
+                except ProcessLookupError:
+                    pass
+                pending.remove(st)
+        time.sleep(0.02)
+    rc = p.wait(1800)
+    summary = json.loads((root / "_runs" / "latest.json").read_text())
+    failures = summary.get("failures", [])
+    bad = mismatches(ref, root)
+    ok = rc == 0 and not failures  # the run itself absorbed every kill: no rerun
+    return result("kill_worker", killed, killed if ok and not bad else 0, bad, stages_hit=hit,
+                  failures=[f"{f['stage']}/{f['scene_id']}: {f.get('error', '')[:160]}" for f in failures[:5]])
+
+
+def full_disk(ref: Path, work: Path) -> dict:
+    """A tmpfs a third the size of the reference's data: the run fails the scene whose write hits
+    the full disk with a clear error and no marker; after the disk grows, a rerun completes."""
+    mnt = work / "small_disk"
+    mnt.mkdir(parents=True, exist_ok=True)
+    size = sum(p.stat().st_size for p in ref.rglob("*") if p.is_file())
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={max(size // 3, 1 << 20)}",
+                                            "tmpfs", str(mnt)], capture_output=True).returncode:
+        return result("full_disk", 0, 0, [], skipped="cannot mount a tmpfs here (needs root)")
+    try:
+        root = mnt / "data"
+        log = work / "full_disk_run1.log"
+        r1 = run(root, log=log)
+        fails = r1["summary"].get("failures", [])
+        if not fails:  # no room left for the run summary itself: the console said it
+            import re
+
+            text = re.sub(r"\s+", " ", log.read_text(errors="replace"))
+            fails = [{"stage": m.group(1), "scene_id": m.group(2), "error": "disk full"}
+                     for m in re.finditer(r"failed (\S+) (\w+) \([^)]*\): disk full", text)]
+        full = [f for f in fails if "disk full" in f.get("error", "")]
+        trusted = [f"{f['stage']}/{f['scene_id']}" for f in full if (root / "_markers" / f["stage"] /
+                                                                      f"{f['scene_id']}.json").exists()]
+        subprocess.run(["mount", "-o", f"remount,size={size * 3}", str(mnt)], check=True)
+        r2 = run(root, log=work / "full_disk_run2.log")
+        bad = mismatches(ref, root)
+        ok = bool(full) and not trusted and r2["rc"] == 0 and not r2["summary"].get("failures")
+        return result("full_disk", len(full), len(full) if ok and not bad else 0, bad,
+                      errors=[f["error"][:200] for f in full[:3]], markers_of_failed=trusted)
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
+
+
+def concurrent(ref: Path, work: Path) -> dict:
+    """Two identical runs, then two shards, started at once on one data root: no (stage, scene)
+    is computed by both, nothing fails, the outputs match."""
+    out, injected, survived, bad_all = {}, 0, 0, []
+    for name, overs in (("identical", [(), ()]), ("shards", [("scenes.shard=0", "scenes.num_shards=2"),
+                                                               ("scenes.shard=1", "scenes.num_shards=2")])):
+        root = work / f"concurrent_{name}"
+        procs = [start(root, *o, log=work / f"concurrent_{name}_{i}.log") for i, o in enumerate(overs)]
+        rcs = [p.wait(1800) for p in procs]
+        runs = sorted((root / "_runs").glob("run-*.json"))
+        sums = [json.loads(p.read_text()) for p in runs]
+        done = [statuses(s, "done") for s in sums]
+        # a dataset-level step may run in both (under its lock, one after the other, each over all
+        # the scenes present then): the same files; scene tasks must not
+        twice = sorted(x for x in set.intersection(*done) if not x[0].endswith(":finalize")) if len(done) == 2 else []
+        fails = [f for s in sums for f in s.get("failures", [])]
+        bad = mismatches(ref, root)
+        injected += 1
+        ok = rcs == [0, 0] and len(sums) == 2 and not twice and not fails and not bad
+        survived += ok
+        bad_all += bad
+        out[name] = {"ok": ok, "computed_twice": [f"{s}/{c}" for s, c in twice], "failures": len(fails),
+                     "waited": sum(1 for s in sums for r in s.get("results", []) if r.get("waited_s"))}
+    return result("concurrent", injected, survived, bad_all, runs=out)
+
+
+def damaged(ref: Path, work: Path) -> dict:
+    """Outputs truncated or deleted behind their markers (one file of each stage's outputs): the
+    rerun notices from the markers' manifests, recomputes exactly those, and matches."""
+    root = work / "damaged"
+    shutil.copytree(ref, root, symlinks=True)
+    (root / "_runs").exists() and shutil.rmtree(root / "_runs")
+    rng = np.random.default_rng(1)
+    hurt = {}
+    for m in sorted((root / "_markers").glob("*/*.json")):
+        man = json.loads(m.read_text()).get("manifest") or {}
+        files = [k for k in man if not os.path.isabs(k) and (root / k).is_file()]
+        if not files:
+            continue
+        k = files[int(rng.integers(len(files)))]
+        f = root / k
+        if f.stat().st_nlink > 1:  # a hard link shares its bytes with the source: replace, do not cut
+            data = f.read_bytes()
+            f.unlink()
+            f.write_bytes(data)
+        if rng.random() < 0.5:
+            f.unlink()
+        else:
+            with open(f, "r+b") as fh:
+                fh.truncate(max(0, f.stat().st_size // 2))
+        hurt[(m.parent.name, m.stem)] = k
+    r = run(root)
+    redone = statuses(r["summary"], "done")
+    missed = sorted(set(hurt) - redone)
+    bad = mismatches(ref, root)
+    ok = r["rc"] == 0 and not r["summary"].get("failures") and not missed
+    return result("damaged", len(hurt), len(hurt) if ok and not bad else 0, bad,
+                  not_recomputed=[f"{s}/{c}" for s, c in missed])
+
+
+def determinism(ref: Path, work: Path) -> dict:
+    """The same config with 1, 2 and 4 Dask workers, and as 3 shards one after the other: every
+    stored byte equal to the reference (a sync run)."""
+    out, bad_all, survived = {}, [], 0
+    variants = {f"workers_{n}": [("executor=local", f"executor.n_workers={n}", "executor.threads_per_worker=1")]
+                for n in (1, 2, 4)}
+    variants["shards_3"] = [(f"scenes.shard={k}", "scenes.num_shards=3") for k in range(3)]
+    for name, runs_ in variants.items():
+        root = work / f"determinism_{name}"
+        rcs = [run(root, *o)["rc"] for o in runs_]
+        bad = mismatches(ref, root)
+        ok = all(rc == 0 for rc in rcs) and not bad
+        survived += ok
+        bad_all += bad
+        out[name] = {"ok": ok, "byte_mismatches": len(bad)}
+    return result("determinism", len(variants), survived, bad_all, variants=out)
+
+
+def out_of_memory(ref: Path, work: Path) -> dict:
+    """One scene far too large for the worker's memory limit, beside the reference's two: the
+    large scene fails with the reason (its worker killed by Dask's nanny on every try), the two
+    others complete and match the reference."""
+    from benchmarks.robustness.fuzz_readers import small_scene
+    from navcore.gaussians.formats import write_inria_ply
+
+    big = work / "big" / "scene.ply"
+    big.parent.mkdir(parents=True)
+    write_inria_ply(big, small_scene(10_000_000, 0, 3))  # 620 MB on disk, well over 1.5 GB once read
+    cat = work / "catalog.yaml"
+    cat.write_text("synthetic: {count: 2, first_seed: 0, prefix: synth, group: synthetic}\n"
+                   f"scenes:\n  - {{name: too_big, group: big, path: {big}, format: inria_ply}}\n")
+    root = work / "oom"
+    r = run(root, f"scenes.catalog={cat}", "executor=local", "executor.n_workers=1", "executor.threads_per_worker=1",
+            "executor.memory_limit=1500MB")
+    fails = r["summary"].get("failures", [])
+    failed_scenes = {f["scene"] for f in fails}
+    reason = next((f["error"] for f in fails if f["scene"] == "too_big" and f["status"] == "failed"), "")
+    shutil.rmtree(big.parent, ignore_errors=True)
+    bad = mismatches(ref, root)
+    # the big scene's outputs (none trusted) are not in the reference; the others must match it
+    bad = [b for b in bad if "/big/" not in b and not any(x in b for x in _scene_ids_of(root, "too_big"))]
+    ok = failed_scenes == {"too_big"} and "memory" in reason
+    return result("out_of_memory", 1, int(ok and not bad), bad, reason=reason[:300],
+                  failed_scenes=sorted(failed_scenes))
+
+
+def _scene_ids_of(root: Path, name: str) -> list[str]:
+    s = json.loads((root / "_runs" / "latest.json").read_text()) if (root / "_runs" / "latest.json").exists() else {}
+    return sorted({r["scene_id"] for r in s.get("results", []) if r["scene"] == name})
+
+
+SCENARIOS = {"kill_run": kill_run, "kill_worker": kill_worker, "full_disk": full_disk, "concurrent": concurrent,
+             "damaged": damaged, "determinism": determinism, "out_of_memory": out_of_memory}
+
+
+def code_digest() -> str:
+    """What the reference's bytes depend on: the packages' code, the configs and catalogs, the base
+    overrides. A reference made by other code is stale (its bytes legitimately differ)."""
+    h = hashlib.sha256(repr(BASE).encode())
+    for top in ("navcore", "stages", "pipeline", "conf", "catalogs"):
+        for f in sorted((PROJECT / top).rglob("*")):
+            if f.is_file() and f.suffix in (".py", ".yaml", ".json", ".csv", ".txt"):
+                h.update(str(f.relative_to(PROJECT)).encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()
+
+
+def reference(work: Path) -> Path:
+    """The undisturbed run every scenario compares with, reused while the code it was made with is
+    today's (its digest is stored beside it), made again otherwise."""
+    ref = work / "reference"
+    stamp, digest = work / "reference.code.sha256", code_digest()
+    if not stamp.exists() or stamp.read_text() != digest or not (ref / "_runs" / "latest.json").exists():
+        shutil.rmtree(ref, ignore_errors=True)
+        stamp.unlink(missing_ok=True)
+        r = run(ref)
+        if r["rc"] != 0 or r["summary"].get("failures"):
+            raise RuntimeError(f"the undisturbed reference run failed: {r['summary'].get('failures')}")
+        stamp.write_text(digest)
+    return ref
+
+
+def run_scenario(name: str, ref: Path, work: Path, kills: int = 20) -> dict:
+    """One scenario in a fresh folder work/name, timed."""
+    d = work / name
+    if d.exists():
+        shutil.rmtree(d, ignore_errors=True)
+    d.mkdir(parents=True)
+    t0 = time.perf_counter()
+    r = SCENARIOS[name](ref, d, kills) if name == "kill_run" else SCENARIOS[name](ref, d)
+    r["seconds"] = round(time.perf_counter() - t0, 1)
+    return r
+
+
+def markdown(rep: dict) -> str:
+    lines = ["# Fault injection and hostile input (issue 14)", "",
+             f"Machine: {rep['machine']}. Reproduce: `make test-faults`.", "",
+             "| fault | injected | survived | byte mismatches | seconds | notes |", "|---|---|---|---|---|---|"]
+    for r in rep["scenarios"].values():
+        notes = {k: v for k, v in r.items() if k not in ("kind", "injected", "survived", "byte_mismatches",
+                                                         "mismatched_files", "seconds")}
+        lines.append(f"| {r['kind']} | {r['injected']} | {r['survived']} | {r['byte_mismatches']} | "
+                     f"{r.get('seconds', '')} | {json.dumps(notes)[:300]} |")
+    lines += ["", f"Totals: {rep['faults_injected']} faults injected, {rep['faults_survived']} survived, "
+              f"{rep['byte_mismatches']} byte mismatches."]
+    fz = rep.get("fuzz")
+    if fz:
+        lines += ["", "| reader | cases |", "|---|---|"]
+        lines += [f"| {k} | {v:,} |" for k, v in fz["cases_per_reader"].items()]
+        lines += ["", f"Reader fuzzing: {fz['fuzz_cases']:,} cases, {fz['fuzz_crashes']} crashes, {fz['fuzz_hangs']} "
+                  "hangs (`python -m benchmarks.robustness.fuzz_readers`)."]
+    ff = rep.get("fuzz_frames")
+    if ff:
+        lines += ["", "| agent-server frame (side:type) | cases |", "|---|---|"]
+        lines += [f"| {k} | {v:,} |" for k, v in ff["cases_per_frame_type"].items()]
+        lines += ["", f"Frame fuzzing: {sum(ff['cases_per_frame_type'].values()):,} cases, {ff['crashes']} crashes "
+                  f"(memory included), {ff['hangs']} hangs (`python -m benchmarks.robustness.fuzz_frames`)."]
+    if "fuzz_cases" in rep:
+        lines += ["", f"All fuzzing: {rep['fuzz_cases']:,} cases, {rep['fuzz_crashes']} crashes, {rep['fuzz_hangs']} hangs."]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> dict:
+    from benchmarks import machine, write_report
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--work", default="/tmp/navarena_faults")
+    ap.add_argument("--kills", type=int, default=20)
+    ap.add_argument("--only", default=",".join(SCENARIOS))
+    ap.add_argument("--out", default="data/08_reports")
+    ap.add_argument("--docs", action="store_true", help="also write docs/bench_faults.md")
+    ap.add_argument("--merge", nargs="+", type=Path,
+                    help="instead of running: bench_faults.json files, later ones replacing earlier scenarios")
+    args = ap.parse_args(argv)
+    rep = {"machine": machine(), "base_overrides": list(BASE), "scenarios": {}}
+    if args.merge:
+        for f in args.merge:
+            r = json.loads(Path(f).read_text())
+            rep["scenarios"].update(r["scenarios"])
+            rep.setdefault("merged_from", []).append({"file": str(f), "scenarios": list(r["scenarios"])})
+    work = Path(args.work)
+    work.mkdir(parents=True, exist_ok=True)
+    ref = None if args.merge else reference(work)
+    for name in ([] if args.merge else args.only.split(",")):
+        rep["scenarios"][name] = r = run_scenario(name, ref, work, args.kills)
+        print(json.dumps(r), flush=True)
+    rep["faults_injected"] = sum(r["injected"] for r in rep["scenarios"].values())
+    rep["faults_survived"] = sum(r["survived"] for r in rep["scenarios"].values())
+    rep["byte_mismatches"] = sum(r["byte_mismatches"] for r in rep["scenarios"].values())
+    fz = Path(args.out) / "fuzz_readers.json"
+    if fz.exists():
+        f = json.loads(fz.read_text())
+        rep["fuzz"] = {k: f[k] for k in ("fuzz_cases", "fuzz_crashes", "fuzz_hangs", "cases_per_reader")}
+        rep.update({k: f[k] for k in ("fuzz_cases", "fuzz_crashes", "fuzz_hangs")})
+    ff = Path(args.out) / "fuzz_frames.json"
+    if ff.exists():  # frames (benchmarks.robustness.fuzz_frames) count into the fuzz totals too
+        f = json.loads(ff.read_text())
+        rep["fuzz_frames"] = {"cases_per_frame_type": {k: v["cases"] for k, v in f["kinds"].items()},
+                              "crashes": f["fuzz_frame_crashes"], "hangs": f["fuzz_frame_hangs"],
+                              "peak_rss_mb": f.get("peak_rss_mb")}
+        for ours, theirs in (("fuzz_cases", "fuzz_frame_cases"), ("fuzz_crashes", "fuzz_frame_crashes"),
+                             ("fuzz_hangs", "fuzz_frame_hangs")):
+            rep[ours] = rep.get(ours, 0) + f[theirs]
+    write_report(args.out, "bench_faults.json", rep)
+    (Path(args.out) / "bench_faults.md").write_text(markdown(rep))
+    if args.docs:
+        write_page("bench_faults.md", markdown(rep))
+    return rep
+
+
+if __name__ == "__main__":
+    main()

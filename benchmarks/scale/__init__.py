@@ -1,0 +1,1 @@
+"""Scale: the 2,000-scene run, storage per scene, the CPU renderer."""
