@@ -23,6 +23,7 @@ from pathlib import Path
 
 OUT = Path(__file__).resolve().parents[1] / "docs" / "configuration.md"
 CLI_OUT = OUT.parent / "reference" / "cli.md"
+DATA_OUT = OUT.parent / "reference" / "data.md"
 
 
 @dataclass(frozen=True)
@@ -191,15 +192,55 @@ def cli_markdown() -> str:
     return "\n".join(L)
 
 
+def data_markdown() -> str:
+    """docs/reference/data.md: the stage graph (what each stage needs, the config sections whose
+    change recomputes it, GPU use), the data layout (catalogs/layout.yaml) and the table schemas."""
+    import yaml
+
+    from navcore.instances import INSTANCE_SCHEMA
+    from navcore.io.episode_schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA
+    from pipeline.graph import DEFAULT_STAGES, STAGES
+
+    L = ["# Stages, data layout and schemas", "",
+         "Generated from the stage graph (`pipeline/graph.py`), the layout (`catalogs/layout.yaml`) and the "
+         "schemas (`navcore/io/episode_schema.py`, `navcore/instances.py`) by `python -m pipeline.config_reference`.",
+         "", "## The stage graph", "",
+         "One Dask task per (stage, scene); a stage runs after its own scene's upstream stages only. A stage is "
+         "recomputed when its config sections, its version or an upstream stage changed (the marker's hash).", "",
+         "```text"]
+    for st in STAGES:
+        arrow = " <- " + ", ".join(st.needs) if st.needs else ""
+        L.append(f"{st.name:<12}{arrow}")
+    L += ["```", "", "| stage | needs | config sections | version | GPU | default |", "|---|---|---|---|---|---|"]
+    for st in STAGES:
+        L.append(f"| `{st.name}` | {', '.join(st.needs) or '-'} | {', '.join(f'`{c}`' for c in st.config) or '-'} | "
+                 f"{st.version} | {'yes' if st.gpu else ''} | {'yes' if st.name in DEFAULT_STAGES else 'no'} |")
+    layout = yaml.safe_load((Path(__file__).resolve().parents[1] / "catalogs" / "layout.yaml").read_text())
+    L += ["", "## The data layout", "", "Logical dataset names (what stages and tools ask the catalog for) and "
+          "where they live under the data root (`{root}`).", "", "| dataset | path | type |", "|---|---|---|"]
+    for name, e in (layout.get("datasets") or layout).items():
+        if isinstance(e, dict) and "path" in e:
+            L.append(f"| `{name}` | `{e['path']}` | {e.get('type', '')} |")
+        elif isinstance(e, str):
+            L.append(f"| `{name}` | `{e}` | folder |")
+    for title, schema in (("Episodes (`05_episodes`, one row per episode)", EPISODE_SCHEMA),
+                          ("Expert trajectories (`06_trajectories`, one row per 20 Hz step)", TRAJECTORY_SCHEMA),
+                          ("ObjectNav instances (`04_semantics/{scene_id}/instances.parquet`)", INSTANCE_SCHEMA)):
+        L += ["", f"## {title}", "", "| column | type |", "|---|---|"]
+        L += [f"| `{f.name}` | `{f.type}` |" for f in schema]
+    return "\n".join(L) + "\n"
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=str(OUT))
     ap.add_argument("--check", action="store_true", help="exit 1 when the page is not current or a key has no description")
     a = ap.parse_args(argv)
-    text, gaps, cli = markdown(), missing(), cli_markdown()
+    text, gaps, cli, data = markdown(), missing(), cli_markdown(), data_markdown()
     if a.check:
         # the CLI page is checked for its commands only: argparse's layout varies between Python versions
         stale = not Path(a.out).is_file() or Path(a.out).read_text() != text or not CLI_OUT.is_file() or \
+            not DATA_OUT.is_file() or DATA_OUT.read_text() != data or \
             [x for x in cli.splitlines() if x.startswith("## ")] != [x for x in CLI_OUT.read_text().splitlines()
                                                                      if x.startswith("## ")]
         for g in gaps:
@@ -209,6 +250,7 @@ def main(argv=None) -> int:
         return 1 if gaps or stale else 0
     Path(a.out).write_text(text)
     CLI_OUT.write_text(cli)
+    DATA_OUT.write_text(data)
     print(f"{a.out}: {sum(not k.section for k in keys())} keys, {len(gaps)} without a description; {CLI_OUT}")
     return 0
 
