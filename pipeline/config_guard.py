@@ -6,11 +6,13 @@ an upstream of a stage they named (`stages=[evaluate]` with other episode overri
 that made the episodes), it silently overwrites their data. `config_changes` finds these pairs
 and which keys differ (markers record their stage's config: graph.stage_config); the executor
 prints them at the start and in the run summary, and refuses to overwrite outputs of stages the
-run does not name unless `force=true` (then it recomputes them) or the run names them.
+run does not name unless `force=true` (then it recomputes them) or the run names them. A change
+of a storage key only (what a stage keeps, e.g. voxelize.store_opacity) changes nothing any
+stage computes and is never refused.
 """
 from __future__ import annotations
 
-from pipeline.graph import BY_NAME, scene_hash, stage_config
+from pipeline.graph import BY_NAME, scene_hash, stage_config, stage_storage
 from pipeline.markers import read_marker
 
 
@@ -46,9 +48,15 @@ def config_changes(cfg, catalog, scenes, stages, hashes) -> dict[str, dict]:
             m = read_marker(catalog.path("markers", scene, stage=st.name))
             if m is None or m.get("config_hash") == scene_hash(hashes[st.name], st.name, scene):
                 continue
-            row = out.setdefault(st.name, {"scenes": [], "keys": [], "cause": ""})
+            row = out.setdefault(st.name, {"scenes": [], "keys": [], "cause": "", "storage_only": True})
             row["scenes"].append(scene.scene_id)
             d = diff(m.get("config"), parts[st.name])
+            stored = diff(m.get("storage"), stage_storage(cfg, st.name)) if "storage" in m else None
+            if not (d == [] and stored):  # a change of what is stored only (no content downstream changes)
+                row["storage_only"] = False
+            if d == [] and stored:
+                row["keys"] = sorted(set(row["keys"]) | {(k, _show(a), _show(b)) for k, a, b in stored})
+                continue
             if d is None:
                 row["cause"] = row["cause"] or "made before markers recorded their settings"
             elif d:

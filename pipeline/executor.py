@@ -58,7 +58,7 @@ def execute(cfg, console: Console | None = None) -> dict:
                   f"(shard {cfg.scenes.shard}/{cfg.scenes.num_shards}), stages {[s.name for s in stages]}, "
                   f"data in {root}")
     changes = config_changes(cfg, catalog, scenes, stages, hashes)
-    blocked = [] if cfg.force else [s for s in changes if s not in selected]
+    blocked = [] if cfg.force else [s for s, c in changes.items() if s not in selected and not c["storage_only"]]
     if blocked:  # outputs of stages the run does not name would be overwritten: refuse, touch nothing
         msg = refusal(changes, blocked)
         console.print(f"[red]refused[/]: {escape(msg)}")

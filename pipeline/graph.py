@@ -145,6 +145,12 @@ def stage_config(cfg, name: str) -> dict:
     return part
 
 
+def stage_storage(cfg, name: str) -> dict:
+    """The values of a stage's storage keys (what it stores, not what it computes: `Stage.storage`)."""
+    return {f"{sec}.{key}": OmegaConf.select(cfg, f"{sec}.{key}", default=default)
+            for sec, key, default in BY_NAME[name].storage}
+
+
 def config_hashes(cfg) -> dict[str, str]:
     """Hash per stage of its config sections, its version and its upstream hashes: a changed
     config recomputes that stage and everything downstream of it.

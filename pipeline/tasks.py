@@ -9,7 +9,7 @@ import time
 import traceback
 
 from navcore.io.catalog import Catalog, SceneEntry
-from pipeline.graph import BY_NAME, stage_config
+from pipeline.graph import BY_NAME, stage_config, stage_storage
 from pipeline.locks import locked
 from pipeline.markers import manifest_problem, output_manifest, read_marker, write_marker
 
@@ -74,7 +74,8 @@ def _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, veri
     try:
         manifest = output_manifest(info.get("outputs", []), catalog.root)
         write_marker(marker, {"stage": stage_name, "scene_id": scene.scene_id, "config_hash": config_hash,
-                              "config": stage_config(cfg, stage_name), "duration_s": duration, "info": info,
+                              "config": stage_config(cfg, stage_name), "storage": stage_storage(cfg, stage_name),
+                              "duration_s": duration, "info": info,
                               "manifest": manifest})
     except OSError as e:  # an output gone after the stage, or no room for the marker: not done
         marker.unlink(missing_ok=True)

@@ -372,7 +372,8 @@ def test_goal_images_rendered_at_the_goal_camera_and_exported(episode_run, make_
     from pipeline.executor import execute
 
     root, over, _ = episode_run
-    summary = execute(make_cfg(root, *over[:-1], "export.chunk_size=8", "goal_images.enabled=true"))
+    summary = execute(make_cfg(root, *over[:-1], "export.chunk_size=8", "goal_images.enabled=true",
+                               "stages=[goal_images,export]"))  # named: its settings changed
     assert not summary["failures"], summary["failures"]
     eps = pd.read_parquet(root / "05_episodes", filters=[("task", "==", "imagenav")])
     sid = str(eps["scene_id"].iloc[0])
