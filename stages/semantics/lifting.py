@@ -45,6 +45,12 @@ class LiftingConfig:
     """DBSCAN core-point threshold."""
     min_cluster: int = 30
     """Clusters with fewer Gaussians are dropped."""
+    dbscan_max_points: int = 50_000
+    """Above this many labelled points of a category, DBSCAN runs on one point per delta_down voxel
+    weighted by how many it stands for (sklearn's sample_weight), the labels then mapped back:
+    DBSCAN holds every point's eps-neighbourhood, and the dense clouds of a large real capture
+    (hundreds of thousands of Gaussians per category) outgrew 20 GB. Smaller clouds are clustered
+    point by point as before."""
     min_views: int = 1
     """An instance needs votes from at least this many distinct views (its `views`): multi-view
     consistency against detections that do not recur in 3D (the detector segmenter asks for
@@ -150,8 +156,6 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
         list of {label, center [3], min [3], max [3], support (Gaussians), confidence, views (distinct
         frames that voted for it), agreement (view_support)}; instances under cfg.min_views views dropped.
     """
-    from sklearn.cluster import DBSCAN
-
     pts, labs, fids = [], [], []
     per_cell = cfg.voting and cfg.support == "views"
     for f, (depth, K, c2w, masks) in enumerate(frames):
@@ -192,7 +196,7 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
         xyz = cloud(idx)
         if len(xyz) < cfg.min_cluster:
             continue
-        cl = DBSCAN(eps=dbscan_radius(xyz, cfg), min_samples=cfg.dbscan_min_samples).fit_predict(xyz)
+        cl = cluster(xyz, cfg)
         for c in np.unique(cl[cl >= 0]):
             sel = cl == c
             if sel.sum() < cfg.min_cluster:
@@ -206,6 +210,20 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
             out.append({"label": int(lab), "center": p.mean(0), "min": p.min(0), "max": p.max(0),
                         "support": int(sel.sum()), "confidence": conf, "views": views, "agreement": agreement})
     return out
+
+
+def cluster(xyz: np.ndarray, cfg: LiftingConfig) -> np.ndarray:
+    """DBSCAN labels of a category's points (-1 = noise), on voxel representatives above
+    cfg.dbscan_max_points points (LiftingConfig.dbscan_max_points)."""
+    from sklearn.cluster import DBSCAN
+
+    eps = dbscan_radius(xyz, cfg)
+    if len(xyz) <= cfg.dbscan_max_points:
+        return DBSCAN(eps=eps, min_samples=cfg.dbscan_min_samples).fit_predict(xyz)
+    _, rep, inv, count = np.unique(voxel_keys(xyz, cfg.delta_down), axis=0, return_index=True, return_inverse=True,
+                                   return_counts=True)
+    labels = DBSCAN(eps=eps, min_samples=cfg.dbscan_min_samples).fit_predict(xyz[rep], sample_weight=count)
+    return labels[inv.reshape(-1)]
 
 
 def view_support(cell_keys: np.ndarray, voters: dict[tuple, set[int]]) -> tuple[int, float]:
