@@ -66,8 +66,11 @@ dataset: $(STAMP)
 	$(BIN)/python -m pipeline $(ARGS)
 
 # lint (ruff) and the import contracts (navcore <- stages <- pipeline) first, then the tests
+# the default tests over TEST_WORKERS processes (pytest-xdist; a test module stays in one process,
+# so its fixtures are built once); TEST_WORKERS=0 runs them in this process
+TEST_WORKERS ?= 2
 test: lint
-	$(BIN)/python -m pytest -q $(ARGS)
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile $(ARGS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
