@@ -53,7 +53,7 @@ def render_one(g: dict, viewmat: np.ndarray, K: np.ndarray, width: int, height: 
                near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, features=None, extra=None, visits=None):
     """One camera -> (feats [H, W, C], depth [H, W], alpha [H, W]) float32 numpy arrays; visits
     ([N, 2] uint8, zeroed, optional) gets which Gaussians the rasteriser read and which
-    contributed (`_rasterize`; benchmarks.render_cpu's bound on culling).
+    contributed (`_rasterize`; benchmarks.scale.render_cpu's bound on culling).
 
     The compiled passes do not check their indices, so what they would read out of bounds is
     refused here: deg above the scene's SH degree, features / extra without one row per Gaussian."""
