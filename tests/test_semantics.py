@@ -280,3 +280,21 @@ def test_dense_clouds_are_clustered_on_voxel_representatives():
         assert (labels[60_000:] == -1).all()  # the sparse strays are noise
     for lo, hi in ((0, 30_000), (30_000, 60_000)):
         assert np.allclose(xyz[lo:hi][exact[lo:hi] >= 0].mean(0), xyz[lo:hi][fast[lo:hi] >= 0].mean(0), atol=0.01)
+
+
+def test_instances_that_stay_on_the_floor_are_dropped_when_asked():
+    """lifting.min_top_m (the detector sets 0.25 m): a labelled patch of floor is no object."""
+    from stages.semantics.lifting import LiftingConfig, lift
+
+    rng = np.random.default_rng(4)
+    chair = box_points((2.0, 0.0, 0.4), (0.5, 0.5, 0.8), 4000, rng)
+    patch = np.column_stack([rng.uniform(0.5, 1.5, 4000), rng.uniform(1.5, 2.5, 4000), rng.uniform(0, 0.1, 4000)])
+    floor = np.column_stack([rng.uniform(0, 4, 8000), rng.uniform(-1, 3, 8000), np.zeros(8000)])
+    means = np.concatenate([chair, patch, floor])
+    labels = np.concatenate([np.full(4000, 1), np.full(4000, 2), np.zeros(8000, int)])
+    K = intrinsics(W, H, 90)
+    poses = [(0.0, 0.5, a) for a in np.linspace(-0.6, 0.9, 6)] + [(4.5, 0.5, math.pi + a) for a in (-0.4, 0.0, 0.4)]
+    frames = list(synthetic_frames(means, labels, poses, K))
+    every = {f["label"] for f in lift(frames, means, LiftingConfig())}
+    kept = {f["label"] for f in lift(frames, means, LiftingConfig(min_top_m=0.25))}
+    assert every == {1, 2} and kept == {1}

@@ -51,6 +51,9 @@ class LiftingConfig:
     DBSCAN holds every point's eps-neighbourhood, and the dense clouds of a large real capture
     (hundreds of thousands of Gaussians per category) outgrew 20 GB. Smaller clouds are clustered
     point by point as before."""
+    min_top_m: float = 0.0
+    """Instances whose highest point lies below this height (aligned frame, floor z = 0) are
+    dropped: floor texture taken for an object (0 = off; the detector sets detector.min_top_m)."""
     min_views: int = 1
     """An instance needs votes from at least this many distinct views (its `views`): multi-view
     consistency against detections that do not recur in 3D (the detector segmenter asks for
@@ -205,7 +208,7 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
             conf = float(g_conf[idx[sel]].mean()) if g_conf is not None else 1.0
             views, agreement = view_support(voxel_keys(p, cfg.delta_vote), voters) if cfg.voting else \
                 (len(np.unique(frames_of[idx[sel]])), 1.0)
-            if views < cfg.min_views:
+            if views < cfg.min_views or float(p[:, 2].max()) < cfg.min_top_m:
                 continue
             out.append({"label": int(lab), "center": p.mean(0), "min": p.min(0), "max": p.max(0),
                         "support": int(sel.sum()), "confidence": conf, "views": views, "agreement": agreement})

@@ -101,9 +101,11 @@ def category_masks(seg: dict, prompts: list[str]) -> dict[int, list[np.ndarray]]
 
 
 def lifting_config(scfg: SemanticsConfig):
-    """The lifting of this segmenter: the detector's instances need detector.min_views views."""
+    """The lifting of this segmenter: the detector's instances need detector.min_views views and
+    a top above detector.min_top_m."""
     if scfg.segmenter == "detector":
-        return replace(scfg.lifting, min_views=max(scfg.lifting.min_views, scfg.detector.min_views))
+        return replace(scfg.lifting, min_views=max(scfg.lifting.min_views, scfg.detector.min_views),
+                       min_top_m=max(scfg.lifting.min_top_m, scfg.detector.min_top_m))
     return scfg.lifting
 
 
