@@ -9,17 +9,10 @@ rerun overwrites it. Works wherever the data root is shared (local workers, batc
 from __future__ import annotations
 
 import json
-import math
 import os
 from pathlib import Path
 
-
-def _plain(v):
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if hasattr(v, "item"):  # numpy scalars
-        return _plain(v.item())
-    return v
+from navcore.io import jsonio
 
 
 class ProgressLog:
@@ -29,11 +22,11 @@ class ProgressLog:
     def start(self, total: int, **meta) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         with open(self.path, "w") as f:
-            f.write(json.dumps({"total": int(total), "pid": os.getpid(), **{k: _plain(v) for k, v in meta.items()}}) + "\n")
+            f.write(jsonio.dumps({"total": int(total), "pid": os.getpid(), **meta}) + "\n")
 
     def item(self, **fields) -> None:
         with open(self.path, "a") as f:
-            f.write(json.dumps({k: _plain(v) for k, v in fields.items()}) + "\n")
+            f.write(jsonio.dumps(fields) + "\n")
 
 
 def read_log(path: str | Path, skip: int = 0) -> tuple[dict | None, list[dict]]:
