@@ -24,8 +24,8 @@ SAMPLE = 400_000
 """Content Gaussians the up-axis search looks at (a deterministic sample): seconds on big scenes."""
 
 
-def inspect(path: str, fmt: str | None = None) -> dict:
-    """The facts of the module doc as a dict (no picture)."""
+def inspect(path: str, fmt: str | None = None) -> tuple[dict, np.ndarray]:
+    """The facts of the module doc as a dict (no picture), and the content's centres [N, 3]."""
     from navcore.gaussians.content import content_mask
     from navcore.gaussians.formats import detect_format
     from navcore.gaussians.model import sh_degree_for_coeffs
@@ -57,7 +57,7 @@ def inspect(path: str, fmt: str | None = None) -> dict:
     except ValueError as e:  # no floor found: the thinnest extent stands in for the height
         out |= {"up_axis": None, "up_error": str(e), "units_hint": _units_hint(min(out["extent_m"].values()), out["extent_m"])}
     out["seconds"] = round(time.perf_counter() - t0, 1)
-    return out
+    return out, content.means
 
 
 def _units_hint(top: float, extent: dict) -> str:
@@ -69,18 +69,14 @@ def _units_hint(top: float, extent: dict) -> str:
     return "plausible for metres"
 
 
-def picture(path: str, out_png: str, fmt: str | None = None, info: dict | None = None) -> str:
-    """Top-down density of the content seen along the found up axis (or +z), with a 1 m scale bar."""
+def picture(m: np.ndarray, path: str, out_png: str, info: dict | None = None) -> str:
+    """Top-down density of the content's centres `m` (of the file `path`) seen along the found up
+    axis (or +z), with a 1 m scale bar."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from navcore.gaussians.content import content_mask
-    from navcore.gaussians.validate import read_validated
-
-    scene, _ = read_validated(path, fmt)
-    m = scene.means[content_mask(scene.means)[0]]
     up = np.asarray((info or {}).get("up_vector") or [0, 0, 1], float)
     a = np.cross(up, [1, 0, 0] if abs(up[0]) < 0.9 else [0, 1, 0])
     a /= np.linalg.norm(a)
@@ -111,11 +107,11 @@ def main(argv=None) -> int:
     ap.add_argument("--json", action="store_true", help="print the facts as JSON")
     a = ap.parse_args(argv)
     try:
-        info = inspect(a.file, a.format)
+        info, means = inspect(a.file, a.format)
     except (FileNotFoundError, ValueError) as e:  # SceneFormatError is a ValueError naming the file
         print(f"navarena inspect: {e}", file=sys.stderr)
         return 2
-    info["picture"] = picture(a.file, a.picture or f"{Path(a.file).name.replace('.', '_')}_topdown.png", a.format, info)
+    info["picture"] = picture(means, a.file, a.picture or f"{Path(a.file).name.replace('.', '_')}_topdown.png", info)
     if a.json:
         print(json.dumps(info, indent=1))
         return 0
