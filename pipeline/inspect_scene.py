@@ -13,12 +13,13 @@ a scale bar) beside the output path given, or into the working directory.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from navcore.io import jsonio
 
 SAMPLE = 400_000
 """Content Gaussians the up-axis search looks at (a deterministic sample): seconds on big scenes."""
@@ -113,7 +114,7 @@ def main(argv=None) -> int:
         return 2
     info["picture"] = picture(means, a.file, a.picture or f"{Path(a.file).name.replace('.', '_')}_topdown.png", info)
     if a.json:
-        print(json.dumps(info, indent=1))
+        print(jsonio.dumps(info, indent=1))
         return 0
     ext = info["extent_m"]
     print(f"{info['file']}\n  format          {info['format']} (SH degree {info['sh_degree']})\n"
