@@ -165,9 +165,12 @@ class NavArenaConfig:
     (or that refused to overwrite outputs, see `force`) exits with status 1 after completing
     everything else; the run summary lists the failures either way."""
     verify: str = "size"
-    """How a finished (stage, scene)'s outputs are checked against its marker's manifest before it
-    counts as done: size (every file present with its recorded size: a stat each), checksum (also
-    its sha256: reads everything), none. A mismatch recomputes the stage for that scene."""
+    """How a finished (stage, scene) is checked before it counts as done, its outputs against its
+    marker's manifest and the outside files it was made from (a real scene's source, its label
+    files) against the marker's record: size (every output present with its recorded size; every
+    source with its recorded size and mtime, hashed only when those differ: a stat each), checksum
+    (every output and source hashed: reads everything), none. A mismatch recomputes the stage for
+    that scene (a changed source: that scene's stages from the one that reads it on)."""
     synthetic: SyntheticConfig = field(default_factory=SyntheticConfig)
     ingest: IngestConfig = field(default_factory=IngestConfig)
     voxelize: VoxelizeConfig = field(default_factory=VoxelizeConfig)

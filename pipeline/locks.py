@@ -33,3 +33,19 @@ def locked(path: Path):
         yield waited
     finally:
         os.close(fd)  # releases the lock
+
+
+@contextlib.contextmanager
+def try_locked(path: Path):
+    """Hold the lock of `path` if nobody does; yields whether it was taken (never waits)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            yield False
+            return
+        yield True
+    finally:
+        os.close(fd)

@@ -26,6 +26,7 @@ def build_summary(results: list[dict], started: dt.datetime, cat_file, shard: li
                "shortfalls": [r for r in results if r.get("shortfall")],
                "warnings": [r for r in results if r.get("warnings")],
                "goal_mappings": [r for r in results if r.get("goal_mapping")],
+               "sources_changed": sources_changed(results),
                "screening": screening(results), "results": results}
     placed = placement(results)
     if placed:
@@ -34,6 +35,18 @@ def build_summary(results: list[dict], started: dt.datetime, cat_file, shard: li
         c = summary["counts"].setdefault(r["stage"], {})
         c[r["status"]] = c.get(r["status"], 0) + 1
     return summary
+
+
+def sources_changed(results: list[dict]) -> list[dict]:
+    """One row per scene whose outputs were recomputed because a file they were made from changed
+    (pipeline.sources): the file, its old and new sha256, the stages recomputed or failed for it."""
+    rows: dict[str, dict] = {}
+    for r in results:
+        if r.get("source_changed"):
+            row = rows.setdefault(r["scene_id"], {"scene_id": r["scene_id"], "scene": r["scene"], **r["source_changed"],
+                                                  "stages": []})
+            row["stages"].append(f"{r['stage']}" + ("" if r["status"] == "done" else f" ({r['status']})"))
+    return list(rows.values())
 
 
 def screening(results: list[dict]) -> list[dict]:
@@ -123,6 +136,21 @@ def print_summary(summary: dict, console: Console) -> None:
             f.add_column(col, overflow="fold")
         for stage, c in summary["config_changes"].items():
             f.add_row(stage, str(len(c["scenes"])), escape("; ".join(f"{k}: {a} -> {b}" for k, a, b in c["keys"]) or c["cause"]))
+        console.print(f)
+    if summary.get("paths_outside_catalog"):
+        f = Table(title="catalog paths leading out of the catalog's folder (resolved; check them in a catalog "
+                        "someone else wrote)", box=box.SIMPLE_HEAD)
+        for col in ("scene", "key", "reads"):
+            f.add_column(col, overflow="fold")
+        for o in summary["paths_outside_catalog"]:
+            f.add_row(escape(o["scene"]), o["key"], escape(o["resolved"]))
+        console.print(f, style="dim")
+    if summary.get("sources_changed"):
+        f = Table(title="recomputed because a file the outputs were made from changed")
+        for col in ("scene", "what changed", "stages"):
+            f.add_column(col, overflow="fold")
+        for r in summary["sources_changed"]:
+            f.add_row(f"{r['scene_id']} ({r['scene']})", escape(r["message"]), ", ".join(r["stages"]))
         console.print(f)
     if summary["failures"]:
         f = Table(title="failures", show_lines=False)

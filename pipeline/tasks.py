@@ -9,8 +9,9 @@ import time
 import traceback
 
 from navcore.io.catalog import Catalog, SceneEntry
+from pipeline import sources
 from pipeline.graph import BY_NAME, stage_config, stage_storage
-from pipeline.locks import locked
+from pipeline.locks import locked, try_locked
 from pipeline.markers import manifest_problem, output_manifest, read_marker, write_marker
 
 FAILED = ("failed", "skipped")
@@ -28,9 +29,23 @@ def current(stage_name: str, scene: SceneEntry, catalog: Catalog, config_hash: s
     marker = catalog.path("markers", scene, stage=stage_name)
     m = None if force else read_marker(marker)
     if m is not None and m.get("config_hash") == config_hash and \
-            manifest_problem(m.get("manifest"), catalog.root, verify) is None:
+            manifest_problem(m.get("manifest"), catalog.root, verify) is None and \
+            sources.problem(m.get("sources"), sources.files(stage_name, scene), verify) is None:
+        if m.get("sources") and (fresh := sources.restat(m["sources"])):
+            _refresh_sources(marker, catalog.path("locks", stage=stage_name, key=scene.scene_id), m, fresh)
         return {**base, "status": "cached", **notes(m.get("info", {}))}
     return None
+
+
+def _refresh_sources(marker, lock, m: dict, fresh: dict) -> None:
+    """Record a touched source's new mtime in a current marker (same sha256), when no task of that
+    (stage, scene) holds its lock and the marker is still the one read; best effort."""
+    try:
+        with try_locked(lock) as mine:
+            if mine and read_marker(marker) == m:
+                write_marker(marker, {**m, "sources": fresh})
+    except OSError:
+        pass
 
 
 def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_hash: str, force: bool,
@@ -59,30 +74,51 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
 def _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, verify, base) -> dict:
     marker = catalog.path("markers", scene, stage=stage_name)
     old = None if force else read_marker(marker)
-    damaged = manifest_problem(old.get("manifest"), catalog.root, verify) \
-        if old is not None and old.get("config_hash") == config_hash else None
+    extra = {}
+    if old is not None and old.get("config_hash") == config_hash:  # why a marker of this config is redone
+        changed = sources.problem(old.get("sources"), sources.files(stage_name, scene), verify)
+        damaged = manifest_problem(old.get("manifest"), catalog.root, verify)
+        if changed:
+            extra = {"recomputed": f"source changed: {changed['message']}", "source_changed": changed}
+        elif damaged:
+            extra = {"recomputed": f"outputs damaged since the last run: {damaged}"}
     marker.unlink(missing_ok=True)  # outputs are about to change: the old marker must not vouch for them
     if stage.finalize:  # nor may the dataset-level files built from them (a later run rebuilds them)
         catalog.path("finalize_marker", stage=stage_name).unlink(missing_ok=True)
     t0 = time.perf_counter()
     try:
+        # the outside files as they are when the stage reads them (known: the upstream markers' records)
+        ups = [read_marker(catalog.path("markers", scene, stage=n)) or {} for n in stage.needs]
+        used = sources.record(sources.files(stage_name, scene), verify,
+                              {k: v for m in ups for k, v in (m.get("sources") or {}).items()})
+    except OSError as e:
+        return {**base, "status": "failed", "error": f"{describe(e, catalog)}{_since(extra)}", **extra}
+    try:
         info = stage.run(scene, cfg, catalog) or {}
     except Exception as e:  # noqa: BLE001 - recorded, the run goes on
-        return {**base, "status": "failed", "error": describe(e, catalog),
-                "traceback": traceback.format_exc(limit=6), "duration_s": round(time.perf_counter() - t0, 3)}
+        return {**base, "status": "failed", "error": f"{describe(e, catalog)}{_since(extra)}",
+                "traceback": traceback.format_exc(limit=6), "duration_s": round(time.perf_counter() - t0, 3), **extra}
     duration = round(time.perf_counter() - t0, 3)
+    moved = sources.problem(used, list(used), verify)
+    if moved:  # the outputs may mix the old and the new bytes: not done
+        return {**base, "status": "failed", "duration_s": duration,
+                "error": f"a source changed while the stage read it ({moved['message']}); rerun once it is settled"}
     try:
         manifest = output_manifest(info.get("outputs", []), catalog.root)
         write_marker(marker, {"stage": stage_name, "scene_id": scene.scene_id, "config_hash": config_hash,
                               "config": stage_config(cfg, stage_name), "storage": stage_storage(cfg, stage_name),
-                              "duration_s": duration, "info": info,
+                              "duration_s": duration, "info": info, "sources": used,
                               "manifest": manifest})
     except OSError as e:  # an output gone after the stage, or no room for the marker: not done
         marker.unlink(missing_ok=True)
         return {**base, "status": "failed", "error": f"after the stage: {describe(e, catalog)}",
                 "duration_s": duration}
-    extra = {"recomputed": f"outputs damaged since the last run: {damaged}"} if damaged else {}
     return {**base, "status": "done", "duration_s": duration, **extra, **notes(info)}
+
+
+def _since(extra: dict) -> str:
+    """What a failure's message adds when the task ran because a source changed."""
+    return f" (recomputed because {extra['source_changed']['message']})" if "source_changed" in extra else ""
 
 
 def describe(e: BaseException, catalog: Catalog) -> str:

@@ -98,11 +98,42 @@ def _scannet_side_files(path: Path) -> tuple[Path | None, Path | None]:
     return (segs[0] if segs else None), (agg[0] if agg else None)
 
 
+def side_files(path: Path) -> list[Path]:
+    """The files beside a labelled mesh that its reader also takes (those that exist)."""
+    path = Path(path)
+    out = [p for p in _scannet_side_files(path) if p is not None] if path.name.endswith(".ply") else []
+    info = path.parent / "info_semantic.json"
+    return out + ([info] if info.is_file() else [])
+
+
 def read_labelled_geometry(path: str | Path, classes: LabelSet | None = None) -> LabelledGeometry:
-    """A labelled mesh / point cloud (module doc), in its own frame."""
+    """A labelled mesh / point cloud (module doc), in its own frame. A malformed file (or side
+    file) is a ValueError naming it."""
+    path = Path(path)
+    try:
+        geom = _read_labelled_geometry(path, classes)
+        n = len(geom.triangles) if geom.per_face else len(geom.vertices)
+        if geom.per_face and not n:
+            raise ValueError(f"{path}: labels per face, but the mesh has no faces")
+        if not len(geom.vertices) or not np.isfinite(geom.vertices).all():
+            raise ValueError(f"{path}: no vertices, or vertices that are not finite numbers")
+        if len(geom.segment) != n or len(geom.instance) != n:
+            raise ValueError(f"{path}: {len(geom.segment)} class and {len(geom.instance)} instance ids for its {n} "
+                             f"{'faces' if geom.per_face else 'vertices'}")
+        return geom
+    except FileNotFoundError:
+        raise
+    except ValueError as e:
+        if str(path.parent) in str(e):
+            raise
+        raise ValueError(f"{path} (or a side file beside it): malformed labels ({e})") from None
+    except (KeyError, TypeError, AttributeError, IndexError, OverflowError, RecursionError) as e:
+        raise ValueError(f"{path} (or a side file beside it): malformed labels ({type(e).__name__}: {e})") from None
+
+
+def _read_labelled_geometry(path: Path, classes: LabelSet | None) -> LabelledGeometry:
     from navcore.labels.shipped import read_json
 
-    path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"labels.mesh: {path} does not exist")
     raw = _ply_raw(path)

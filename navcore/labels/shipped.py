@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from navcore.io.paths import usable_path
 from navcore.labels import GoalVocabulary, LabelSet, as_category, is_structure, normalise, read_table, resolve
 
 CLASS_NAME_FILES = ("classes.txt", "class_names.txt")
@@ -66,16 +67,45 @@ class LabelSpec:
         unknown = sorted(set(spec) - set(SPEC_KEYS))
         if unknown:
             raise ValueError(f"{where}: unknown labels key(s) {unknown}; known: {', '.join(SPEC_KEYS)}")
+        for key in ("classes", "mesh", "mesh_classes"):
+            v = spec.get(key)
+            if v is not None and (not isinstance(v, str) or not v.strip()):
+                raise ValueError(f"{where}: labels.{key} must be a file name or a table key, got {v!r}")
+            if v is not None:
+                usable_path(v, f"{where}: labels.{key}")
+        ints = lambda v: isinstance(v, int) and not isinstance(v, bool) and abs(v) < 2**31  # noqa: E731
+        if spec.get("id_offset") is not None and not ints(spec["id_offset"]):
+            raise ValueError(f"{where}: labels.id_offset must be an integer, got {spec['id_offset']!r}")
+        ignore = spec.get("ignore")
+        if ignore is not None and (not isinstance(ignore, list) or not all(ints(i) for i in ignore)):
+            raise ValueError(f"{where}: labels.ignore must be a list of integer ids, got {ignore!r}")
+        dist = spec.get("max_distance", 0.05)
+        if not isinstance(dist, (int, float)) or isinstance(dist, bool) or not 0 < dist <= 10:
+            raise ValueError(f"{where}: labels.max_distance must be metres in (0, 10], got {dist!r}")
         gm = spec.get("goal_map") or {}
+        if not isinstance(gm, dict) or not all(isinstance(k, str) and isinstance(v, str) for k, v in gm.items()):
+            raise ValueError(f"{where}: labels.goal_map must map dataset class names to goal categories (strings)")
         return cls(classes=spec.get("classes"), id_offset=spec.get("id_offset"),
-                   ignore=tuple(int(i) for i in spec["ignore"]) if spec.get("ignore") is not None else None,
-                   mesh=spec.get("mesh"), mesh_classes=spec.get("mesh_classes"),
-                   max_distance=float(spec.get("max_distance", 0.05)),
-                   goal_map=tuple(sorted((str(k), str(v)) for k, v in gm.items())), base=str(base))
+                   ignore=tuple(ignore) if ignore is not None else None,
+                   mesh=spec.get("mesh"), mesh_classes=spec.get("mesh_classes"), max_distance=float(dist),
+                   goal_map=tuple(sorted(gm.items())), base=str(base))
 
     def path(self, p: str) -> Path:
         q = Path(p)
         return q if q.is_absolute() or not self.base else Path(self.base) / q
+
+    def files(self) -> list[Path]:
+        """The files these labels are read from (class tables given as files, the labelled mesh and
+        the side files its reader takes: ScanNet segs / aggregation json, Replica's
+        info_semantic.json), those that exist, sorted: what a finished run records so that a later
+        run notices when one changes (pipeline.sources)."""
+        from navcore.labels import BUILTIN
+        from navcore.labels.mesh import side_files
+
+        out = [self.path(t) for t in (self.classes, self.mesh_classes) if t and t not in BUILTIN]
+        if self.mesh:
+            out += [self.path(self.mesh), *side_files(self.path(self.mesh))]
+        return sorted({p.resolve() for p in out if p.is_file()})
 
     def as_dict(self) -> dict:
         """JSON-able form (hashed into the scene's stage hashes)."""
