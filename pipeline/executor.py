@@ -123,6 +123,8 @@ def execute(cfg, console: Console | None = None) -> dict:
     if changes:
         summary["config_changes"] = {k: v | {"keys": [list(x) for x in v["keys"]]} for k, v in changes.items()}
     summary["allow_failures"] = bool(cfg.get("allow_failures", False))
+    names = {sc.name for sc in scenes}
+    summary["paths_outside_catalog"] = [o for o in catalog.outside if o["scene"] in names]
     print_summary(summary, console)
     try:
         latest = write_summary(summary, catalog, started, cfg.scenes.shard)

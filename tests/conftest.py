@@ -65,6 +65,17 @@ def rng():
 
 NO_HELD_OUT = ("episodes.scene_splits.val_unseen=0", "episodes.scene_splits.test=0")
 """Overrides that hold no scene out of training (Hydra merges dicts: `scene_splits={}` keeps the defaults)."""
+SMALL_SCENE = ("scenes.count=1", "scenes.num_gaussians=60000", "synthetic.layout.rooms_max=2",
+               "synthetic.layout.room_size_max_m=4.4")
+"""One generated scene of two rooms of at most 4.4 m: every stage's features at half the time of
+the default layout (the costmap's fine pass, the screening views and the episodes scale with the
+floor area)."""
+
+
+@pytest.fixture(scope="session")
+def small_scene_overrides():
+    """The overrides of the tests' generated scene (SMALL_SCENE, nothing held out)."""
+    return [*SMALL_SCENE, *NO_HELD_OUT]
 
 
 @pytest.fixture(scope="session")
@@ -79,8 +90,8 @@ def make_cfg():
     def make(root, *overrides):
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
             # no scene held out (the default holds out 10 %: synth_0000, the only scene here, is val_unseen)
-            return compose("config", overrides=[f"data_root={root}", "executor=sync", "scenes.count=1",
-                                                "scenes.num_gaussians=60000", *NO_HELD_OUT, *overrides])
+            return compose("config", overrides=[f"data_root={root}", "executor=sync", *SMALL_SCENE, *NO_HELD_OUT,
+                                                *overrides])
     return make
 
 

@@ -175,3 +175,53 @@ def test_quaternions_near_float32_max_normalize_to_unit(tmp_path):
     scene, _ = read_validated(tmp_path / "s", "npy_folder", scene_id="hostile")
     assert np.allclose(np.linalg.norm(scene.quats.astype(np.float64), axis=1), 1, atol=1e-6)
     assert np.allclose(scene.quats[1], [2 ** -0.5, 2 ** -0.5, 0, 0], atol=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["catalog", "label_folder", "mesh_scannet", "mesh_replica", "mesh_points"])
+def test_catalogs_label_folders_and_meshes_survive_random_corruption(kind, tmp_path):
+    """A few dozen cases of benchmarks.robustness.fuzz_inputs (10,000 an input in make test-faults)."""
+    from benchmarks.robustness.fuzz_inputs import fuzz_kind
+
+    rep = fuzz_kind(kind, 30, 0, tmp_path)
+    assert rep["cases"] == 30 and rep["crash"] == rep["hang"] == rep["memory"] == 0, rep["failures"]
+
+
+@pytest.mark.parametrize("text, match", [
+    (b"\xff\xfe scenes", "not UTF-8"), ("scenes:\n  - {name: a\n", "not valid YAML"),
+    ("scenes: !!python/object/apply:os.system ['true']\n", "not valid YAML"), ("- a\n- b\n", "must be a mapping"),
+    ("scenes: {name: a}\n", "scenes must be a list"), ("scenes:\n  - just a string\n", "scene entry 1: must be a mapping"),
+    ("scenes:\n  - {name: [a], path: a.ply}\n", "'name' must be a non-empty string"),
+    ("scenes:\n  - {name: a, path: " + "x" * 300 + ".ply}\n", "not a usable path"),
+    ("scenes:\n  - {name: a, path: a.ply, labels: {max_distance: far}}\n", "labels.max_distance"),
+    ("scenes:\n  - {name: a, path: a.ply, labels: {ignore: [a]}}\n", "labels.ignore"),
+    ("synthetic: {count: 100000000000000}\n", "count must be an integer"),
+    ("layout:\n  instances: '{root}/{scefe_id}.parquet'\n", "unknown placeholder"),
+    ("layout:\n  episodes_root: {path: x, type: parquet}\n", "must be a folder template"),
+    ("layout:\n  instances: {path: '{root}/x', type: zarr}\n", "of type 'parquet'"),
+    ("layout:\n  instances: '{root}/}{'\n", "malformed"),
+])
+def test_catalog_defects_found_by_fuzzing_are_clear_errors(tmp_path, text, match):
+    from navcore.io.catalog import Catalog
+
+    f = tmp_path / "c.yaml"
+    f.write_bytes(text if isinstance(text, bytes) else text.encode())
+    with pytest.raises(ValueError, match=match) as e:
+        Catalog(f, tmp_path / "d")
+    assert str(f) in str(e.value)
+
+
+def test_mesh_defects_found_by_fuzzing_are_clear_errors(tmp_path):
+    import json
+
+    from benchmarks.robustness.fuzz_inputs import make_seed
+    from navcore.labels.mesh import read_labelled_geometry
+
+    mesh = make_seed("mesh_replica", tmp_path / "r")
+    (tmp_path / "r" / "info_semantic.json").write_text(json.dumps({"classes": None, "objects": [{"id": None}]}))
+    with pytest.raises(ValueError, match="malformed labels") as e:
+        read_labelled_geometry(mesh)
+    assert str(mesh) in str(e.value)
+    text = mesh.read_text().replace("element face 24", "element face 0")  # labels per face, no faces
+    mesh.write_text(text.split("end_header")[0] + "end_header\n" + "\n".join(text.split("end_header\n")[1].splitlines()[:16]))
+    with pytest.raises(ValueError, match="no faces|malformed"):
+        read_labelled_geometry(mesh)

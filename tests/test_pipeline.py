@@ -6,19 +6,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zarr
-from hydra import compose, initialize_config_dir
 
 from navcore.io.datasets import CostmapDataset
-from pipeline.config import CONF_DIR, register_configs
+from pipeline.config import register_configs
 from pipeline.executor import execute
 
 register_configs()
-
-
-def make_cfg(root, *overrides):
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        return compose("config", overrides=[f"data_root={root}", "executor=sync", "scenes.count=1",
-                                            "scenes.num_gaussians=60000", *overrides])
 
 
 def statuses(summary):

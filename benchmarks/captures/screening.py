@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -156,7 +157,7 @@ def markdown(rep: dict, args) -> str:
 
     pc = lambda x: f"{100 * x:.1f} %"  # noqa: E731
     out = ["# Scene and region screening (`make bench-screening`)", "",
-           f"Machine: {platform.machine()}, {__import__('os').cpu_count()} cores; "
+           f"Machine: {platform.machine()}, {os.cpu_count()} cores; "
            f"`python -m benchmarks.captures.screening --seeds {args.seeds} --level {args.level} --gaussians {args.gaussians}"
            f" --regions {args.regions} --radius {args.radius}`. Design: stages/screen/design.md.", "",
            "## Injected defects (realistic synthetic scenes, every cue as the stage computes it)", "",

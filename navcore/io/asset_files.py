@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from navcore.io.paths import contained
+
 ALIGNED_FILES = {"ply": "aligned.ply", "spz": "aligned.spz"}
 """asset.aligned_format -> the aligned model's file in the asset."""
 COMPRESSED_SOURCES = ("spz", "sog", "splat", "supersplat_ply")
@@ -31,7 +33,7 @@ def aligned_model(asset_dir) -> Path:
         raise FileNotFoundError(f"{folder}: no manifest.json (not a NavArena V1 asset folder)")
     files = json.loads(man.read_text()).get("files", {})
     name = files.get("aligned") or files.get("aligned_ply")
-    if not name or not (folder / name).is_file():
+    if not name or not contained(folder, name, f"{man}: files.aligned").is_file():
         raise FileNotFoundError(f"{man}: files.aligned names {name!r}, which is not in the folder")
     return folder / name
 
@@ -63,7 +65,5 @@ def read_nav_map(asset_dir) -> tuple[np.ndarray, tuple[float, float], float]:
 
     folder = Path(asset_dir)
     spec = yaml.safe_load((folder / "nav_map.yaml").read_text())
-    image = folder / str(spec["image"])
-    if image.parent.resolve() != folder.resolve():
-        raise ValueError(f"{folder / 'nav_map.yaml'}: image {spec['image']!r} is not a file of the asset folder")
+    image = contained(folder, str(spec["image"]), f"{folder / 'nav_map.yaml'}: image")
     return read_pgm(image), (float(spec["origin"][0]), float(spec["origin"][1])), float(spec["resolution"])

@@ -23,6 +23,7 @@ import yaml
 from navcore.gaussians.formats import detect_format
 from navcore.io.datasets import TYPES, Dataset
 from navcore.io.licences import PROJECT_LICENSE
+from navcore.io.paths import usable_path
 from navcore.labels.shipped import LabelSpec
 
 LAYOUT_FILE = Path(__file__).resolve().parents[2] / "catalogs" / "layout.yaml"
@@ -53,6 +54,62 @@ def provenance(entry: dict, where: str) -> dict:
         if v is not None and not isinstance(v, str):
             raise ValueError(f"{where}: {k} must be a string (an SPDX id such as CC-BY-4.0, or free text), got {v!r}")
         out[k] = v.strip() if isinstance(v, str) and v.strip() else None
+    return out
+
+
+MAX_SYNTHETIC = 1_000_000
+"""The most procedural scenes one catalog may ask for (a typo of a few digits would otherwise
+enumerate billions of scene ids before anything runs)."""
+
+
+def read_catalog(path: Path) -> dict:
+    """A catalog file's YAML (the safe loader: no tags that build Python objects), a mapping; any
+    problem is a ValueError naming the file."""
+    try:
+        text = path.read_text()
+    except UnicodeDecodeError as e:
+        raise ValueError(f"catalog {path}: not UTF-8 text ({e})") from None
+    except OSError as e:
+        raise ValueError(f"catalog {path}: cannot be read ({e.strerror or e})") from None
+    try:
+        spec = yaml.safe_load(text)
+    except yaml.YAMLError as e:
+        raise ValueError(f"catalog {path}: not valid YAML ({' '.join(str(e).split())})") from None
+    if spec is None:
+        return {}
+    if not isinstance(spec, dict):
+        raise ValueError(f"catalog {path}: must be a mapping with scenes: and / or synthetic:, got {type(spec).__name__}")
+    return spec
+
+
+def _placeholders(template: str, file: Path = LAYOUT_FILE) -> set[str]:
+    """The {fields} a path template names (a malformed template is a ValueError naming the file)."""
+    try:
+        return {n for _, n, _, _ in string.Formatter().parse(template) if n is not None}
+    except ValueError as e:
+        raise ValueError(f"catalog {file}: layout template {template!r} is malformed ({e})") from None
+
+
+def _typed(spec: dict, key: str, kind: type, file: Path):
+    v = spec.get(key)
+    if v is not None and not isinstance(v, kind):
+        raise ValueError(f"catalog {file}: {key} must be a {kind.__name__}, got {type(v).__name__}")
+    return v
+
+
+def outside_paths(folder: Path, name: str, paths: dict) -> list[dict]:
+    """The paths of a catalog entry that lead out of the catalog's folder (absolute, or through
+    '..'), resolved: a run lists them in its summary, so that whoever runs a catalog someone else
+    wrote sees which files outside it the run reads. Built-in class-table keys are no paths."""
+    from navcore.labels import BUILTIN
+
+    out = []
+    for key, written in paths.items():
+        if not written or not isinstance(written, str) or written in BUILTIN:
+            continue
+        resolved = (folder / written).resolve()
+        if not resolved.is_relative_to(folder.resolve()):
+            out.append({"scene": name, "key": key, "written": written, "resolved": str(resolved)})
     return out
 
 
@@ -89,43 +146,95 @@ class Catalog:
         self.file = Path(catalog_file)
         if not self.file.exists():
             raise FileNotFoundError(f"catalog {self.file} does not exist (scenes.catalog=...)")
-        spec = yaml.safe_load(self.file.read_text()) or {}
+        spec = read_catalog(self.file)
         self.root = Path(root).resolve()
         self.layout = dict(yaml.safe_load(LAYOUT_FILE.read_text()))
-        self.layout.update(spec.get("layout") or {})
+        layout = _typed(spec, "layout", dict, self.file) or {}
+        layout = dict(layout)
+        for k, v in layout.items():  # an entry keeps its kind: a dataset {path, type} or a folder (a string)
+            was = self.layout.get(k)
+            if isinstance(was, dict) and isinstance(v, str):  # a dataset's path alone: its type stays
+                v = layout[k] = {**was, "path": v}
+            ok = isinstance(v, str) if isinstance(was, str) else (
+                isinstance(v, dict) and isinstance(v.get("path"), str) and isinstance(v.get("type"), str) and v["type"] in TYPES and
+                (was is None or v.get("type") == was.get("type")))
+            if ok:  # and names only the placeholders its default names (any of the layout's, for a new one)
+                allowed = _placeholders(was if isinstance(was, str) else was["path"]) if was is not None else \
+                    set().union(*(_placeholders(x if isinstance(x, str) else x["path"]) for x in self.layout.values()))
+                if "scene_id" in allowed:  # a per-scene entry may name any of the scene's fields
+                    allowed |= {"group", "name"}
+                extra = _placeholders(v if isinstance(v, str) else v["path"], self.file) - allowed
+                if extra:
+                    raise ValueError(f"catalog {self.file}: layout entry {k!r} names the unknown placeholder(s) "
+                                     f"{sorted(extra)}; it may use {sorted(allowed)}")
+            if not ok:
+                want = "a folder template (a string)" if isinstance(was, str) else "a path template or a mapping {path, type}"
+                raise ValueError(f"catalog {self.file}: layout entry {k!r} must be {want}"
+                                 f"{' of type ' + repr(was['type']) if isinstance(was, dict) else ''}, got {v!r}")
+        self.layout.update(layout)
         self.scenes: list[SceneEntry] = []
+        self.outside: list[dict] = []  # paths of entries that lead out of the catalog's folder (`outside_paths`)
         taken: set[str] = set()
-        for e in spec.get("scenes") or []:
-            for key in ("name", "path"):
-                if key not in e:
-                    raise ValueError(f"catalog {self.file}: scene entry {e} lacks '{key}'")
-            group = safe_component(e.get("group", "default"), "group", self.file)
-            sid = safe_component(e.get("id") or scene_id_for(group, e["name"], taken), "id", self.file)
-            path = Path(e["path"])
-            if not path.is_absolute():
-                path = (self.file.parent / path).resolve()  # relative to the catalog file's folder
-            fmt = e.get("format") or detect_format(path)  # left out: the path tells
-            labels = LabelSpec.from_entry(e.get("labels"), self.file.parent, f"catalog {self.file}, scene {e['name']!r}")
-            self.scenes.append(SceneEntry(sid, e["name"], group, str(path), fmt, labels=labels,
-                                          **provenance(e, f"catalog {self.file}, scene {e['name']!r}")))
-            taken.add(sid)
-        syn = spec.get("synthetic")
+        for i, e in enumerate(_typed(spec, "scenes", list, self.file) or []):
+            where = f"catalog {self.file}, scene entry {i + 1}"
+            try:
+                self._add_entry(e, where, taken)
+            except (TypeError, KeyError, AttributeError, OverflowError) as err:  # a value of the wrong type
+                raise ValueError(f"{where}: {type(err).__name__}: {err}") from None
+        syn = _typed(spec, "synthetic", dict, self.file)
         if syn:
-            syn = dict(syn)
-            if synthetic_count is not None:
-                syn["count"] = synthetic_count
-            if synthetic_num_gaussians is not None:
-                syn["num_gaussians"] = synthetic_num_gaussians
-            for k in range(int(syn.get("count", 0))):
-                seed = int(syn.get("first_seed", 0)) + k
-                name = safe_component(f"{syn.get('prefix', 'synth')}_{seed:04d}", "synthetic prefix", self.file)
-                group = safe_component(syn.get("group", "synthetic"), "group", self.file)
-                sid = scene_id_for(group, name, taken)
-                taken.add(sid)
-                self.scenes.append(SceneEntry(
-                    sid, name, group, "", "synthetic", seed, syn.get("num_gaussians"),
-                    license=str(syn.get("license") or PROJECT_LICENSE), source_url=syn.get("source_url"),
-                    attribution=syn.get("attribution") or f"NavArena procedural scene generator, seed {seed}"))
+            self._add_synthetic(dict(syn), synthetic_count, synthetic_num_gaussians)
+
+    def _add_entry(self, e, where: str, taken: set[str]) -> None:
+        if not isinstance(e, dict):
+            raise ValueError(f"{where}: must be a mapping with name and path, got {type(e).__name__}")
+        for key in ("name", "path"):
+            if not isinstance(e.get(key), str) or not e[key].strip():
+                raise ValueError(f"{where}: '{key}' must be a non-empty string (got {e.get(key)!r})")
+        for key in ("group", "id", "format"):
+            if e.get(key) is not None and not isinstance(e[key], str):
+                raise ValueError(f"{where}: '{key}' must be a string (got {e[key]!r})")
+        where = f"catalog {self.file}, scene {e['name']!r}"
+        usable_path(e["path"], f"{where}: path")
+        group = safe_component(e.get("group", "default"), "group", self.file)
+        sid = safe_component(e.get("id") or scene_id_for(group, e["name"], taken), "id", self.file)
+        path = Path(e["path"])
+        if not path.is_absolute():
+            path = (self.file.parent / path).resolve()  # relative to the catalog file's folder
+        try:
+            fmt = e.get("format") or detect_format(path)  # left out: the path tells
+        except ValueError as err:
+            raise ValueError(f"{where}: {err}") from None
+        labels = LabelSpec.from_entry(e.get("labels"), self.file.parent, where)
+        self.outside += outside_paths(self.file.parent, e["name"], {"path": e["path"], **{
+            f"labels.{k}": getattr(labels, k) for k in ("classes", "mesh", "mesh_classes") if labels is not None}})
+        self.scenes.append(SceneEntry(sid, e["name"], group, str(path), fmt, labels=labels, **provenance(e, where)))
+        taken.add(sid)
+
+    def _add_synthetic(self, syn: dict, count: int | None, num_gaussians: int | None) -> None:
+        if count is not None:
+            syn["count"] = count
+        if num_gaussians is not None:
+            syn["num_gaussians"] = num_gaussians
+        where = f"catalog {self.file}, synthetic"
+        for key, lo, hi in (("count", 0, MAX_SYNTHETIC), ("first_seed", 0, 2**31), ("num_gaussians", 1, 10**9)):
+            v = syn.get(key)
+            if v is not None and (not isinstance(v, int) or isinstance(v, bool) or not lo <= v <= hi):
+                raise ValueError(f"{where}: {key} must be an integer in {lo}..{hi:,} (got {v!r})")
+        for key in ("prefix", "group", "license", "source_url", "attribution"):
+            if syn.get(key) is not None and not isinstance(syn[key], str):
+                raise ValueError(f"{where}: {key} must be a string (got {syn[key]!r})")
+        taken = {s.scene_id for s in self.scenes}
+        for k in range(int(syn.get("count") or 0)):
+            seed = int(syn.get("first_seed") or 0) + k
+            name = safe_component(f"{syn.get('prefix', 'synth')}_{seed:04d}", "synthetic prefix", self.file)
+            group = safe_component(syn.get("group", "synthetic"), "group", self.file)
+            sid = scene_id_for(group, name, taken)
+            taken.add(sid)
+            self.scenes.append(SceneEntry(
+                sid, name, group, "", "synthetic", seed, syn.get("num_gaussians"),
+                license=str(syn.get("license") or PROJECT_LICENSE), source_url=syn.get("source_url"),
+                attribution=syn.get("attribution") or f"NavArena procedural scene generator, seed {seed}"))
 
     @classmethod
     def for_root(cls, root: str | Path) -> "Catalog":

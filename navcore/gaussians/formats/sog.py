@@ -29,6 +29,7 @@ import numpy as np
 from navcore.gaussians.errors import SceneFormatError
 from navcore.gaussians.formats.limits import check_inflation
 from navcore.gaussians.model import GaussianScene
+from navcore.io.paths import PathEscapeError, contained
 
 _SQRT2 = np.sqrt(2.0)
 _SH_COEFFS = {0: 0, 1: 3, 2: 8, 3: 15}
@@ -142,11 +143,19 @@ def _read_json(data: bytes, where: str) -> dict:
     return meta
 
 
+def _inside(folder: Path, name, where) -> Path:
+    """folder / name of a file a SOG meta names; a name leading out of the folder is a format error."""
+    try:
+        return contained(folder, name, str(where))
+    except PathEscapeError as e:
+        raise SceneFormatError(where, str(e).split(": ", 1)[1]) from None
+
+
 def _read_folder_unit(meta_path: Path) -> GaussianScene:
     folder = meta_path.parent
 
     def load(name: str) -> bytes:
-        p = folder / name
+        p = _inside(folder, name, meta_path)
         if not p.is_file():
             raise SceneFormatError(meta_path, f"SOG image {name} is missing (expected at {p})")
         return p.read_bytes()
@@ -206,8 +215,8 @@ def lod_levels(lod_meta_path: Path) -> tuple[dict, dict[int, list[int]]]:
 def _read_lod(path: Path, level: int | None) -> GaussianScene:
     meta, levels = lod_levels(path)
     folder = path.parent
-    missing = {lv: [meta["filenames"][f] for f in fs if not (folder / meta["filenames"][f]).is_file()]
-               for lv, fs in levels.items()}
+    files = {f: _inside(folder, meta["filenames"][f], path) for fs in levels.values() for f in fs}
+    missing = {lv: [meta["filenames"][f] for f in fs if not files[f].is_file()] for lv, fs in levels.items()}
     if level is None:
         complete = [lv for lv in levels if not missing[lv]]
         if not complete:
@@ -221,7 +230,7 @@ def _read_lod(path: Path, level: int | None) -> GaussianScene:
         have = [lv for lv in levels if not missing[lv]]
         raise SceneFormatError(path, f"level {level} lacks {len(m)} of its {len(levels[level])} files "
                                      f"({', '.join(m[:5])}{' ...' if len(m) > 5 else ''}); complete levels: {have}")
-    parts = [_read_folder_unit(folder / meta["filenames"][f]) for f in levels[level]]
+    parts = [_read_folder_unit(files[f]) for f in levels[level]]
     return concat_scenes(parts)
 
 
