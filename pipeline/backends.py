@@ -21,7 +21,7 @@ from distributed.diagnostics.plugin import WorkerPlugin
 from rich.console import Console
 
 from navcore.io.catalog import Catalog
-from pipeline.tasks import FAILED, current, run_task
+from pipeline.tasks import FAILED, current, new_run, run_task
 
 
 def visible_gpus() -> list[str]:
@@ -224,18 +224,28 @@ def run_placed(stage_name: str, scene, run_id: str, *args) -> dict:
 
     t0 = time.time()
     cfg, catalog = RUNS[run_id]
-    r = run_task(stage_name, scene, cfg, catalog, *args)
+    r = run_task(stage_name, scene, cfg, catalog, *args, run=run_identity(run_id))
     r["worker"], r["started"], r["finished"] = str(get_worker().name), round(t0, 3), round(time.time(), 3)
     return {**r, **gpu_identity()}
 
 
-def run_on_dask(cfg, catalog: Catalog, chain, record, console: Console) -> None:
+def run_identity(run_id: str) -> dict:
+    """The run's identity (pipeline.tasks.new_run) from its id, "{pid}-{start ns}"."""
+    return {"id": run_id, "started_ns": int(run_id.rsplit("-", 1)[1])}
+
+
+SCHEDULER_LOST = ("the Dask scheduler was lost before this task finished (killed, or unreachable past the "
+                  "connection timeout): not run here; nothing it may have half-written is trusted (no marker); "
+                  "rerun against a running scheduler")
+
+
+def run_on_dask(cfg, catalog: Catalog, chain, record, console: Console, run: dict | None = None) -> None:
     """Submit the run's tasks; the cluster starts at the first task that has work to do (a run
     whose every task is current starts none)."""
     from dask.distributed import Future, as_completed
 
     dask: dict = {}
-    run_id = f"{os.getpid()}-{time.time_ns()}"
+    run_id = (run or new_run())["id"]
 
     def submit(st, scene, h, force, ups):
         # a task whose inputs are settled and whose marker is current is answered here: a finished
@@ -263,7 +273,9 @@ def run_on_dask(cfg, catalog: Catalog, chain, record, console: Console) -> None:
             except Exception as e:  # noqa: BLE001 - a killed worker, a lost dependency
                 name, sc = what[fut.key]
                 error = f"{type(e).__name__}: {e}"
-                if type(e).__name__ == "KilledWorker":
+                if "scheduler-connection-lost" in str(e) or dask["client"].status in ("closing", "closed"):
+                    error = SCHEDULER_LOST
+                elif type(e).__name__ == "KilledWorker":
                     error = (f"the worker running it died every time it was tried (out of memory? "
                              f"executor.memory_limit={cfg.executor.memory_limit}; or killed from outside): {e}")
                 r = {"stage": name, "scene_id": sc.scene_id, "scene": sc.name, "status": "failed", "error": error}

@@ -23,7 +23,7 @@ from pipeline.config_guard import config_changes, describe, refusal
 from pipeline.episode_progress import EpisodeWatcher, rate_column
 from pipeline.graph import closure, config_hashes, scene_hash
 from pipeline.summary import build_summary, print_summary, write_summary
-from pipeline.tasks import finalize_due, run_finalize, run_task
+from pipeline.tasks import finalize_due, new_run, run_finalize, run_task
 
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 
@@ -102,14 +102,15 @@ def execute(cfg, console: Console | None = None) -> dict:
                                started.timestamp())
     with progress, watch:
         bar = progress.add_task("tasks", total=len(scenes) * len(stages))
+        run = new_run()
         if cfg.executor.kind == "sync" and not cfg.executor.address:
             def run_now(st, scene, h, force, ups):
-                r = run_task(st.name, scene, cfg, catalog, h, force, *ups)
+                r = run_task(st.name, scene, cfg, catalog, h, force, *ups, run=run)
                 record(r)
                 return r
             chain(run_now)
         else:
-            run_on_dask(cfg, catalog, chain, record, console)
+            run_on_dask(cfg, catalog, chain, record, console, run)
     order = {s.name: i for i, s in enumerate(stages)}
     results.sort(key=lambda r: (r["scene_id"], order[r["stage"]]))
     if any(r["status"] in ("done", "failed") for r in results) and root.exists():

@@ -156,8 +156,16 @@ def print_summary(summary: dict, console: Console) -> None:
         f = Table(title="failures", show_lines=False)
         for col in ("scene", "stage", "status", "error"):
             f.add_column(col, overflow="fold")
+        shared: dict[str, list[dict]] = {}
         for r in summary["failures"]:
-            f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], r["status"], escape(r.get("error", "")))
+            shared.setdefault(r.get("error", ""), []).append(r)
+        for error, rows in shared.items():  # one line for a cause many tasks share (a lost scheduler)
+            if len(rows) > 3:
+                f.add_row(f"{len({r['scene_id'] for r in rows})} scenes", f"{len(rows)} tasks", rows[0]["status"],
+                          escape(error))
+                continue
+            for r in rows:
+                f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], r["status"], escape(error))
         console.print(f)
         console.print("[red]some tasks failed[/]: the run exits with status 1" if not summary.get("allow_failures")
                       else "some tasks failed; allow_failures=true: the run exits with status 0")

@@ -48,9 +48,19 @@ def _refresh_sources(marker, lock, m: dict, fresh: dict) -> None:
         pass
 
 
+def new_run() -> dict:
+    """A run's identity in its markers: id (pid and start time) and start time in ns. A task of an
+    older run never overwrites what a newer run wrote (`_run_locked`): the write fence that keeps
+    the orphaned tasks of a killed client, still running on an external cluster's workers, from
+    replacing a rerun's newer result."""
+    t = time.time_ns()
+    return {"id": f"{os.getpid()}-{t}", "started_ns": t}
+
+
 def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_hash: str, force: bool,
-             *upstream: dict) -> dict:
-    """Run one (stage, scene) unless it is current; never raises."""
+             *upstream: dict, run: dict | None = None) -> dict:
+    """Run one (stage, scene) unless it is current; never raises. run: the run's identity
+    (`new_run`), recorded in the marker and checked against a newer run's marker."""
     base = {"stage": stage_name, "scene_id": scene.scene_id, "scene": scene.name}
     for up in upstream:
         if up["status"] in FAILED:
@@ -66,13 +76,19 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
             done = current(stage_name, scene, catalog, config_hash, force, verify)
             if done is not None:
                 return {**done, "waited_s": round(waited, 3)}
-            return _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, verify, base)
+            return _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, verify, base, run)
     except OSError as e:  # the lock could not be taken (a full disk, a read-only data root)
         return {**base, "status": "failed", "error": describe(e, catalog)}
 
 
-def _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, verify, base) -> dict:
+def _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, verify, base, run) -> dict:
     marker = catalog.path("markers", scene, stage=stage_name)
+    newer = read_marker(marker) if run else None
+    by = (newer or {}).get("run") or {}
+    if run and by.get("started_ns", 0) > run["started_ns"]:  # the write fence (new_run)
+        return {**base, "status": "skipped", "superseded_by": by.get("id"),
+                "error": f"superseded: a newer run ({by.get('id')}) wrote this (stage, scene) while this one's task "
+                         "waited; an older run never overwrites a newer one's outputs"}
     old = None if force else read_marker(marker)
     extra = {}
     if old is not None and old.get("config_hash") == config_hash:  # why a marker of this config is redone
@@ -107,7 +123,7 @@ def _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, veri
         manifest = output_manifest(info.get("outputs", []), catalog.root)
         write_marker(marker, {"stage": stage_name, "scene_id": scene.scene_id, "config_hash": config_hash,
                               "config": stage_config(cfg, stage_name), "storage": stage_storage(cfg, stage_name),
-                              "duration_s": duration, "info": info, "sources": used,
+                              "duration_s": duration, "info": info, "sources": used, "run": run,
                               "manifest": manifest})
     except OSError as e:  # an output gone after the stage, or no room for the marker: not done
         marker.unlink(missing_ok=True)

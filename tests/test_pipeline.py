@@ -758,3 +758,25 @@ def test_map_pictures_carry_a_scale_bar_of_the_right_length():
     black = np.flatnonzero((bar_row == 0).all(-1))
     assert len(black) == 2 / 0.05 * k + 1  # 2 m: the longest step within a quarter of 10 m
     assert ((pic[300:] == (255, 0, 0)).all(-1)).sum() > 50  # the legend's swatch
+
+
+def test_an_older_runs_task_never_overwrites_a_newer_runs_output(tmp_path, make_cfg):
+    """The write fence: a task of a run that started before the one whose marker it finds (an orphan
+    of a killed client, still running on an external cluster) is superseded, not run."""
+    from pipeline.executor import open_catalog
+    from pipeline.graph import config_hashes, scene_hash
+    from pipeline.tasks import new_run, run_task
+
+    older = new_run()
+    cfg = make_cfg(tmp_path, "stages=[align]")
+    execute(cfg)  # the newer run
+    marker = next((tmp_path / "_markers" / "align").glob("*.json"))
+    before = marker.read_bytes()
+    cat, (scene,), _ = open_catalog(cfg)
+    stale = make_cfg(tmp_path, "stages=[align]", "align.max_gaussians=300000")  # the orphan's other settings
+    h = scene_hash(config_hashes(stale)["align"], "align", scene)
+    r = run_task("align", scene, stale, cat, h, False, run=older)
+    assert r["status"] == "skipped" and "superseded" in r["error"] and marker.read_bytes() == before
+    assert json.loads(before)["run"]["started_ns"] > older["started_ns"]
+    r = run_task("align", scene, stale, cat, h, False, run=new_run())  # a newer run recomputes
+    assert r["status"] == "done" and json.loads(marker.read_text())["config_hash"] == h

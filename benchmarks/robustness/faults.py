@@ -298,8 +298,173 @@ def _scene_ids_of(root: Path, name: str) -> list[str]:
     return sorted({r["scene_id"] for r in s.get("results", []) if r["scene"] == name})
 
 
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as sk:
+        sk.bind(("127.0.0.1", 0))
+        return sk.getsockname()[1]
+
+
+def _external_cluster(port: int, work: Path, workers: int = 2) -> tuple[subprocess.Popen, list[subprocess.Popen]]:
+    """A `dask scheduler` on port and `workers` one-thread `dask worker`s, as a cluster on other
+    machines would be (executor.address); returns once the workers are connected."""
+    from distributed import Client
+
+    dask_cli = str(Path(sys.executable).parent / "dask")
+    log = open(work / f"cluster_{port}.log", "ab")
+    env = {**os.environ, **ENV}
+    sched = subprocess.Popen([dask_cli, "scheduler", "--port", str(port), "--no-dashboard"], stdout=log,
+                             stderr=subprocess.STDOUT, env=env, start_new_session=True)
+    ws = [subprocess.Popen([dask_cli, "worker", f"tcp://127.0.0.1:{port}", "--nthreads", "1", "--no-dashboard",
+                            "--death-timeout", "120"], stdout=log, stderr=subprocess.STDOUT, env=env,
+                           start_new_session=True) for _ in range(workers)]
+    with Client(f"tcp://127.0.0.1:{port}", timeout=60) as c:
+        c.wait_for_workers(workers, timeout=120)
+    return sched, ws
+
+
+def _stop(*procs) -> None:
+    for p in procs:
+        if p is not None and p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+def scheduler_killed(ref: Path, work: Path) -> dict:
+    """An external scheduler (executor.address) SIGKILLed mid-run: the run stops within a bounded
+    time with the reason (no hang), trusts nothing half-written; a rerun against a fresh scheduler
+    on the same address (the old workers reconnect to it) completes and matches the reference."""
+    root, port = work / "scheduler_killed", _free_port()
+    sched, ws = _external_cluster(port, work)
+    try:
+        p = start(root, f"executor.address=tcp://127.0.0.1:{port}", log=work / "scheduler_killed_run1.log")
+        while p.poll() is None and len(markers(root)) < len(markers(ref)) // 3:
+            time.sleep(0.05)
+        _stop(sched)
+        t0 = time.time()
+        rc1 = p.wait(600)
+        stop_s = round(time.time() - t0, 1)
+        s1 = json.loads((root / "_runs" / "latest.json").read_text())
+        lost = [f for f in s1.get("failures", []) if "scheduler was lost" in f.get("error", "")]
+        sched = _external_cluster(port, work, workers=0)[0]  # the same address: the workers reconnect
+        r2 = run(root, f"executor.address=tcp://127.0.0.1:{port}", log=work / "scheduler_killed_run2.log")
+        bad = mismatches(ref, root)
+        ok = rc1 == 1 and lost and stop_s < 120 and r2["rc"] == 0 and not r2["summary"].get("failures")
+        return result("scheduler_killed", 1, int(bool(ok) and not bad), bad, stopped_after_s=stop_s,
+                      tasks_reported_lost=len(lost), rerun_rc=r2["rc"])
+    finally:
+        _stop(sched, *ws)
+
+
+def client_killed(ref: Path, work: Path) -> dict:
+    """The client SIGKILLed while an external cluster's workers run its tasks (they go on: orphans);
+    a rerun started at once on the same cluster completes, waits for an orphan only while it holds
+    the lock of the very (stage, scene) it needs, lets no orphan overwrite what it wrote (the write
+    fence of pipeline.tasks.new_run) and matches the reference."""
+    root, port = work / "client_killed", _free_port()
+    sched, ws = _external_cluster(port, work)
+    try:
+        p = start(root, f"executor.address=tcp://127.0.0.1:{port}", log=work / "client_killed_run1.log")
+        orphan = None
+        while p.poll() is None and orphan is None:  # a costmap task running on a worker: kill its client
+            orphan = held_lock(root, "costmap")
+            time.sleep(0.02)
+        _stop(p)
+        t0 = time.time()
+        r2 = run(root, f"executor.address=tcp://127.0.0.1:{port}", log=work / "client_killed_run2.log")
+        waited = [x.get("waited_s", 0) for x in r2["summary"].get("results", []) if x.get("waited_s")]
+        bad = mismatches(ref, root)
+        ok = orphan is not None and r2["rc"] == 0 and not r2["summary"].get("failures")
+        return result("client_killed", 1, int(ok and not bad), bad, orphan_worker_pid=orphan,
+                      rerun_s=round(time.time() - t0, 1), rerun_waited_on_locks_s=round(sum(waited), 2))
+    finally:
+        _stop(sched, *ws)
+
+
+def changed_source(ref: Path, work: Path) -> dict:
+    """Sources that change under a finished run (pipeline.sources). Two real scenes (the reference's
+    generated sources copied as outside files, one with a labelled mesh); after a finished run:
+    a source replaced with other bytes (that scene recomputed from ingest on, the other cached),
+    its labelled mesh edited (semantics on recomputed, nothing upstream), the source truncated
+    and deleted (ingest fails naming the file, nothing of the scene trusted), restored, then other
+    bytes behind the same size and mtime (noticed with verify=checksum). The final root must
+    equal, byte for byte, an undisturbed run made from the final files."""
+    from benchmarks.robustness.fuzz_inputs import _boxes, _ply
+    from navcore.gaussians.formats import read_gaussians, write_inria_ply
+
+    root = work / "changed_source"
+    src = root / "sources"  # inside the data root: both roots name their sources alike (<ROOT>/sources)
+    src.mkdir(parents=True)
+    gen = sorted((ref / "00_sources" / "synthetic").glob("*/scene.ply"))
+    shutil.copy(gen[0], src / "a.ply")
+    shutil.copy(gen[1], src / "b.ply")
+    verts, faces = _boxes()
+    _ply(src / "a_labels.ply", verts + [1.0, 1.0, 0.0], faces, {"label": [6] * 8 + [5] * 8})
+    cat = src / "catalog.yaml"
+    cat.write_text("scenes:\n  - {name: a, group: real, path: a.ply, labels: {mesh: a_labels.ply, mesh_classes: nyu40}}\n"
+                   "  - {name: b, group: real, path: b.ply}\n")
+    over = (f"scenes.catalog={cat}",)
+    a = src / "a.ply"
+    steps, log = {}, work / "changed_source.log"
+
+    def rerun(*extra):
+        r = run(root, *over, *extra, log=log)
+        return r, {(x["scene"], x["stage"]): x["status"] for x in r["summary"].get("results", [])}
+
+    first, _ = rerun()
+    ok0 = first["rc"] == 0
+    stages_a = lambda st, want: sorted(k[1] for k, v in st.items() if k[0] == "a" and v == want)  # noqa: E731
+    cached_b = lambda st: all(v == "cached" for k, v in st.items() if k[0] == "b" and v != "n/a")  # noqa: E731
+    # 1. other bytes at the same path
+    g = read_gaussians(a)
+    g.means = g.means + np.array([0.05, 0.0, 0.0], g.means.dtype)
+    write_inria_ply(a, g)
+    r, st = rerun()
+    row = (r["summary"].get("sources_changed") or [{}])[0]
+    steps["replaced"] = bool(cached_b(st) and "ingest" in stages_a(st, "done") and not stages_a(st, "cached")
+                             and row.get("file") == str(a) and row.get("new_sha256"))
+    # 2. the labelled mesh edited: semantics and later only
+    _ply(src / "a_labels.ply", verts + [1.5, 1.0, 0.0], faces, {"label": [6] * 8 + [5] * 8})
+    r, st = rerun()
+    steps["mesh_edited"] = bool(cached_b(st) and "semantics" in stages_a(st, "done") and
+                                {"ingest", "voxelize", "align", "costmap"} <= set(stages_a(st, "cached")))
+    # 3. truncated, 4. deleted: ingest fails naming the file; nothing of the scene trusted
+    good = a.read_bytes()
+    for name, hurt in (("truncated", lambda: a.write_bytes(good[: len(good) // 3])), ("deleted", a.unlink)):
+        hurt()
+        r, st = rerun()
+        err = next((f.get("error", "") for f in r["summary"].get("failures", []) if f["scene"] == "a"
+                    and f["stage"] == "ingest"), "")
+        sid = next((x["scene_id"] for x in r["summary"].get("results", []) if x["scene"] == "a"), "?")
+        steps[name] = bool(r["rc"] == 1 and str(a.name) in err and cached_b(st) and
+                           not (root / "_markers" / "ingest" / f"{sid}.json").exists())
+    # restored
+    a.write_bytes(good)
+    r, _ = rerun()
+    restored = r["rc"] == 0
+    # 5. other bytes behind the same size and mtime: verify=checksum notices
+    st0 = a.stat()
+    data = bytearray(good)
+    data[-3] ^= 0x10
+    a.write_bytes(bytes(data))
+    os.utime(a, ns=(st0.st_atime_ns, st0.st_mtime_ns))
+    _, st = rerun()
+    quiet = all(v in ("cached", "n/a") for v in st.values())  # size mode cannot tell (documented)
+    r, st = rerun("verify=checksum")
+    steps["same_size_and_mtime"] = bool(quiet and r["rc"] == 0 and "ingest" in stages_a(st, "done") and cached_b(st))
+    # the undisturbed run from the final files
+    und = work / "undisturbed"
+    shutil.copytree(src, und / "sources")
+    u = run(und, f"scenes.catalog={und / 'sources' / 'catalog.yaml'}", log=work / "undisturbed.log")
+    bad = mismatches(und, root)
+    ok = ok0 and restored and u["rc"] == 0
+    return result("changed_source", len(steps), sum(steps.values()) if ok and not bad else 0, bad, steps=steps)
+
+
 SCENARIOS = {"kill_run": kill_run, "kill_worker": kill_worker, "full_disk": full_disk, "concurrent": concurrent,
-             "damaged": damaged, "determinism": determinism, "out_of_memory": out_of_memory}
+             "damaged": damaged, "determinism": determinism, "out_of_memory": out_of_memory,
+             "changed_source": changed_source, "scheduler_killed": scheduler_killed, "client_killed": client_killed}
 
 
 def code_digest() -> str:
