@@ -1,7 +1,7 @@
 """Sharded batch submission: one array job, one pipeline run per shard.
 
     python -m pipeline.submit --shards 64 --scheduler slurm [--dry-run] [--wait] [--cpus 8] [--mem 32G]
-        [--time 04:00:00] [--queue cpu] -- scenes=synthetic_large costmap.embodiments=[stretch]
+        [--time 04:00:00] [--requeue-before 120] [--queue cpu] -- scenes=synthetic_large costmap.embodiments=[stretch]
 
 Array task k runs ``python -m pipeline scenes.shard=k scenes.num_shards=N executor=local ...``
 (every n-th scene in scene-id order: disjoint and deterministic). Completion markers make the
@@ -25,9 +25,12 @@ PROJECT_ROOT = Path(__file__).resolve().parent.parent
 
 def array_script(scheduler: str, shards: int, overrides: list[str], cpus: int, mem: str, walltime: str,
                  queue: str | None, account: str | None, python: str, workdir: Path,
-                 logs: str = "data/_submit/logs") -> str:
+                 logs: str = "data/_submit/logs", requeue_before: int = 0, max_requeues: int = 10) -> str:
     """The batch script of an array job over the shards (logs: its log folder, relative to
-    workdir or absolute)."""
+    workdir or absolute). requeue_before (SLURM): seconds before the time limit at which a task
+    stops its run and puts itself back in the queue (at most max_requeues times): the requeued
+    task resumes from the markers, and the stage it was in is redone (its partial outputs carry
+    no marker and are never trusted); 0: a task that reaches its limit is killed (resubmit it)."""
     if shards < 1:
         raise ValueError("--shards must be >= 1")
     over = " ".join(shlex.quote(o) for o in overrides)
@@ -37,6 +40,7 @@ def array_script(scheduler: str, shards: int, overrides: list[str], cpus: int, m
                 f"#SBATCH --output={logs}/navarena-%A_%a.out"]
         head += [f"#SBATCH --partition={queue}"] if queue else []
         head += [f"#SBATCH --account={account}"] if account else []
+        head += ["#SBATCH --requeue", f"#SBATCH --signal=B:USR1@{requeue_before}"] if requeue_before > 0 else []
         index = "$SLURM_ARRAY_TASK_ID"
     elif scheduler == "pbs":
         head = ["#!/bin/bash", "#PBS -N navarena", f"#PBS -J 0-{shards - 1}",
@@ -47,9 +51,26 @@ def array_script(scheduler: str, shards: int, overrides: list[str], cpus: int, m
         index = "$PBS_ARRAY_INDEX"
     else:
         raise ValueError(f"scheduler must be slurm or pbs, not {scheduler!r}")
-    body = [f"cd {shlex.quote(str(workdir))}",
-            f"{shlex.quote(python)} -m pipeline scenes.shard={index} scenes.num_shards={shards} "
-            f"executor=local executor.n_workers={cpus} executor.dashboard=false {over}".rstrip()]
+    run = (f"{shlex.quote(python)} -m pipeline scenes.shard={index} scenes.num_shards={shards} "
+           f"executor=local executor.n_workers={cpus} executor.dashboard=false {over}").rstrip()
+    if scheduler == "slurm" and requeue_before > 0:
+        # the run in the background, so that the time-limit signal reaches this shell's trap at once
+        body = [f"cd {shlex.quote(str(workdir))}",
+                'task="${SLURM_ARRAY_JOB_ID}_${SLURM_ARRAY_TASK_ID}"',
+                "requeue() {",
+                f'    echo "navarena: {requeue_before} s before the time limit: stopping shard {index} and requeueing $task"',
+                '    kill -TERM "$run" 2>/dev/null; wait "$run"',
+                f'    if [ "${{SLURM_RESTART_COUNT:-0}}" -lt {max_requeues} ]; then scontrol requeue "$task"; exit 0; fi',
+                f'    echo "navarena: requeued {max_requeues} times already: giving up (resubmit to go on)"; exit 1',
+                "}",
+                "trap requeue USR1",
+                f"{run} &",
+                "run=$!",
+                'wait "$run"',
+                'status=$?',
+                'exit "$status"']
+        return "\n".join(head + ["set -uo pipefail"] + body) + "\n"
+    body = [f"cd {shlex.quote(str(workdir))}", run]
     return "\n".join(head + ["set -euo pipefail"] + body) + "\n"
 
 
@@ -65,6 +86,9 @@ def main(argv=None) -> int:
     ap.add_argument("--time", default="04:00:00")
     ap.add_argument("--queue")
     ap.add_argument("--account")
+    ap.add_argument("--requeue-before", type=int, default=120, metavar="S",
+                    help="SLURM: seconds before the time limit at which a task requeues itself (0: never)")
+    ap.add_argument("--max-requeues", type=int, default=10)
     ap.add_argument("--dry-run", action="store_true", help="write the script, do not submit it")
     ap.add_argument("--wait", action="store_true", help="block until the job has ended (its exit status)")
     args = ap.parse_args(argv)
@@ -72,7 +96,8 @@ def main(argv=None) -> int:
     out = (root if root.is_absolute() else PROJECT_ROOT / root) / "_submit"
     (out / "logs").mkdir(parents=True, exist_ok=True)
     script = array_script(args.scheduler, args.shards, overrides, args.cpus, args.mem, args.time, args.queue,
-                          args.account, sys.executable, PROJECT_ROOT, str(out / "logs"))
+                          args.account, sys.executable, PROJECT_ROOT, str(out / "logs"), args.requeue_before,
+                          args.max_requeues)
     path = out / f"navarena-{args.scheduler}-{dt.datetime.now():%Y%m%dT%H%M%S}.sh"
     path.write_text(script)
     print(f"wrote {path}")

@@ -364,6 +364,13 @@ def test_batch_submission_scripts(project_root, make_cfg):
     assert "#SBATCH --array=0-15" in s and "#SBATCH --partition=cpu" in s
     assert "scenes.shard=$SLURM_ARRAY_TASK_ID scenes.num_shards=16" in s and s.rstrip().endswith(
         "scenes=synthetic_large costmap.resolution=0.02")
+    r = array_script("slurm", 2, [], 1, "4G", "00:01:00", None, None, "python", project_root, requeue_before=30,
+                     max_requeues=3)  # a task near its time limit requeues itself
+    assert "#SBATCH --signal=B:USR1@30" in r and "#SBATCH --requeue" in r and "trap requeue USR1" in r
+    assert 'scontrol requeue "$task"' in r and "-lt 3 ]" in r
+    import subprocess
+
+    assert subprocess.run(["bash", "-n"], input=r, text=True).returncode == 0  # valid bash
     p = array_script("pbs", 4, [], 4, "16gb", "01:00:00", None, "acct", "python", project_root)
     assert "#PBS -J 0-3" in p and "$PBS_ARRAY_INDEX" in p and "#PBS -A acct" in p
     pytest.importorskip("dask_jobqueue")

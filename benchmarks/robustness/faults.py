@@ -306,9 +306,11 @@ def _free_port() -> int:
         return sk.getsockname()[1]
 
 
-def _external_cluster(port: int, work: Path, workers: int = 2) -> tuple[subprocess.Popen, list[subprocess.Popen]]:
+def _external_cluster(port: int, work: Path, workers: int = 2, wait_for: int | None = None
+                      ) -> tuple[subprocess.Popen, list[subprocess.Popen]]:
     """A `dask scheduler` on port and `workers` one-thread `dask worker`s, as a cluster on other
-    machines would be (executor.address); returns once the workers are connected."""
+    machines would be (executor.address); returns once `wait_for` workers (default: these) are
+    connected."""
     from distributed import Client
 
     dask_cli = str(Path(sys.executable).parent / "dask")
@@ -320,7 +322,7 @@ def _external_cluster(port: int, work: Path, workers: int = 2) -> tuple[subproce
                             "--death-timeout", "120"], stdout=log, stderr=subprocess.STDOUT, env=env,
                            start_new_session=True) for _ in range(workers)]
     with Client(f"tcp://127.0.0.1:{port}", timeout=60) as c:
-        c.wait_for_workers(workers, timeout=120)
+        c.wait_for_workers(wait_for or workers, timeout=120)
     return sched, ws
 
 
@@ -333,8 +335,8 @@ def _stop(*procs) -> None:
 
 def scheduler_killed(ref: Path, work: Path) -> dict:
     """An external scheduler (executor.address) SIGKILLed mid-run: the run stops within a bounded
-    time with the reason (no hang), trusts nothing half-written; a rerun against a fresh scheduler
-    on the same address (the old workers reconnect to it) completes and matches the reference."""
+    time with the reason (no hang), trusts nothing half-written; the workers close with it; a rerun
+    against a fresh scheduler and workers on the same address completes and matches the reference."""
     root, port = work / "scheduler_killed", _free_port()
     sched, ws = _external_cluster(port, work)
     try:
@@ -347,7 +349,8 @@ def scheduler_killed(ref: Path, work: Path) -> dict:
         stop_s = round(time.time() - t0, 1)
         s1 = json.loads((root / "_runs" / "latest.json").read_text())
         lost = [f for f in s1.get("failures", []) if "scheduler was lost" in f.get("error", "")]
-        sched = _external_cluster(port, work, workers=0)[0]  # the same address: the workers reconnect
+        _stop(*ws)  # the workers closed with their scheduler (as dask-jobqueue's do): a fresh cluster
+        sched, ws = _external_cluster(port, work)
         r2 = run(root, f"executor.address=tcp://127.0.0.1:{port}", log=work / "scheduler_killed_run2.log")
         bad = mismatches(ref, root)
         ok = rc1 == 1 and lost and stop_s < 120 and r2["rc"] == 0 and not r2["summary"].get("failures")
@@ -380,6 +383,153 @@ def client_killed(ref: Path, work: Path) -> dict:
                       rerun_s=round(time.time() - t0, 1), rerun_waited_on_locks_s=round(sum(waited), 2))
     finally:
         _stop(sched, *ws)
+
+
+# ---- batch-cluster scenarios (a one-node SLURM: scripts/slurm_localhost.sh) -----------------------
+
+def _slurm() -> str | None:
+    """Why the SLURM scenarios cannot run here, or None."""
+    if shutil.which("sbatch") is None or subprocess.run(["sinfo", "-h"], capture_output=True).returncode:
+        return "no SLURM here (make test-slurm starts a one-node one: scripts/slurm_localhost.sh, root)"
+    return None
+
+
+def _submit(root: Path, *flags: str) -> str:
+    """`make submit`'s array job of the base config over 2 shards; returns its job id."""
+    import re
+
+    p = subprocess.run([sys.executable, "-m", "pipeline.submit", "--shards", "2", "--cpus", "1", "--mem", "4G", *flags,
+                        "--", f"data_root={root}", *BASE], cwd=PROJECT, env={**os.environ, **ENV},
+                       capture_output=True, text=True)
+    m = re.search(r"Submitted batch job (\d+)", p.stdout)
+    if not m:
+        raise RuntimeError(f"sbatch did not take the job: {p.stdout[-500:]} {p.stderr[-500:]}")
+    return m.group(1)
+
+
+def _queued(job: str) -> bool:
+    return bool(subprocess.run(["squeue", "-h", "-j", job], capture_output=True, text=True).stdout.strip())
+
+
+def _wait_job(job: str, timeout: float = 1800) -> None:
+    deadline = time.time() + timeout
+    while _queued(job):
+        if time.time() > deadline:
+            subprocess.run(["scancel", job])
+            raise TimeoutError(f"SLURM job {job} still queued after {timeout} s")
+        time.sleep(1)
+
+
+def _shard_runs(root: Path, since: float = 0.0) -> list[dict]:
+    out = []
+    for p in sorted((root / "_runs").glob("run-*-shard*.json")):
+        if p.stat().st_mtime >= since:
+            out.append(json.loads(p.read_text()))
+    return out
+
+
+def slurm_cancel(ref: Path, work: Path) -> dict:
+    """A running array job cancelled (scancel) mid-stage, then resubmitted: it completes, redoes
+    nothing that was done, and matches."""
+    if (why := _slurm()):
+        return result("slurm_cancel", 0, 0, [], skipped=why)
+    root = work / "slurm_cancel"
+    job = _submit(root, "--requeue-before", "0")
+    deadline = time.time() + 900
+    while len(markers(root)) < len(markers(ref)) // 3 and time.time() < deadline:
+        time.sleep(0.2)
+    subprocess.run(["scancel", job], check=True)
+    _wait_job(job)
+    before = markers(root)
+    t0 = time.time()
+    _wait_job(_submit(root, "--requeue-before", "0"))
+    results = [x for r in _shard_runs(root, t0) for x in r["results"]]
+    redone = sorted(before & {(x["stage"], x["scene_id"]) for x in results if x["status"] == "done"})
+    fails = [f for r in _shard_runs(root, t0) for f in r["failures"]]
+    bad = mismatches(ref, root)
+    ok = bool(before) and not redone and not fails and len(_shard_runs(root, t0)) == 2
+    return result("slurm_cancel", 1, int(ok and not bad), bad, markers_at_cancel=len(before),
+                  redone=[f"{s}/{c}" for s, c in redone])
+
+
+def slurm_time_limit(ref: Path, work: Path) -> dict:
+    """Array tasks with a one-minute time limit: 30 s before it each task stops its run and requeues
+    itself (pipeline.submit --requeue-before); the stage it was in carries no marker and is redone;
+    the tasks finish after as many requeues as they need, and the outputs match."""
+    import re
+
+    if (why := _slurm()):
+        return result("slurm_time_limit", 0, 0, [], skipped=why)
+    root = work / "slurm_time_limit"
+    job = _submit(root, "--time", "00:01:00", "--requeue-before", "30", "--max-requeues", "20")
+    _wait_job(job, 2400)
+    logs = "".join(p.read_text(errors="replace") for p in (root / "_submit" / "logs").glob(f"navarena-{job}_*.out"))
+    requeues = len(re.findall(r"requeueing", logs))
+    last = {}
+    for r in _shard_runs(root):
+        last[tuple(r["shard"])] = r
+    fails = [f for r in last.values() for f in r["failures"]]
+    bad = mismatches(ref, root)
+    ok = requeues > 0 and len(last) == 2 and not fails
+    return result("slurm_time_limit", requeues, requeues if ok and not bad else 0, bad,
+                  shard_runs=len(_shard_runs(root)), failures=[f.get("error", "")[:120] for f in fails[:3]])
+
+
+def slurm_double_submit(ref: Path, work: Path) -> dict:
+    """The same two shards submitted twice at once by mistake: both arrays run side by side on one
+    data root; no (stage, scene) is computed twice, every marker parses, and the outputs match."""
+    if (why := _slurm()):
+        return result("slurm_double_submit", 0, 0, [], skipped=why)
+    root = work / "slurm_double_submit"
+    jobs = [_submit(root, "--requeue-before", "0") for _ in range(2)]
+    for j in jobs:
+        _wait_job(j)
+    runs = _shard_runs(root)
+    done = [(x["stage"], x["scene_id"]) for r in runs for x in r["results"]
+            if x["status"] == "done" and not x["stage"].endswith(":finalize")]
+    twice = sorted({d for d in done if done.count(d) > 1})
+    broken = [str(p) for p in (root / "_markers").rglob("*.json") if _unparsable(p)]
+    fails = [f for r in runs for f in r["failures"]]
+    bad = mismatches(ref, root)
+    ok = len(runs) == 4 and not twice and not broken and not fails
+    return result("slurm_double_submit", 1, int(ok and not bad), bad, computed_twice=[f"{s}/{c}" for s, c in twice],
+                  unparsable_markers=broken, waited=sum(1 for r in runs for x in r["results"] if x.get("waited_s")))
+
+
+def _unparsable(p: Path) -> bool:
+    try:
+        json.loads(p.read_text())
+        return False
+    except ValueError:
+        return True
+
+
+def slurm_worker_cancel(ref: Path, work: Path) -> dict:
+    """executor=slurm (Dask workers in SLURM jobs, dask-jobqueue): one of the two worker jobs
+    cancelled while it holds tasks; the run goes on with the other (or fails cleanly naming the
+    lost worker) and a rerun completes; the outputs match."""
+    if (why := _slurm()):
+        return result("slurm_worker_cancel", 0, 0, [], skipped=why)
+    root = work / "slurm_worker_cancel"
+    over = ("executor=slurm", "executor.jobqueue.jobs=2", "executor.jobqueue.cores=1", "executor.jobqueue.processes=1",
+            "executor.jobqueue.memory=4GB", "executor.jobqueue.walltime=00:30:00",
+            f"executor.jobqueue.log_directory={work / 'slurm_worker_logs'}")
+    p = start(root, *over, log=work / "slurm_worker_cancel.log")
+    cancelled = None
+    while p.poll() is None and cancelled is None:
+        jobs = subprocess.run(["squeue", "-h", "-n", "navarena-worker", "-t", "R", "-o", "%i"], capture_output=True,
+                              text=True).stdout.split()
+        if len(jobs) == 2 and held_lock(root, "costmap"):
+            cancelled = jobs[0]
+            subprocess.run(["scancel", cancelled])
+        time.sleep(0.2)
+    rc1 = p.wait(1800)
+    s1 = json.loads((root / "_runs" / "latest.json").read_text())
+    r2 = run(root, *over, log=work / "slurm_worker_cancel_rerun.log")
+    bad = mismatches(ref, root)
+    ok = cancelled is not None and r2["rc"] == 0 and not r2["summary"].get("failures")
+    return result("slurm_worker_cancel", int(cancelled is not None), int(ok and not bad), bad,
+                  first_run_rc=rc1, first_run_failures=[f.get("error", "")[:160] for f in s1.get("failures", [])[:3]])
 
 
 def changed_source(ref: Path, work: Path) -> dict:
@@ -464,7 +614,9 @@ def changed_source(ref: Path, work: Path) -> dict:
 
 SCENARIOS = {"kill_run": kill_run, "kill_worker": kill_worker, "full_disk": full_disk, "concurrent": concurrent,
              "damaged": damaged, "determinism": determinism, "out_of_memory": out_of_memory,
-             "changed_source": changed_source, "scheduler_killed": scheduler_killed, "client_killed": client_killed}
+             "changed_source": changed_source, "scheduler_killed": scheduler_killed, "client_killed": client_killed,
+             "slurm_cancel": slurm_cancel, "slurm_time_limit": slurm_time_limit, "slurm_double_submit": slurm_double_submit,
+             "slurm_worker_cancel": slurm_worker_cancel}
 
 
 def code_digest() -> str:
@@ -506,7 +658,7 @@ def run_scenario(name: str, ref: Path, work: Path, kills: int = 20) -> dict:
 
 
 def markdown(rep: dict) -> str:
-    lines = ["# Fault injection and hostile input (issue 14)", "",
+    lines = ["# Fault injection and hostile input (issues 14 and 48)", "",
              f"Machine: {rep['machine']}. Reproduce: `make test-faults`.", "",
              "| fault | injected | survived | byte mismatches | seconds | notes |", "|---|---|---|---|---|---|"]
     for r in rep["scenarios"].values():
@@ -528,6 +680,31 @@ def markdown(rep: dict) -> str:
         lines += [f"| {k} | {v:,} |" for k, v in ff["cases_per_frame_type"].items()]
         lines += ["", f"Frame fuzzing: {sum(ff['cases_per_frame_type'].values()):,} cases, {ff['crashes']} crashes "
                   f"(memory included), {ff['hangs']} hangs (`python -m benchmarks.robustness.fuzz_frames`)."]
+    fi = rep.get("fuzz_inputs")
+    if fi:
+        lines += ["", "| input | cases | crashes | hangs |", "|---|---|---|---|"]
+        lines += [f"| {k} | {v:,} | {fi['crashes_per_group'].get(k, 0)} | {fi['hangs_per_group'].get(k, 0)} |"
+                  for k, v in fi["cases_per_group"].items()]
+        lines += ["", "Catalogs, label folders and labelled meshes: `python -m benchmarks.robustness.fuzz_inputs` (a "
+                  "case ends in an accepted input or a ValueError naming the file)."]
+    ch = rep.get("chaos")
+    if ch:
+        kinds: dict[str, int] = {}
+        for e in ch["events"]:
+            kinds[e["fault"]] = kinds.get(e["fault"], 0) + 1
+        lines += ["", f"## A run under chaos ({ch['minutes_planned']:g} minutes planned)", "",
+                  f"`python -m benchmarks.robustness.chaos --minutes {ch['minutes_planned']:g}`: {ch['scenes']:,} scenes of "
+                  "the scale simulation on an external Dask cluster (a scheduler, two workers under nannies); "
+                  f"faults: {', '.join(f'{k} {v}' for k, v in kinds.items())}.", "",
+                  "| figure | value |", "|---|---|",
+                  f"| wall time under chaos | {ch['wall_s']} s ({ch['attempts']} runs started) |",
+                  f"| undisturbed run of the compared scenes | {ch['undisturbed_wall_s']} s |",
+                  f"| time lost to faults | {ch['time_lost_s'] if ch['time_lost_s'] is not None else 'n/a (a sample)'} s |",
+                  f"| tasks the killed workers held (retried) | {ch['tasks_retried']} |",
+                  f"| client peak memory | {ch['client_peak_rss_mb']} MB |",
+                  f"| markers not current (outputs hashed) | {len(ch['markers_not_current'])} |",
+                  f"| scenes compared byte for byte | {ch['compared']['scenes']} ({ch['compared']['files']:,} files) |",
+                  f"| byte mismatches | {len(ch['byte_mismatches'])} |"]
     if "fuzz_cases" in rep:
         lines += ["", f"All fuzzing: {rep['fuzz_cases']:,} cases, {rep['fuzz_crashes']} crashes, {rep['fuzz_hangs']} hangs."]
     return "\n".join(lines) + "\n"
@@ -574,6 +751,24 @@ def main(argv=None) -> dict:
         for ours, theirs in (("fuzz_cases", "fuzz_frame_cases"), ("fuzz_crashes", "fuzz_frame_crashes"),
                              ("fuzz_hangs", "fuzz_frame_hangs")):
             rep[ours] = rep.get(ours, 0) + f[theirs]
+    fi = Path(args.out) / "fuzz_inputs.json"
+    if fi.exists():  # catalogs, label folders, labelled meshes (benchmarks.robustness.fuzz_inputs)
+        f = json.loads(fi.read_text())
+        per = {"cases_per_group": f["cases_per_group"], "crashes_per_group": {}, "hangs_per_group": {}}
+        for r in f["kinds"].values():
+            per["crashes_per_group"][r["input"]] = per["crashes_per_group"].get(r["input"], 0) + r["crash"] + r["memory"]
+            per["hangs_per_group"][r["input"]] = per["hangs_per_group"].get(r["input"], 0) + r["hang"]
+        rep["fuzz_inputs"] = per
+        for k in ("fuzz_cases", "fuzz_crashes", "fuzz_hangs"):
+            rep[k] = rep.get(k, 0) + f[k]
+    ch = Path(args.out) / "chaos.json"
+    if ch.exists():  # the run under chaos (benchmarks.robustness.chaos): its faults count in the totals
+        c = json.loads(ch.read_text())
+        rep["chaos"] = c
+        rep["scenarios"]["chaos"] = result("chaos", c["faults_injected"], c["faults_survived"], c["byte_mismatches"],
+                                           scenes=c["scenes"], wall_s=c["wall_s"], tasks_retried=c["tasks_retried"])
+        for k in ("faults_injected", "faults_survived", "byte_mismatches"):
+            rep[k] = sum(r[k] for r in rep["scenarios"].values())
     write_report(args.out, "bench_faults.json", rep)
     (Path(args.out) / "bench_faults.md").write_text(markdown(rep))
     if args.docs:

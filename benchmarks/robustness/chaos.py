@@ -1,0 +1,211 @@
+"""A long run under chaos: the scale simulation (benchmarks.scale.bench_scale's SIM scenes) on an
+external Dask cluster (a scheduler and two workers under nannies, as on a cluster: executor.address)
+while a driver injects faults: a random worker process SIGKILLed every 30-90 s (its nanny starts a
+new one), the scheduler SIGKILLed once (at a third of the tasks; a new one starts on the same
+address with new workers, the run is started again), the whole run (the client) SIGKILLed
+once (at two thirds; started again). The driver reruns the pipeline until it completes.
+
+Then: every (stage, scene) marker must be current with its outputs hashed (verify=checksum), and
+the stored bytes must equal an undisturbed run's: every scene in the short version, a seeded
+sample of scenes in the long one (each scene's bytes depend on that scene alone). The report gives
+the faults injected and survived, the tasks the killed workers held (retried), the wall time
+lost to faults (against the undisturbed run of the same scenes when it ran whole) and the client's
+peak memory.
+
+    python -m benchmarks.robustness.chaos --minutes 5            # about 5 minutes of chaos (make test-faults)
+    python -m benchmarks.robustness.chaos --minutes 60     # CHAOS_MINUTES=60: 2,000 scenes, 40 compared
+    -> data/08_reports/chaos.json
+"""
+from __future__ import annotations
+
+import argparse
+import fcntl
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.dataset.compare_data import digests
+from benchmarks.robustness.faults import ENV, PROJECT, _external_cluster, _free_port, _stop, markers
+from benchmarks.scale.bench_scale import SIM
+
+SCENES_PER_MINUTE = 20
+"""Scenes of the simulation one chaos minute covers on this 2-core machine (faults included)."""
+
+
+def held_by(root: Path, pid: int) -> list[str]:
+    """The (stage/key) locks process `pid` holds now: the tasks a kill of it makes Dask retry."""
+    out = []
+    for lock in (root / "_locks").glob("*/*.lock"):
+        try:
+            fd = os.open(lock, os.O_RDONLY)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            fcntl.flock(fd, fcntl.LOCK_UN)
+        except BlockingIOError:
+            parts = lock.read_text().split()
+            if len(parts) == 2 and parts[1] == str(pid):
+                out.append(f"{lock.parent.name}/{lock.stem}")
+        finally:
+            os.close(fd)
+    return out
+
+
+def worker_processes(nannies) -> list:
+    """The worker processes (children of the nannies) alive now."""
+    import psutil
+
+    out = []
+    for n in nannies:
+        try:
+            out += [c for c in psutil.Process(n.pid).children(recursive=True) if "spawn_main" in " ".join(c.cmdline())]
+        except psutil.Error:
+            pass
+    return out
+
+
+def client(root: Path, port: int, scenes: int, log: Path) -> subprocess.Popen:
+    cmd = [sys.executable, "-m", "pipeline", f"data_root={root}", f"scenes.count={scenes}", *SIM,
+           f"executor.address=tcp://127.0.0.1:{port}"]
+    return subprocess.Popen(cmd, cwd=PROJECT, env={**os.environ, **ENV}, stdout=open(log, "ab"), stderr=subprocess.STDOUT,
+                            start_new_session=True)
+
+
+def chaos(root: Path, work: Path, scenes: int, minutes: float, seed: int = 0) -> dict:
+    """Run the simulation to completion under faults; returns the figures."""
+    import psutil
+
+    rng = np.random.default_rng(seed)
+    port = _free_port()
+    sched, nannies = _external_cluster(port, work)
+    from pipeline.graph import DEFAULT_STAGES, closure
+
+    total = scenes * len(closure(list(DEFAULT_STAGES)))  # the (stage, scene) markers of a finished run
+    events, attempts, peak = [], 0, 0.0
+    next_worker_kill = time.time() + rng.uniform(30, 90)
+    sched_killed = client_killed = False
+    t0 = time.time()
+    try:
+        while True:
+            attempts += 1
+            p = client(root, port, scenes, work / "chaos_client.log")
+            proc = psutil.Process(p.pid)
+            while p.poll() is None:
+                try:
+                    peak = max(peak, proc.memory_info().rss / 2**20)
+                except psutil.Error:
+                    pass
+                done = len(markers(root))
+                now = time.time()
+                if now >= next_worker_kill:
+                    ws = worker_processes(nannies)
+                    if ws:
+                        w = ws[int(rng.integers(len(ws)))]
+                        held = held_by(root, w.pid)
+                        w.kill()
+                        events.append({"t": round(now - t0, 1), "fault": "worker_killed", "tasks_held": held})
+                    next_worker_kill = now + rng.uniform(30, 90)
+                if not sched_killed and done >= total / 3:
+                    _stop(sched)
+                    events.append({"t": round(now - t0, 1), "fault": "scheduler_killed", "markers": done})
+                    sched_killed = True
+                    time.sleep(2)  # the workers close with their scheduler: the cluster starts fresh ones
+                    _stop(*nannies)
+                    sched, nannies = _external_cluster(port, work)
+                elif sched_killed and not client_killed and done >= 2 * total / 3:
+                    _stop(p)
+                    events.append({"t": round(now - t0, 1), "fault": "client_killed", "markers": done})
+                    client_killed = True
+                time.sleep(0.5)
+            latest = root / "_runs" / "latest.json"
+            s = json.loads(latest.read_text()) if latest.exists() else {}
+            if p.returncode == 0 and not s.get("failures"):
+                break
+            if attempts >= 30:
+                raise RuntimeError(f"the run did not complete in {attempts} attempts; see {work / 'chaos_client.log'}")
+    finally:
+        _stop(sched, *nannies)
+    return {"attempts": attempts, "events": events, "wall_s": round(time.time() - t0, 1), "client_peak_rss_mb": round(peak),
+            "minutes_planned": minutes}
+
+
+def markers_current(root: Path, scenes: int) -> list[str]:
+    """Every (stage, scene) of the simulation whose marker is not current with its outputs hashed."""
+    from hydra import compose, initialize_config_dir
+
+    from pipeline.config import CONF_DIR, register_configs
+    from pipeline.executor import open_catalog
+    from pipeline.graph import closure, config_hashes, scene_hash
+    from pipeline.tasks import current
+
+    register_configs()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose("config", overrides=[f"data_root={root}", f"scenes.count={scenes}", *SIM])
+    catalog, selected, _ = open_catalog(cfg)
+    hashes = config_hashes(cfg)
+    bad = []
+    for scene in selected:
+        for st in closure(list(cfg.stages)):
+            if current(st.name, scene, catalog, scene_hash(hashes[st.name], st.name, scene), False, "checksum") is None:
+                bad.append(f"{st.name}/{scene.scene_id}")
+    return bad
+
+
+def main(argv=None) -> dict:
+    from benchmarks import machine, write_report
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--minutes", type=float, default=float(os.environ.get("CHAOS_MINUTES", 5)))
+    ap.add_argument("--scenes", type=int, help=f"default: {SCENES_PER_MINUTE} a minute")
+    ap.add_argument("--sample", type=int, default=0, help="scenes compared with an undisturbed run (0: all)")
+    ap.add_argument("--work", default="/tmp/navarena_chaos")
+    ap.add_argument("--out", default="data/08_reports")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    long = args.minutes >= 60  # the 2,000-scene simulation, a sample of its scenes compared
+    scenes = args.scenes or (2000 if long else max(10, round(args.minutes * SCENES_PER_MINUTE)))
+    args.sample = args.sample or (40 if long else 0)
+    work = Path(args.work)
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    root = work / "data"
+    rep = {"machine": machine(), "scenes": scenes, "overrides": SIM, **chaos(root, work, scenes, args.minutes, args.seed)}
+    rep["markers_not_current"] = markers_current(root, scenes)
+    # the undisturbed run: the same scenes (or a seeded sample), a plain local run
+    ids = sorted({r["scene_id"] for r in json.loads((root / "_runs" / "latest.json").read_text())["results"]
+                  if r["scene_id"] != "*"})
+    sample = ids if not args.sample or args.sample >= len(ids) else \
+        sorted(np.random.default_rng(args.seed).choice(ids, args.sample, replace=False).tolist())
+    und = work / "undisturbed"
+    sel = [] if sample == ids else [f"scenes.ids=[{','.join(sample)}]"]
+    t = time.time()
+    rc = subprocess.run([sys.executable, "-m", "pipeline", f"data_root={und}", f"scenes.count={scenes}", *SIM, *sel,
+                         "executor=local", "executor.n_workers=2", "executor.threads_per_worker=1"], cwd=PROJECT,
+                        env={**os.environ, **ENV}, stdout=open(work / "undisturbed.log", "w"), stderr=subprocess.STDOUT).returncode
+    rep["undisturbed_wall_s"] = round(time.time() - t, 1)
+    whole = sample == ids
+    a, b = digests(root.resolve()), digests(und.resolve())
+    if not whole:  # the sampled scenes' own files (dataset-level files depend on every scene)
+        a, b = ({k: v for k, v in d.items() if any(s in k for s in sample)} for d in (a, b))
+    rep["compared"] = {"scenes": len(sample), "files": len(b), "whole_root": whole}
+    rep["byte_mismatches"] = sorted(k for k in set(a) | set(b) if a.get(k) != b.get(k))[:50]
+    rep["undisturbed_rc"] = rc
+    rep["time_lost_s"] = round(rep["wall_s"] - rep["undisturbed_wall_s"], 1) if whole else None
+    rep["tasks_retried"] = sum(len(e.get("tasks_held", [])) for e in rep["events"])
+    rep["faults_injected"] = len(rep["events"])
+    ok = rc == 0 and not rep["markers_not_current"] and not rep["byte_mismatches"]
+    rep["faults_survived"] = rep["faults_injected"] if ok else 0
+    write_report(args.out, "chaos.json", rep)
+    print(json.dumps({k: v for k, v in rep.items() if k not in ("events", "overrides")}, indent=1))
+    return rep
+
+
+if __name__ == "__main__":
+    main()
