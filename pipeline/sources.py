@@ -38,6 +38,19 @@ def sha256_of(path: str | Path, st: os.stat_result | None = None) -> str:
     return _SHA[key]
 
 
+def label_files(spec) -> list[Path]:
+    """The files a catalog entry's labels (navcore.labels.shipped.LabelSpec) are read from: class
+    tables given as files, the labelled mesh and the side files its reader takes (ScanNet segs /
+    aggregation json, Replica's info_semantic.json); those that exist, sorted."""
+    from navcore.labels import BUILTIN
+    from navcore.labels.mesh import side_files
+
+    out = [spec.path(t) for t in (spec.classes, spec.mesh_classes) if t and t not in BUILTIN]
+    if spec.mesh:
+        out += [spec.path(spec.mesh), *side_files(spec.path(spec.mesh))]
+    return sorted({p.resolve() for p in out if p.is_file()})
+
+
 def files(stage: str, scene) -> list[str]:
     """The outside files a (stage, scene)'s outputs depend on (absolute paths, sorted)."""
     out: list[Path] = []
@@ -45,7 +58,7 @@ def files(stage: str, scene) -> list[str]:
         path = Path(scene.path)
         out += source_files(path)[1] if path.exists() else [path]
     if scene.labels is not None and stage in downstream("semantics"):
-        out += scene.labels.files()
+        out += label_files(scene.labels)
     return sorted({str(Path(p).absolute()) for p in out})
 
 

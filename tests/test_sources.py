@@ -60,10 +60,10 @@ def test_label_files_of_a_catalog_entry(tmp_path):
         (tmp_path / "m" / name).write_text("x")
     spec = LabelSpec(classes="m/names.txt", mesh="m/scene0001_00_vh_clean_2.labels.ply", mesh_classes="nyu40",
                      base=str(tmp_path))
-    assert [Path(p).name for p in spec.files()] == ["names.txt", "scene0001_00.aggregation.json",
+    assert [Path(p).name for p in sources.label_files(spec)] == ["names.txt", "scene0001_00.aggregation.json",
                                                      "scene0001_00_vh_clean_2.0.010000.segs.json",
                                                      "scene0001_00_vh_clean_2.labels.ply"]
-    assert LabelSpec(classes="scannet20").files() == []
+    assert sources.label_files(LabelSpec(classes="scannet20")) == []
 
 
 @pytest.fixture(scope="module")

@@ -225,7 +225,7 @@ def read_input(kind: str, path: Path, work: Path) -> None:
                 if not Path(p).resolve().is_relative_to(cat.root):
                     raise AssertionError(f"a catalog steered {ds} to {p}, outside the data root")
             if scene.labels is not None:
-                scene.labels.files()
+                sources.label_files(scene.labels)
         return
     if kind == "label_folder":
         from navcore.gaussians.validate import read_validated

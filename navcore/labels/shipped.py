@@ -94,19 +94,6 @@ class LabelSpec:
         q = Path(p)
         return q if q.is_absolute() or not self.base else Path(self.base) / q
 
-    def files(self) -> list[Path]:
-        """The files these labels are read from (class tables given as files, the labelled mesh and
-        the side files its reader takes: ScanNet segs / aggregation json, Replica's
-        info_semantic.json), those that exist, sorted: what a finished run records so that a later
-        run notices when one changes (pipeline.sources)."""
-        from navcore.labels import BUILTIN
-        from navcore.labels.mesh import side_files
-
-        out = [self.path(t) for t in (self.classes, self.mesh_classes) if t and t not in BUILTIN]
-        if self.mesh:
-            out += [self.path(self.mesh), *side_files(self.path(self.mesh))]
-        return sorted({p.resolve() for p in out if p.is_file()})
-
     def as_dict(self) -> dict:
         """JSON-able form (hashed into the scene's stage hashes)."""
         return {"classes": self.classes, "id_offset": self.id_offset, "ignore": self.ignore, "mesh": self.mesh,
