@@ -40,7 +40,8 @@ def array_script(scheduler: str, shards: int, overrides: list[str], cpus: int, m
                 f"#SBATCH --output={logs}/navarena-%A_%a.out"]
         head += [f"#SBATCH --partition={queue}"] if queue else []
         head += [f"#SBATCH --account={account}"] if account else []
-        head += ["#SBATCH --requeue", f"#SBATCH --signal=B:USR1@{requeue_before}"] if requeue_before > 0 else []
+        head += ["#SBATCH --requeue", f"#SBATCH --signal=B:USR1@{requeue_before}", "#SBATCH --open-mode=append"] \
+            if requeue_before > 0 else []  # append: a requeued task's log keeps what its earlier runs said
         index = "$SLURM_ARRAY_TASK_ID"
     elif scheduler == "pbs":
         head = ["#!/bin/bash", "#PBS -N navarena", f"#PBS -J 0-{shards - 1}",
