@@ -25,17 +25,20 @@ PROJECT_ROOT = Path(__file__).resolve().parent.parent
 
 def array_script(scheduler: str, shards: int, overrides: list[str], cpus: int, mem: str, walltime: str,
                  queue: str | None, account: str | None, python: str, workdir: Path,
-                 logs: str = "data/_submit/logs", requeue_before: int = 0, max_requeues: int = 10) -> str:
+                 logs: str = "data/_submit/logs", requeue_before: int = 0, max_requeues: int = 10,
+                 max_running: int = 0) -> str:
     """The batch script of an array job over the shards (logs: its log folder, relative to
     workdir or absolute). requeue_before (SLURM): seconds before the time limit at which a task
     stops its run and puts itself back in the queue (at most max_requeues times): the requeued
     task resumes from the markers, and the stage it was in is redone (its partial outputs carry
-    no marker and are never trusted); 0: a task that reaches its limit is killed (resubmit it)."""
+    no marker and are never trusted); 0: a task that reaches its limit is killed (resubmit it).
+    max_running: at most this many of the array's tasks at once (0: as many as the cluster runs)."""
     if shards < 1:
         raise ValueError("--shards must be >= 1")
     over = " ".join(shlex.quote(o) for o in overrides)
     if scheduler == "slurm":
-        head = ["#!/bin/bash", "#SBATCH --job-name=navarena", f"#SBATCH --array=0-{shards - 1}",
+        throttle = f"%{max_running}" if max_running > 0 else ""
+        head = ["#!/bin/bash", "#SBATCH --job-name=navarena", f"#SBATCH --array=0-{shards - 1}{throttle}",
                 f"#SBATCH --cpus-per-task={cpus}", f"#SBATCH --mem={mem}", f"#SBATCH --time={walltime}",
                 f"#SBATCH --output={logs}/navarena-%A_%a.out"]
         head += [f"#SBATCH --partition={queue}"] if queue else []
@@ -49,6 +52,7 @@ def array_script(scheduler: str, shards: int, overrides: list[str], cpus: int, m
                 f"#PBS -o {logs}/", "#PBS -j oe"]
         head += [f"#PBS -q {queue}"] if queue else []
         head += [f"#PBS -A {account}"] if account else []
+        head += [f"#PBS -W max_run_subjobs={max_running}"] if max_running > 0 else []  # PBS Pro's array throttle
         index = "$PBS_ARRAY_INDEX"
     else:
         raise ValueError(f"scheduler must be slurm or pbs, not {scheduler!r}")
@@ -90,6 +94,7 @@ def main(argv=None) -> int:
     ap.add_argument("--requeue-before", type=int, default=120, metavar="S",
                     help="SLURM: seconds before the time limit at which a task requeues itself (0: never)")
     ap.add_argument("--max-requeues", type=int, default=10)
+    ap.add_argument("--max-running", type=int, default=0, metavar="N", help="at most N array tasks at once (0: no limit)")
     ap.add_argument("--dry-run", action="store_true", help="write the script, do not submit it")
     ap.add_argument("--wait", action="store_true", help="block until the job has ended (its exit status)")
     args = ap.parse_args(argv)
@@ -98,7 +103,7 @@ def main(argv=None) -> int:
     (out / "logs").mkdir(parents=True, exist_ok=True)
     script = array_script(args.scheduler, args.shards, overrides, args.cpus, args.mem, args.time, args.queue,
                           args.account, sys.executable, PROJECT_ROOT, str(out / "logs"), args.requeue_before,
-                          args.max_requeues)
+                          args.max_requeues, args.max_running)
     path = out / f"navarena-{args.scheduler}-{dt.datetime.now():%Y%m%dT%H%M%S}.sh"
     path.write_text(script)
     print(f"wrote {path}")

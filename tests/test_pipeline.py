@@ -367,7 +367,9 @@ def test_batch_submission_scripts(project_root, make_cfg):
     r = array_script("slurm", 2, [], 1, "4G", "00:01:00", None, None, "python", project_root, requeue_before=30,
                      max_requeues=3)  # a task near its time limit requeues itself
     assert "#SBATCH --signal=B:USR1@30" in r and "#SBATCH --requeue" in r and "trap requeue USR1" in r
-    assert 'scontrol requeue "$task"' in r and "-lt 3 ]" in r
+    assert 'scontrol requeue "$task"' in r and "-lt 3 ]" in r and "#SBATCH --array=0-1\n" in r
+    assert "#SBATCH --array=0-1%1" in array_script("slurm", 2, [], 1, "4G", "1:00:00", None, None, "python", project_root,
+                                                   max_running=1)
     import subprocess
 
     assert subprocess.run(["bash", "-n"], input=r, text=True).returncode == 0  # valid bash

@@ -481,7 +481,8 @@ def slurm_double_submit(ref: Path, work: Path) -> dict:
     if (why := _slurm()):
         return result("slurm_double_submit", 0, 0, [], skipped=why)
     root = work / "slurm_double_submit"
-    jobs = [_submit(root, "--requeue-before", "0") for _ in range(2)]
+    # one task of each array at a time (two CPUs here): shard 0 of both arrays runs side by side
+    jobs = [_submit(root, "--requeue-before", "0", "--max-running", "1") for _ in range(2)]
     for j in jobs:
         _wait_job(j)
     runs = _shard_runs(root)
