@@ -139,6 +139,17 @@ with H264Writer(Path(sys.argv[2]), 5, crf=18, b_frames=0) as v:
 """
 
 
+def test_the_exporter_encodes_with_the_deterministic_x264_settings(tmp_path):
+    """The fix the slow test below proves end to end (a cold renderer compilation before encoding):
+    one encoder thread and cpu-independent assembly, whatever the caller asks besides."""
+    from navcore.io.video import DETERMINISTIC_X264, H264Writer
+
+    with H264Writer(tmp_path / "a.mp4", 5, crf=18, b_frames=0) as w:
+        w.add(np.zeros((36, 48, 3), np.uint8))
+        assert DETERMINISTIC_X264.items() <= w.options.items()  # what the stream was opened with
+
+
+@pytest.mark.slow
 def test_the_videos_bytes_do_not_depend_on_what_the_process_ran_before(exported, tmp_path):
     """x264's macroblock-tree assembly read a stack value it never wrote, so an episode's MP4
     depended on what ran before it in the process: after a cold compilation of the renderer, the

@@ -34,7 +34,7 @@ from benchmarks.dataset.compare_data import digests
 from benchmarks.robustness.faults import ENV, PROJECT, _external_cluster, _free_port, _stop, markers
 from benchmarks.scale.bench_scale import SIM
 
-SCENES_PER_MINUTE = 20
+SCENES_PER_MINUTE = 40
 """Scenes of the simulation one chaos minute covers on this 2-core machine (faults included)."""
 
 
