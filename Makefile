@@ -66,10 +66,10 @@ dataset: $(STAMP)
 	$(BIN)/python -m pipeline $(ARGS)
 
 # lint (ruff) and the import contracts (navcore <- stages <- pipeline) first, then the tests
-# the default tests; TEST_WORKERS=2 spreads them over processes (pytest-xdist, a module per
-# process): on the 2-core CI machine that was no faster (14 min 8 s make test on a fresh clone with
-# 2, the tests' own threads already use both cores), so 0 (this process) is the default
-TEST_WORKERS ?= 0
+# the default tests, spread over TEST_WORKERS processes (pytest-xdist, a module per process; 0: this
+# process): on the 2-core CI machine 2 took the tests from 502 s to 439 s (the pipeline tests wait
+# on subprocesses and Python as much as on the cores)
+TEST_WORKERS ?= 2
 test: lint
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile $(ARGS)
 
