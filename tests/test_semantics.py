@@ -189,7 +189,7 @@ def test_stage_predicts_valid_instances_into_the_table_and_the_asset(semantics_r
     objects, c2s = ground_truth_objects(src)
     s2a = np.asarray(json.loads((root / "01_scenes" / sid / "alignment.json").read_text())["source_to_aligned"])
     r = score(labels, objects, [o["category"] for o in objects], np.linalg.inv(s2a @ c2s))
-    # moderate corruption (the default), 24 of the 30 capture views of a 60 k-Gaussian two-room scene:
+    # moderate corruption (the default), 24 of the 30 capture views of a 30 k-Gaussian two-room scene:
     # the centres are valid, more than half of the objects found
     assert r["predicted"] and r["valid"] >= 0.9 * r["predicted"] and r["found"] >= 0.5 * r["objects"], r
     marker = json.loads((root / "_markers" / "semantics" / f"{sid}.json").read_text())["info"]
