@@ -17,6 +17,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from navcore.io.atomic import sweep_stale_temporaries
 from navcore.io.catalog import Catalog, SceneEntry
+from pipeline import sources
 from pipeline.backends import run_on_dask
 from pipeline.config import unknown_keys
 from pipeline.config_guard import config_changes, describe, refusal
@@ -100,7 +101,7 @@ def execute(cfg, console: Console | None = None) -> dict:
         run = run_name(OmegaConf.to_object(cfg.evaluate))
         watch = EpisodeWatcher(progress, catalog.path("eval_progress", run=run, scene_id="x").parent,
                                started.timestamp())
-    with progress, watch:
+    with progress, watch, sources.one_listing_a_run():  # a folder source's files listed once a run
         bar = progress.add_task("tasks", total=len(scenes) * len(stages))
         run = new_run()
         if cfg.executor.kind == "sync" and not cfg.executor.address:

@@ -18,6 +18,7 @@ none and are trusted as before (the canonical store still refuses a source whose
 changed, see navcore.gaussians.store)."""
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 
@@ -26,6 +27,20 @@ from navcore.io.release import sha256_file
 from pipeline.graph import downstream
 
 _SHA: dict[tuple, str] = {}
+_LISTED: dict[str, list[str]] | None = None
+"""While a run's client checks its tasks (`one_listing_a_run`): the files of each folder-layout
+source, listed once (a finished run's resume checks every (stage, scene): one listing a scene, not
+one a stage). Elsewhere (a worker that serves many runs) every call lists afresh."""
+
+
+@contextlib.contextmanager
+def one_listing_a_run():
+    global _LISTED
+    _LISTED = {}
+    try:
+        yield
+    finally:
+        _LISTED = None
 
 
 def sha256_of(path: str | Path, st: os.stat_result | None = None) -> str:
@@ -56,7 +71,12 @@ def files(stage: str, scene) -> list[str]:
     out: list[Path] = []
     if not scene.synthetic and stage in downstream("ingest"):
         path = Path(scene.path)
-        out += source_files(path)[1] if path.exists() else [path]
+        listed = None if _LISTED is None else _LISTED.get(str(path))
+        if listed is None:
+            listed = [str(p) for p in source_files(path)[1]] if path.exists() else [str(path)]
+            if _LISTED is not None and path.exists():
+                _LISTED[str(path)] = listed
+        out += [Path(p) for p in listed]
     if scene.labels is not None and stage in downstream("semantics"):
         out += label_files(scene.labels)
     return sorted({str(Path(p).absolute()) for p in out})

@@ -169,3 +169,18 @@ def test_changed_source_recomputes_that_scene_downstream_only(tmp_path, make_cfg
     s = execute(cfg)
     assert _statuses(s)[("a", "ingest")] == "done" and _statuses(s)[("b", "ingest")] == "cached"
     assert s["sources_changed"][0]["new_sha256"] == sha256_file(a)
+
+
+def test_a_folder_source_is_listed_once_a_run(tmp_path):
+    from types import SimpleNamespace
+
+    (tmp_path / "npy").mkdir()
+    (tmp_path / "npy" / "coord.npy").write_bytes(b"x")
+    scene = SimpleNamespace(synthetic=False, path=str(tmp_path / "npy"), labels=None)
+    with sources.one_listing_a_run():
+        first = sources.files("costmap", scene)
+        (tmp_path / "npy" / "segment.npy").write_bytes(b"y")
+        assert sources.files("episodes", scene) == first  # the run's client lists once
+    assert len(sources.files("costmap", scene)) == 2  # the next run (or a worker) sees the new file
+    assert sources.files("ingest", scene) == sources.files("costmap", scene)
+    assert sources.files("synthesize", scene) == []  # upstream of the reader: none
