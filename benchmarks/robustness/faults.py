@@ -768,8 +768,9 @@ def main(argv=None) -> dict:
         rep["chaos"] = c
         rep["scenarios"]["chaos"] = result("chaos", c["faults_injected"], c["faults_survived"], c["byte_mismatches"],
                                            scenes=c["scenes"], wall_s=c["wall_s"], tasks_retried=c["tasks_retried"])
-        for k in ("faults_injected", "faults_survived", "byte_mismatches"):
-            rep[k] = sum(r[k] for r in rep["scenarios"].values())
+        for total, k in (("faults_injected", "injected"), ("faults_survived", "survived"),
+                         ("byte_mismatches", "byte_mismatches")):
+            rep[total] = sum(r[k] for r in rep["scenarios"].values())
     write_report(args.out, "bench_faults.json", rep)
     (Path(args.out) / "bench_faults.md").write_text(markdown(rep))
     if args.docs:
