@@ -19,7 +19,6 @@ peak memory.
 from __future__ import annotations
 
 import argparse
-import fcntl
 import json
 import os
 import shutil
@@ -31,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.dataset.compare_data import digests
-from benchmarks.robustness.faults import ENV, PROJECT, _external_cluster, _free_port, _stop, markers
+from benchmarks.robustness.faults import ENV, PROJECT, _external_cluster, _free_port, _stop, held_locks, markers
 from benchmarks.scale.bench_scale import SIM
 
 SCENES_PER_MINUTE = 40
@@ -40,22 +39,7 @@ SCENES_PER_MINUTE = 40
 
 def held_by(root: Path, pid: int) -> list[str]:
     """The (stage/key) locks process `pid` holds now: the tasks a kill of it makes Dask retry."""
-    out = []
-    for lock in (root / "_locks").glob("*/*.lock"):
-        try:
-            fd = os.open(lock, os.O_RDONLY)
-        except OSError:
-            continue
-        try:
-            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-            fcntl.flock(fd, fcntl.LOCK_UN)
-        except BlockingIOError:
-            parts = lock.read_text().split()
-            if len(parts) == 2 and parts[1] == str(pid):
-                out.append(f"{lock.parent.name}/{lock.stem}")
-        finally:
-            os.close(fd)
-    return out
+    return [k for k, holder in held_locks(root).items() if holder == pid]
 
 
 def worker_processes(nannies) -> list:

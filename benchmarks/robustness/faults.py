@@ -74,9 +74,10 @@ def result(kind: str, injected: int, survived: int, bad: list[str], **extra) -> 
             "mismatched_files": bad[:20], **extra}
 
 
-def held_lock(root: Path, stage: str) -> int | None:
-    """The pid holding a lock of `stage` now (a task of that stage is running there), or None."""
-    for lock in sorted((root / "_locks" / stage).glob("*.lock")):
+def held_locks(root: Path, stage: str = "*") -> dict[str, int]:
+    """{"stage/key": pid} of the task locks held now (a task of that stage and scene is running)."""
+    out = {}
+    for lock in sorted((root / "_locks").glob(f"{stage}/*.lock")):
         try:
             fd = os.open(lock, os.O_RDONLY)
         except OSError:
@@ -87,10 +88,15 @@ def held_lock(root: Path, stage: str) -> int | None:
         except BlockingIOError:
             parts = lock.read_text().split()
             if len(parts) == 2 and parts[1].isdigit():
-                return int(parts[1])
+                out[f"{lock.parent.name}/{lock.stem}"] = int(parts[1])
         finally:
             os.close(fd)
-    return None
+    return out
+
+
+def held_lock(root: Path, stage: str) -> int | None:
+    """The pid holding a lock of `stage` now (a task of that stage is running there), or None."""
+    return next(iter(held_locks(root, stage).values()), None)
 
 
 # ---- scenarios --------------------------------------------------------------------------------
