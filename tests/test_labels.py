@@ -6,6 +6,7 @@ import json
 import numpy as np
 import pytest
 
+from benchmarks.robustness.fuzz_inputs import write_labelled_ply
 from navcore.labels import BUILTIN, GoalVocabulary, LabelSet, builtin, read_table, resolve
 from navcore.labels.shipped import CleaningConfig, LabelReport, LabelSpec, instances_from_gaussians
 
@@ -163,22 +164,6 @@ def _box_mesh(lo, hi):
     return trimesh.creation.box(bounds=[lo, hi])
 
 
-def _write_ply(path, verts, faces=None, vprops=None, fprops=None):
-    """A binary-free ASCII PLY with extra int vertex / face properties."""
-    vprops, fprops = vprops or {}, fprops or {}
-    lines = ["ply", "format ascii 1.0", f"element vertex {len(verts)}", "property float x", "property float y",
-             "property float z"] + [f"property int {k}" for k in vprops]
-    if faces is not None:
-        lines += [f"element face {len(faces)}", "property list uchar int vertex_indices"] + \
-            [f"property int {k}" for k in fprops]
-    lines.append("end_header")
-    for i, v in enumerate(verts):
-        lines.append(" ".join([f"{x:.6f}" for x in v] + [str(int(vprops[k][i])) for k in vprops]))
-    for i, f in enumerate(faces if faces is not None else []):
-        lines.append(" ".join([str(len(f))] + [str(int(j)) for j in f] + [str(int(fprops[k][i])) for k in fprops]))
-    path.write_text("\n".join(lines) + "\n")
-
-
 def test_scannet_labelled_mesh_transfer_known_answer(tmp_path):
     from navcore.labels.mesh import read_labelled_geometry, transfer
 
@@ -186,7 +171,7 @@ def test_scannet_labelled_mesh_transfer_known_answer(tmp_path):
     verts = np.concatenate([a.vertices, b.vertices])
     faces = np.concatenate([a.faces, b.faces + len(a.vertices)])
     nyu = np.array([6] * 8 + [5] * 8)  # raw NYU40 ids: 6 sofa, 5 chair
-    _write_ply(tmp_path / "scene0001_00_vh_clean_2.labels.ply", verts, faces, {"label": nyu})
+    write_labelled_ply(tmp_path / "scene0001_00_vh_clean_2.labels.ply", verts, faces, {"label": nyu})
     (tmp_path / "scene0001_00_vh_clean_2.0.010000.segs.json").write_text(json.dumps({"segIndices": [10] * 8 + [20] * 8}))
     (tmp_path / "scene0001_00.aggregation.json").write_text(json.dumps({"segGroups": [
         {"objectId": 0, "label": "couch", "segments": [10]}, {"objectId": 4, "label": "office chair", "segments": [20]}]}))
@@ -203,7 +188,7 @@ def test_replica_face_labels_and_point_cloud_transfer(tmp_path):
     from navcore.labels.mesh import read_labelled_geometry, transfer
 
     verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [3, 0, 0], [4, 0, 0], [4, 1, 0], [3, 1, 0]], float)
-    _write_ply(tmp_path / "mesh_semantic.ply", verts, [[0, 1, 2, 3], [4, 5, 6, 7]], fprops={"object_id": [7, 9]})
+    write_labelled_ply(tmp_path / "mesh_semantic.ply", verts, [[0, 1, 2, 3], [4, 5, 6, 7]], fprops={"object_id": [7, 9]})
     (tmp_path / "info_semantic.json").write_text(json.dumps({
         "classes": [{"id": 1, "name": "sofa"}, {"id": 2, "name": "rug"}],
         "objects": [{"id": 7, "class_id": 1}, {"id": 9, "class_name": "tv-monitor"}]}))
@@ -213,7 +198,7 @@ def test_replica_face_labels_and_point_cloud_transfer(tmp_path):
     assert ins.tolist() == [7, 9, -1]
     # a point cloud with per-vertex ids, named by a built-in table
     pts = np.array([[0, 0, 0], [1, 0, 0], [5, 5, 5]], float)
-    _write_ply(tmp_path / "pc.ply", pts, None, {"label": [5, 16, 3], "instance": [1, 2, 3]})
+    write_labelled_ply(tmp_path / "pc.ply", pts, None, {"label": [5, 16, 3], "instance": [1, 2, 3]})
     with pytest.raises(ValueError, match="labels.mesh_classes"):
         read_labelled_geometry(tmp_path / "pc.ply")
     geom = read_labelled_geometry(tmp_path / "pc.ply", builtin("scannet20"))
@@ -226,7 +211,7 @@ def test_mesh_labels_become_the_instance_table_through_the_catalog_entry(tmp_pat
     from navcore.instances import shipped_instances
 
     a = _box_mesh([0, 0, 0], [1, 1, 0.5])
-    _write_ply(tmp_path / "pc.ply", a.vertices, a.faces, {"label": [5] * 8, "instance": [3] * 8})
+    write_labelled_ply(tmp_path / "pc.ply", a.vertices, a.faces, {"label": [5] * 8, "instance": [3] * 8})
     rng = np.random.default_rng(2)
     on = rng.uniform([0, 0, 0.0], [1, 1, 0.5], (600, 3))
     on[:, 2] = 0.5 + rng.normal(0, 0.01, 600)  # on the top face
@@ -315,7 +300,7 @@ def test_scannet_vertices_outside_every_group_keep_their_nyu40_class(tmp_path):
 
     a, b = _box_mesh([0, 0, 0], [1, 1, 0.5]), _box_mesh([2, 0, 0], [2.5, 0.5, 1])
     verts, faces = np.concatenate([a.vertices, b.vertices]), np.concatenate([a.faces, b.faces + 8])
-    _write_ply(tmp_path / "s_vh_clean_2.labels.ply", verts, faces, {"label": [6] * 8 + [5] * 4 + [25] * 2 + [0] * 2})
+    write_labelled_ply(tmp_path / "s_vh_clean_2.labels.ply", verts, faces, {"label": [6] * 8 + [5] * 4 + [25] * 2 + [0] * 2})
     (tmp_path / "s_vh_clean_2.0.010000.segs.json").write_text(json.dumps({"segIndices": [10] * 8 + [20] * 4 + [30] * 4}))
     (tmp_path / "s.aggregation.json").write_text(json.dumps({"segGroups": [{"objectId": 0, "label": "couch", "segments": [10]}]}))
     g = read_labelled_geometry(tmp_path / "s_vh_clean_2.labels.ply")

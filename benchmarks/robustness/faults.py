@@ -547,7 +547,7 @@ def changed_source(ref: Path, work: Path) -> dict:
     and deleted (ingest fails naming the file, nothing of the scene trusted), restored, then other
     bytes behind the same size and mtime (noticed with verify=checksum). The final root must
     equal, byte for byte, an undisturbed run made from the final files."""
-    from benchmarks.robustness.fuzz_inputs import _boxes, _ply
+    from benchmarks.robustness.fuzz_inputs import _boxes, write_labelled_ply
     from navcore.gaussians.formats import read_gaussians, write_inria_ply
 
     root = work / "changed_source"
@@ -557,7 +557,7 @@ def changed_source(ref: Path, work: Path) -> dict:
     shutil.copy(gen[0], src / "a.ply")
     shutil.copy(gen[1], src / "b.ply")
     verts, faces = _boxes()
-    _ply(src / "a_labels.ply", verts + [1.0, 1.0, 0.0], faces, {"label": [6] * 8 + [5] * 8})
+    write_labelled_ply(src / "a_labels.ply", verts + [1.0, 1.0, 0.0], faces, {"label": [6] * 8 + [5] * 8})
     cat = src / "catalog.yaml"
     cat.write_text("scenes:\n  - {name: a, group: real, path: a.ply, labels: {mesh: a_labels.ply, mesh_classes: nyu40}}\n"
                    "  - {name: b, group: real, path: b.ply}\n")
@@ -582,7 +582,7 @@ def changed_source(ref: Path, work: Path) -> dict:
     steps["replaced"] = bool(cached_b(st) and "ingest" in stages_a(st, "done") and not stages_a(st, "cached")
                              and row.get("file") == str(a) and row.get("new_sha256"))
     # 2. the labelled mesh edited: semantics and later only
-    _ply(src / "a_labels.ply", verts + [1.5, 1.0, 0.0], faces, {"label": [6] * 8 + [5] * 8})
+    write_labelled_ply(src / "a_labels.ply", verts + [1.5, 1.0, 0.0], faces, {"label": [6] * 8 + [5] * 8})
     r, st = rerun()
     steps["mesh_edited"] = bool(cached_b(st) and "semantics" in stages_a(st, "done") and
                                 {"ingest", "voxelize", "align", "costmap"} <= set(stages_a(st, "cached")))

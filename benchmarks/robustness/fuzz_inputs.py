@@ -47,7 +47,7 @@ NPY_TRICKS = ("object", "shape_2d", "longer", "shorter", "nan", "huge", "negativ
 
 # ---- seeds ------------------------------------------------------------------------------------
 
-def _ply(path: Path, verts, faces=None, vprops=None, fprops=None) -> None:
+def write_labelled_ply(path: Path, verts, faces=None, vprops=None, fprops=None) -> None:
     """A small ASCII PLY with int vertex / face properties (what ScanNet / Replica ship, in ASCII)."""
     vprops, fprops = vprops or {}, fprops or {}
     lines = ["ply", "format ascii 1.0", f"element vertex {len(verts)}", "property float x", "property float y",
@@ -57,7 +57,7 @@ def _ply(path: Path, verts, faces=None, vprops=None, fprops=None) -> None:
             [f"property int {k}" for k in fprops]
     lines.append("end_header")
     for i, v in enumerate(verts):
-        lines.append(" ".join([f"{x:.4f}" for x in v] + [str(int(vprops[k][i])) for k in vprops]))
+        lines.append(" ".join([f"{x:.6f}" for x in v] + [str(int(vprops[k][i])) for k in vprops]))
     for i, f in enumerate(faces if faces is not None else []):
         lines.append(" ".join([str(len(f))] + [str(int(j)) for j in f] + [str(int(fprops[k][i])) for k in fprops]))
     path.write_text("\n".join(lines) + "\n")
@@ -99,19 +99,19 @@ def make_seed(kind: str, folder: Path) -> Path:
         (folder / "npy" / "classes.txt").write_text("wall\nsofa\nchair\n")
         return folder / "npy"
     if kind == "mesh_scannet":
-        _ply(folder / "scene0001_00_vh_clean_2.labels.ply", verts, faces, {"label": [6] * 8 + [5] * 8})
+        write_labelled_ply(folder / "scene0001_00_vh_clean_2.labels.ply", verts, faces, {"label": [6] * 8 + [5] * 8})
         (folder / "scene0001_00_vh_clean_2.0.010000.segs.json").write_text(json.dumps({"segIndices": [10] * 8 + [20] * 8}))
         (folder / "scene0001_00.aggregation.json").write_text(json.dumps({"segGroups": [
             {"objectId": 0, "label": "couch", "segments": [10]}, {"objectId": 4, "label": "chair", "segments": [20]}]}))
         return folder / "scene0001_00_vh_clean_2.labels.ply"
     if kind == "mesh_replica":
-        _ply(folder / "mesh_semantic.ply", verts, faces, fprops={"object_id": [7] * 12 + [9] * 12})
+        write_labelled_ply(folder / "mesh_semantic.ply", verts, faces, fprops={"object_id": [7] * 12 + [9] * 12})
         (folder / "info_semantic.json").write_text(json.dumps({
             "classes": [{"id": 1, "name": "sofa"}, {"id": 2, "name": "chair"}],
             "objects": [{"id": 7, "class_id": 1}, {"id": 9, "class_name": "chair"}]}))
         return folder / "mesh_semantic.ply"
     if kind == "mesh_points":
-        _ply(folder / "points.ply", verts, None, {"label": [6] * 8 + [5] * 8, "instance": [1] * 8 + [2] * 8})
+        write_labelled_ply(folder / "points.ply", verts, None, {"label": [6] * 8 + [5] * 8, "instance": [1] * 8 + [2] * 8})
         return folder / "points.ply"
     raise ValueError(kind)
 
