@@ -30,7 +30,17 @@ from types import SimpleNamespace
 import numpy as np
 import yaml
 
-from benchmarks.robustness.fuzz_readers import ALLOC_BASE, ALLOC_PER_BYTE, OPS, TIME_LIMIT_S, Hang, mutate, small_scene
+from benchmarks.robustness.fuzz_readers import (
+    ALLOC_BASE,
+    ALLOC_PER_BYTE,
+    OPS,
+    TIME_LIMIT_S,
+    Hang,
+    Tally,
+    cap_address_space,
+    mutate,
+    small_scene,
+)
 
 KINDS = ("catalog", "label_folder", "mesh_scannet", "mesh_replica", "mesh_points")
 GROUP = {"catalog": "catalogs", "label_folder": "label folders", "mesh_scannet": "labelled meshes",
@@ -295,8 +305,7 @@ def fuzz_kind(kind: str, cases: int, seed: int, work: Path, log=None) -> dict:
 
     src = make_seed(kind, work / "seed")
     read_input(kind, src, work / "seed")  # the seed is valid, and the imports are not part of a case's memory
-    counts: dict[str, int] = {}
-    bad: list[dict] = []
+    tally = Tally(kind, log)
 
     @hseed(seed)
     @settings(max_examples=cases, database=None, deadline=None, phases=[Phase.generate],
@@ -307,17 +316,10 @@ def fuzz_kind(kind: str, cases: int, seed: int, work: Path, log=None) -> dict:
         member, op, a, b, poison, structural = case
         path = apply_case(kind, src, work / "case", member, op, a, b, poison, structural)
         t0 = time.perf_counter()
-        outcome, detail = run_case(kind, path, work / "case")
-        counts[outcome] = counts.get(outcome, 0) + 1
-        if outcome not in ("accepted", "rejected"):
-            bad.append({"case": list(case), "outcome": outcome, "detail": detail[:300],
-                        "seconds": round(time.perf_counter() - t0, 3)})
-            if log:
-                log(kind, bad[-1])
+        tally.add(list(case), *run_case(kind, path, work / "case"), t0)
 
     one()
-    return {"cases": sum(counts.values()), **{k: counts.get(k, 0) for k in ("accepted", "rejected", "crash", "hang",
-                                                                          "memory")}, "failures": bad[:50]}
+    return tally.report()
 
 
 def main(argv=None) -> dict:
@@ -331,11 +333,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--address-space-gb", type=float, default=16.0)
     args = ap.parse_args(argv)
-    if args.address_space_gb > 0:
-        import resource
-
-        cap = int(args.address_space_gb * (1 << 30))
-        resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+    cap_address_space(args.address_space_gb)
     kinds = args.kinds.split(",")
     per_group = {g: sum(1 for k in kinds if GROUP[k] == g) for g in set(GROUP[k] for k in kinds)}
     rep = {"machine": machine(), "cases_per_input": args.cases, "kinds": {}}

@@ -311,8 +311,7 @@ def fuzz_kind(kind: str, cases: int, seed: int, work: Path, log=None) -> dict:
     from hypothesis import seed as hseed
 
     src = make_seed(kind, work / "seed" / kind)
-    counts: dict[str, int] = {}
-    bad: list[dict] = []
+    tally = Tally(kind, log)
 
     @hseed(seed)
     @settings(max_examples=cases, database=None, deadline=None, phases=[Phase.generate],
@@ -322,17 +321,41 @@ def fuzz_kind(kind: str, cases: int, seed: int, work: Path, log=None) -> dict:
         member, op, a, b, poison = case
         path = apply_case(src, work / "case", member, op, a, b, poison)
         t0 = time.perf_counter()
-        outcome, detail = run_case(path, READER_OF[kind])
-        counts[outcome] = counts.get(outcome, 0) + 1
-        if outcome not in ("accepted", "rejected"):
-            bad.append({"case": [member, op, a, b, poison], "outcome": outcome, "detail": detail[:300],
-                        "seconds": round(time.perf_counter() - t0, 3)})
-            if log:
-                log(kind, bad[-1])
+        tally.add(list(case), *run_case(path, READER_OF[kind]), t0)
 
     one()
-    return {"cases": sum(counts.values()), **{k: counts.get(k, 0) for k in ("accepted", "rejected", "crash", "hang",
-                                                                          "memory")}, "failures": bad[:50]}
+    return tally.report()
+
+
+class Tally:
+    """Outcomes of one kind's fuzz cases: counts, and the cases that were not accepted or rejected
+    (each logged as it happens; the first 50 kept)."""
+
+    def __init__(self, kind: str, log=None):
+        self.kind, self.log, self.counts, self.bad = kind, log, {}, []
+
+    def add(self, case: list, outcome: str, detail: str, t0: float) -> None:
+        self.counts[outcome] = self.counts.get(outcome, 0) + 1
+        if outcome not in ("accepted", "rejected"):
+            self.bad.append({"case": case, "outcome": outcome, "detail": detail[:300],
+                             "seconds": round(time.perf_counter() - t0, 3)})
+            if self.log:
+                self.log(self.kind, self.bad[-1])
+
+    def report(self) -> dict:
+        return {"cases": sum(self.counts.values()),
+                **{k: self.counts.get(k, 0) for k in ("accepted", "rejected", "crash", "hang", "memory")},
+                "failures": self.bad[:50]}
+
+
+def cap_address_space(gb: float) -> None:
+    """Cap this process's address space, so that an allocation a hostile file asks for fails here
+    as a MemoryError (counted) instead of taking the machine; 0: no cap."""
+    if gb > 0:
+        import resource
+
+        cap = int(gb * (1 << 30))
+        resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
 
 
 def main(argv=None) -> dict:
@@ -350,11 +373,7 @@ def main(argv=None) -> dict:
                     help="cap this process's address space, so that an allocation a hostile file asks "
                          "for fails here as a MemoryError (counted) instead of taking the machine")
     args = ap.parse_args(argv)
-    if args.address_space_gb > 0:
-        import resource
-
-        cap = int(args.address_space_gb * (1 << 30))
-        resource.setrlimit(resource.RLIMIT_AS, (cap, cap))
+    cap_address_space(args.address_space_gb)
     rep = {"machine": machine(), "cases_per_kind": args.cases, "kinds": {}}
     t0 = time.perf_counter()
     if args.merge:
