@@ -83,13 +83,13 @@ def run_task(stage_name: str, scene: SceneEntry, cfg, catalog: Catalog, config_h
 
 def _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, verify, base, run) -> dict:
     marker = catalog.path("markers", scene, stage=stage_name)
-    newer = read_marker(marker) if run else None
-    by = (newer or {}).get("run") or {}
+    found = read_marker(marker)
+    by = (found or {}).get("run") or {}
     if run and by.get("started_ns", 0) > run["started_ns"]:  # the write fence (new_run)
         return {**base, "status": "skipped", "superseded_by": by.get("id"),
                 "error": f"superseded: a newer run ({by.get('id')}) wrote this (stage, scene) while this one's task "
                          "waited; an older run never overwrites a newer one's outputs"}
-    old = None if force else read_marker(marker)
+    old = None if force else found
     extra = {}
     if old is not None and old.get("config_hash") == config_hash:  # why a marker of this config is redone
         changed = sources.problem(old.get("sources"), sources.files(stage_name, scene), verify)
