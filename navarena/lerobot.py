@@ -152,15 +152,15 @@ def export_lerobot(root, out, split: str | None = "train", tasks=("pointnav", "i
                     for k, v in (("observation.state", state), ("observation.goal", goal), ("action", act),
                                  ("action.waypoint", wp)):
                         stats_acc[k].append(v)
-                    rows = {"observation.state": list(state), "observation.goal": list(goal), "action": list(act),
-                            "action.waypoint": list(wp), "action.discrete": f["action_id"].to_numpy(np.int64),
+                    rows = {"observation.state": state, "observation.goal": goal, "action": act,
+                            "action.waypoint": wp, "action.discrete": f["action_id"].to_numpy(np.int64),
                             "timestamp": (np.arange(n) / fps).astype(np.float32),
                             "frame_index": np.arange(n, dtype=np.int64),
                             "episode_index": np.full(n, ep_index, np.int64),
                             "index": np.arange(frames_total, frames_total + n, dtype=np.int64),
                             "task_index": np.full(n, ti, np.int64)}
                     if depth:
-                        rows["observation.depth"] = list(dep[..., None])
+                        rows["observation.depth"] = dep[..., None]
                     data_file = ep_index // episodes_per_file
                     dchunk, dfile = divmod(data_file, CHUNKS_SIZE)
                     data_rows.append((data_file, rows))
@@ -228,7 +228,9 @@ def _write_data(tmp: Path, data_rows: list, features: dict) -> None:
     for file_no, rows in data_rows:
         by_file.setdefault(file_no, []).append(rows)
     for file_no, parts in sorted(by_file.items()):
-        cols = {k: [np.asarray(v).tolist() for p in parts for v in p[k]] for k in cols_of}
+        # whole numpy columns: datasets converts them to Arrow directly (the same bytes as Python
+        # lists of every frame's values, ten times faster for the depth images)
+        cols = {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in cols_of}
         chunk, file = divmod(file_no, CHUNKS_SIZE)
         path = tmp / f"data/chunk-{chunk:03d}/file-{file:03d}.parquet"
         path.parent.mkdir(parents=True, exist_ok=True)
