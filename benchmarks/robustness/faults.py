@@ -694,11 +694,15 @@ def markdown(rep: dict) -> str:
                   for k, v in fi["cases_per_group"].items()]
         lines += ["", "Catalogs, label folders and labelled meshes: `python -m benchmarks.robustness.fuzz_inputs` (a "
                   "case ends in an accepted input or a ValueError naming the file)."]
-    ch = rep.get("chaos")
-    if ch:
+    for ch in (rep.get("chaos"), rep.get("chaos_long")):
+        if not ch:
+            continue
         kinds: dict[str, int] = {}
         for e in ch["events"]:
             kinds[e["fault"]] = kinds.get(e["fault"], 0) + 1
+        lost, est = ch["time_lost_s"], ch.get("time_lost_estimate")
+        lost_text = "n/a (a sample)" if lost is None else \
+            f"{lost} s (against {ch.get('time_lost_from') or 'an undisturbed run of the same scenes'})"
         lines += ["", f"## A run under chaos ({ch['minutes_planned']:g} minutes planned)", "",
                   f"`python -m benchmarks.robustness.chaos --minutes {ch['minutes_planned']:g}`: {ch['scenes']:,} scenes of "
                   "the scale simulation on an external Dask cluster (a scheduler, two workers under nannies); "
@@ -706,7 +710,9 @@ def markdown(rep: dict) -> str:
                   "| figure | value |", "|---|---|",
                   f"| wall time under chaos | {ch['wall_s']} s ({ch['attempts']} runs started) |",
                   f"| undisturbed run of the compared scenes | {ch['undisturbed_wall_s']} s |",
-                  f"| time lost to faults | {ch['time_lost_s'] if ch['time_lost_s'] is not None else 'n/a (a sample)'} s |",
+                  f"| time lost to faults | {lost_text} |",
+                  *([f"| time lost, the run's own lower bound (stalls after the scheduler / client kills + the killed "
+                     f"workers' tasks) | {est['total_s']} s ({est['stalls_s']} + {est['worker_tasks_s']}) |"] if est else []),
                   f"| tasks the killed workers held (retried) | {ch['tasks_retried']} |",
                   f"| client peak memory | {ch['client_peak_rss_mb']} MB |",
                   f"| markers not current (outputs hashed) | {len(ch['markers_not_current'])} |",
@@ -768,12 +774,14 @@ def main(argv=None) -> dict:
         rep["fuzz_inputs"] = per
         for k in ("fuzz_cases", "fuzz_crashes", "fuzz_hangs"):
             rep[k] = rep.get(k, 0) + f[k]
-    ch = Path(args.out) / "chaos.json"
-    if ch.exists():  # the run under chaos (benchmarks.robustness.chaos): its faults count in the totals
+    for name in ("chaos", "chaos_long"):  # the runs under chaos (benchmarks.robustness.chaos): in the totals
+        ch = Path(args.out) / f"{name}.json"
+        if not ch.exists():
+            continue
         c = json.loads(ch.read_text())
-        rep["chaos"] = c
-        rep["scenarios"]["chaos"] = result("chaos", c["faults_injected"], c["faults_survived"], c["byte_mismatches"],
-                                           scenes=c["scenes"], wall_s=c["wall_s"], tasks_retried=c["tasks_retried"])
+        rep[name] = c
+        rep["scenarios"][name] = result(name, c["faults_injected"], c["faults_survived"], c["byte_mismatches"],
+                                        scenes=c["scenes"], wall_s=c["wall_s"], tasks_retried=c["tasks_retried"])
         for total, k in (("faults_injected", "injected"), ("faults_survived", "survived"),
                          ("byte_mismatches", "byte_mismatches")):
             rep[total] = sum(r[k] for r in rep["scenarios"].values())
