@@ -11,16 +11,19 @@ WHEELS ?=
 
 .PHONY: docs release verify-release bench-release bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
+# --no-compile: Python byte-compiles the modules it imports when it first imports them, instead of
+# pip compiling every file of every package at install (torch alone: 18 s -> 8 s of set-up)
+PIP := $(BIN)/python -m pip install -q --no-compile
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
-	$(BIN)/python -m pip install -q --upgrade pip
+	$(PIP) --upgrade pip
 	# the CPU build of torch (an unpinned torch would pull several GB of CUDA packages)
-	$(BIN)/python -m pip install -q "torch==2.13.0" || $(BIN)/python -m pip install -q torch --index-url https://download.pytorch.org/whl/cpu
-	$(BIN)/python -m pip install -q -e ".[test,bench,lerobot,open_vocab,docs]"
+	$(PIP) "torch==2.13.0" || $(PIP) torch --index-url https://download.pytorch.org/whl/cpu
+	$(PIP) -e ".[test,bench,lerobot,open_vocab,docs]"
 	# the lerobot package and the torchvision / torchcodec it imports, next to our CPU torch 2.13:
 	# torchvision 0.28.0 is the release made for torch 2.13, but PyPI builds it for CUDA torch, so its
 	# operators cannot load here; navarena.torchvision_fix (a .pth import hook) lets its Python part load
-	$(BIN)/python -m pip install -q --no-deps "lerobot==0.4.4" "torchvision==0.28.0" "torchcodec==0.13.0"
+	$(PIP) --no-deps "lerobot==0.4.4" "torchvision==0.28.0" "torchcodec==0.13.0"
 	$(BIN)/python -m navarena.torchvision_fix install
 	sh scripts/system_packages.sh
 	touch $(STAMP)
@@ -66,12 +69,13 @@ dataset: $(STAMP)
 	$(BIN)/python -m pipeline $(ARGS)
 
 # lint (ruff) and the import contracts (navcore <- stages <- pipeline) first, then the tests
-# the default tests, spread over TEST_WORKERS processes (pytest-xdist, a module per process; 0: this
-# process): on the 2-core CI machine 2 took the tests from 502 s to 439 s (the pipeline tests wait
-# on subprocesses and Python as much as on the cores)
+# the default tests, spread over TEST_WORKERS processes (pytest-xdist, a module per process, the
+# modules sharing the session's episode data root on one: tests/conftest.py; 0: this process): on
+# the 2-core CI machine 2 took the tests from 502 s to 439 s (the pipeline tests wait on
+# subprocesses and Python as much as on the cores)
 TEST_WORKERS ?= 2
 test: lint
-	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile $(ARGS)
+	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup $(ARGS)
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -161,3 +161,31 @@ def episode_run(tmp_path_factory, make_cfg):
     summary = execute(make_cfg(root, *over))
     assert not summary["failures"], summary["failures"]
     return root, over, summary
+
+
+SHARED_RUN_GROUP = "episode_run"
+"""The xdist group (make test: --dist loadgroup) of every module using the session's episode_run:
+one worker builds that data root once for all of them."""
+
+
+def pytest_collection_modifyitems(config, items):
+    """One xdist group per test module (as --dist loadfile), except that the modules using the
+    session-scoped `episode_run` share one group, so that its pipeline run is made once rather than
+    once on each worker; a group named by a test's own xdist_group mark is kept."""
+    shared = {it.path for it in items if "episode_run" in getattr(it, "fixturenames", ())}
+    for it in items:
+        if it.get_closest_marker("xdist_group") is None:
+            it.add_marker(pytest.mark.xdist_group(SHARED_RUN_GROUP if it.path in shared else it.path.stem))
+
+
+def pytest_sessionstart(session):
+    """With several xdist workers (make test), compile the CPU kernels once before they start
+    (pipeline.kernels, when their caches are missing or older than the sources): otherwise each
+    worker and its Dask workers compile the same kernels at the same time on a fresh checkout."""
+    import subprocess
+    import sys
+
+    cfg = session.config
+    if hasattr(cfg, "workerinput") or not (getattr(cfg.option, "numprocesses", None) or 0) > 1:
+        return
+    subprocess.run([sys.executable, "-m", "pipeline.kernels", "--if-stale"], cwd=_PROJECT, check=True)

@@ -1,6 +1,7 @@
 """The pipeline: outputs, markers, reruns, config changes, failures, determinism, Dask."""
 import json
 import os
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,24 @@ register_configs()
 
 def statuses(summary):
     return {r["stage"]: r["status"] for r in summary["results"]}
+
+
+@pytest.fixture(scope="module")
+def costmap_root(tmp_path_factory, make_cfg):
+    """The small scene through the costmap (stages=[costmap], the defaults), made once: tests that
+    start from it copy it (copy_root) instead of running the same stages again."""
+    root = tmp_path_factory.mktemp("costmap_root")
+    s = execute(make_cfg(root, "stages=[costmap]"))
+    assert set(statuses(s).values()) == {"done"} and not s["failures"], s["failures"]
+    return root, s["results"][0]["scene_id"]
+
+
+def copy_root(costmap_root, dest: Path) -> str:
+    """A copy of the costmap_root data root at dest (a data root holds no absolute path of its
+    own: every marker and manifest is relative to it); returns the scene id."""
+    root, sid = costmap_root
+    shutil.copytree(root, dest, dirs_exist_ok=True, ignore=shutil.ignore_patterns("_runs", "_locks"))
+    return sid
 
 
 def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
@@ -96,7 +115,7 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
     assert latest["counts"]["align"] == {"done": 1}
 
 
-def test_voxel_opacity_field_is_a_storage_key(tmp_path, make_cfg):
+def test_voxel_opacity_field_is_a_storage_key(tmp_path, make_cfg, costmap_root):
     # 02_voxels/A is kept only with voxelize.store_opacity=true; V (all any later stage reads) is
     # the same, so voxelize alone re-runs and no later stage's hash changes; the default leaves
     # every hash as it was before the key existed
@@ -115,8 +134,8 @@ def test_voxel_opacity_field_is_a_storage_key(tmp_path, make_cfg):
     h_on = config_hashes(make_cfg(tmp_path, "voxelize.store_opacity=true"))
     assert h == h_old
     assert {k for k in h if h[k] != h_on[k]} == {"voxelize"}
-    s1 = execute(cfg)
-    sid = s1["results"][0]["scene_id"]
+    sid = copy_root(costmap_root, tmp_path)  # execute(cfg)
+    assert set(statuses(execute(cfg)).values()) == {"cached"}  # the copy is the same finished root
     vox = tmp_path / "02_voxels" / f"{sid}.zarr"
     g = zarr.open_group(str(vox), mode="r")
     v_before = np.asarray(g["V"][...])
@@ -203,13 +222,14 @@ def test_asset_aligned_model_as_spz(tmp_path, make_cfg):
         aligned_file("las")
 
 
-def test_damaged_outputs_behind_a_marker_are_recomputed(tmp_path, make_cfg):
+def test_damaged_outputs_behind_a_marker_are_recomputed(tmp_path, make_cfg, costmap_root):
     """Markers record their outputs' sizes and sha256: a deleted or truncated output recomputes its
     stage (verify=size, a stat per file); a same-size change needs verify=checksum."""
     over = ("stages=[costmap,episodes]", "task=[pointnav]", "task.pointnav.episodes_per_scene=5")
+    sid = copy_root(costmap_root, tmp_path)
     s1 = execute(make_cfg(tmp_path, *over))
-    assert set(statuses(s1).values()) == {"done"}
-    sid = s1["results"][0]["scene_id"]
+    st = statuses(s1)
+    assert st["costmap"] == "cached" and st["episodes"] == "done" and not s1["failures"]
     m = json.loads((tmp_path / "_markers" / "costmap" / f"{sid}.json").read_text())
     chunk = next(k for k in m["manifest"] if k.startswith("03_costmaps/") and "/clearance/c/" in k)
     assert m["manifest"][chunk][0] == (tmp_path / chunk).stat().st_size
@@ -291,14 +311,13 @@ def test_failing_scene_is_recorded_and_others_complete(tmp_path, make_cfg):
     assert not (tmp_path / "d" / "_markers" / "ingest" / f"{by_scene['broken']['ingest']['scene_id']}.json").exists()
 
 
-def test_changed_settings_of_a_stage_the_run_does_not_name_are_refused(tmp_path, make_cfg):
+def test_changed_settings_of_a_stage_the_run_does_not_name_are_refused(tmp_path, make_cfg, costmap_root):
     """stages=[screen] with another costmap resolution would overwrite the costmaps made before:
     refused (nothing touched) with the keys that differ and how to keep or recompute; naming the
     stage recomputes, and the run summary says what changed."""
     from pipeline.executor import UnknownKeysError, main_cfg
 
-    s = execute(make_cfg(tmp_path, "stages=[costmap]"))
-    sid = s["results"][0]["scene_id"]
+    sid = copy_root(costmap_root, tmp_path)  # execute(make_cfg(tmp_path, "stages=[costmap]"))
     marker = tmp_path / "_markers" / "costmap" / f"{sid}.json"
     before = marker.read_bytes()
     assert json.loads(before)["config"]["costmap"]["resolution"] == 0.05  # markers record their settings
@@ -317,9 +336,9 @@ def test_changed_settings_of_a_stage_the_run_does_not_name_are_refused(tmp_path,
     assert main_cfg(make_cfg(tmp_path, "+evaluate.agnet=oracle")) == 2
 
 
-def test_same_config_same_bytes_whatever_the_workers(tmp_path, make_cfg):
+def test_same_config_same_bytes_whatever_the_workers(tmp_path, make_cfg, costmap_root):
     """Sync and a 2-process Dask LocalCluster produce byte-identical stores."""
-    execute(make_cfg(tmp_path / "a", "stages=[costmap]"))
+    copy_root(costmap_root, tmp_path / "a")  # execute(make_cfg(tmp_path / "a", "stages=[costmap]")), sync
     execute(make_cfg(tmp_path / "b", "stages=[costmap]", "executor=local", "executor.n_workers=2",
                      "executor.dashboard=false"))
     files_a = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a" / "03_costmaps").rglob("*") if p.is_file())
@@ -523,10 +542,9 @@ def test_interrupted_write_leaves_nothing_trusted(tmp_path, monkeypatch, make_cf
         "voxelize"] == "done"
 
 
-def test_stored_costmap_loads_into_the_same_queries(tmp_path, make_cfg):
+def test_stored_costmap_loads_into_the_same_queries(tmp_path, costmap_root):
 
-    s = execute(make_cfg(tmp_path, "stages=[costmap]"))
-    sid = s["results"][0]["scene_id"]
+    sid = copy_root(costmap_root, tmp_path)
     path = tmp_path / "03_costmaps" / f"{sid}.zarr"
     cm = CostmapDataset(path).load("locobot")
     g = zarr.open_group(str(path))["locobot"]
