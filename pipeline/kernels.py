@@ -27,23 +27,23 @@ TINY = ("scenes.count=1", "scenes.num_gaussians=5000", "synthetic.layout.rooms_m
 """One small generated room, every default stage in a few seconds once compiled."""
 
 
-def kernel_modules() -> list[Path]:
+def kernel_modules(project: Path = PROJECT) -> list[Path]:
     """The project's source files that define cached numba kernels."""
     out = []
     for pkg in ("navcore", "stages"):
-        for f in sorted((PROJECT / pkg).rglob("*.py")):
+        for f in sorted((project / pkg).rglob("*.py")):
             text = f.read_text(encoding="utf-8", errors="replace")
             if "cache=True" in text and "numba" in text:
                 out.append(f)
     return out
 
 
-def stale() -> list[Path]:
+def stale(project: Path = PROJECT) -> list[Path]:
     """The kernel modules whose cache is older than their source, or missing for the renderer's
     compositing kernel (the sign of a fresh checkout); modules that a run never calls (and so
     never cached) do not count."""
     bad = []
-    for f in kernel_modules():
+    for f in kernel_modules(project):
         idx = list((f.parent / "__pycache__").glob(f"{f.stem}.*.nbi"))
         if (idx and max(i.stat().st_mtime for i in idx) < f.stat().st_mtime) or (not idx and f.name == "composite.py"):
             bad.append(f)

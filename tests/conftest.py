@@ -188,4 +188,6 @@ def pytest_sessionstart(session):
     cfg = session.config
     if hasattr(cfg, "workerinput") or not (getattr(cfg.option, "numprocesses", None) or 0) > 1:
         return
-    subprocess.run([sys.executable, "-m", "pipeline.kernels", "--if-stale"], cwd=_PROJECT, check=True)
+    # a failure here is not the session's: the tests that run those stages report it themselves
+    if subprocess.run([sys.executable, "-m", "pipeline.kernels", "--if-stale"], cwd=_PROJECT).returncode:
+        print("pipeline.kernels failed (above); the workers compile the kernels themselves")
