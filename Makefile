@@ -11,9 +11,10 @@ WHEELS ?=
 
 .PHONY: docs release verify-release bench-release bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
-# --no-compile: Python byte-compiles the modules it imports when it first imports them, instead of
-# pip compiling every file of every package at install (torch alone: 18 s -> 8 s of set-up)
-PIP := $(BIN)/python -m pip install -q --no-compile
+# pip byte-compiles every package at install (torch: 18 s, 8 s with --no-compile): once, in one
+# process; with --no-compile every process that first imports a module compiles it, and make test's
+# processes start side by side: the set-up gained 29 s and the tests lost more (2026-11-27)
+PIP := $(BIN)/python -m pip install -q
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(PIP) --upgrade pip
@@ -197,7 +198,7 @@ submit: $(STAMP)
 # issue 14's and 48's proof: the fault-injection scenarios against an undisturbed run (the SLURM
 # ones on a one-node SLURM it starts when root), 10,000 fuzz cases a reader layout, an agent-server
 # frame type, and of catalogs, label folders and labelled meshes; a run under chaos (5 minutes;
-# CHAOS_MINUTES=60: the 2,000-scene simulation for an hour); then data/08_reports/bench_faults.{json,md}
+# CHAOS_MINUTES=60: the scale simulation for an hour, 2,580 scenes); then data/08_reports/bench_faults.{json,md}
 # the fuzzers are single-threaded: three side by side on the two cores (readers split in two
 # halves of about equal time), then the halves' reports merged
 FUZZ_A = sog,spz_v2,supersplat_ply,npy_folder
