@@ -163,19 +163,26 @@ def episode_run(tmp_path_factory, make_cfg):
     return root, over, summary
 
 
-SHARED_RUN_GROUP = "episode_run"
-"""The xdist group (make test: --dist loadgroup) of every module using the session's episode_run:
-one worker builds that data root once for all of them."""
+SHARED_RUN_MODULES = sorted(p.stem for p in Path(__file__).parent.glob("test_*.py")
+                            if "episode_run" in p.read_text(encoding="utf-8"))
+"""The test modules using the session's episode_run data root: make test's --dist loadfile sends
+them to one worker, which builds that root once for all of them (pytest_xdist_make_scheduler)."""
 
 
-def pytest_collection_modifyitems(config, items):
-    """One xdist group per test module (as --dist loadfile), except that the modules using the
-    session-scoped `episode_run` share one group, so that its pipeline run is made once rather than
-    once on each worker; a group named by a test's own xdist_group mark is kept."""
-    shared = {it.path for it in items if "episode_run" in getattr(it, "fixturenames", ())}
-    for it in items:
-        if it.get_closest_marker("xdist_group") is None:
-            it.add_marker(pytest.mark.xdist_group(SHARED_RUN_GROUP if it.path in shared else it.path.stem))
+def pytest_xdist_make_scheduler(config, log):
+    """--dist loadfile, except that the modules using `episode_run` are one unit of work, so that
+    its pipeline run is made once rather than once on each worker. (xdist's loadgroup cannot do
+    this under pytest 9: its group suffix on the node ids no longer takes.)"""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class LoadFileSharingTheEpisodeRun(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            path = nodeid.split("::", 1)[0]
+            return "episode_run" if Path(path).stem in SHARED_RUN_MODULES else path
+
+    return LoadFileSharingTheEpisodeRun(config, log)
 
 
 def pytest_sessionstart(session):
