@@ -718,6 +718,8 @@ def markdown(rep: dict) -> str:
                   f"| markers not current (outputs hashed) | {len(ch['markers_not_current'])} |",
                   f"| scenes compared byte for byte | {ch['compared']['scenes']} ({ch['compared']['files']:,} files) |",
                   f"| byte mismatches | {len(ch['byte_mismatches'])} |"]
+    if rep.get("provenance"):  # a merged report's parts were measured at different times
+        lines += ["", "Where the parts of this report were measured:", ""] + [f"- {p}" for p in rep["provenance"]]
     if "fuzz_cases" in rep:
         lines += ["", f"All fuzzing: {rep['fuzz_cases']:,} cases, {rep['fuzz_crashes']} crashes, {rep['fuzz_hangs']} hangs."]
     return "\n".join(lines) + "\n"
@@ -734,8 +736,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--docs", action="store_true", help="also write docs/bench_faults.md")
     ap.add_argument("--merge", nargs="+", type=Path,
                     help="instead of running: bench_faults.json files, later ones replacing earlier scenarios")
+    ap.add_argument("--provenance", nargs="+", default=[],
+                    help="with --merge: where and when each merged part was measured (a line each on the page)")
     args = ap.parse_args(argv)
-    rep = {"machine": machine(), "base_overrides": list(BASE), "scenarios": {}}
+    rep = {"machine": machine(), "base_overrides": list(BASE), "scenarios": {}, "provenance": args.provenance}
     if args.merge:
         for f in args.merge:
             r = json.loads(Path(f).read_text())
