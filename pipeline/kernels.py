@@ -4,7 +4,8 @@ milliseconds. On a fresh checkout the first pipeline run spends about 45 s of on
 processes that start at the same time (Dask workers, pytest-xdist workers) each compile the same
 kernels. This does it once, on two cores: the renderer's kernels in a child process while this one
 runs a tiny scene through the stages up to the costmap, then the rest of the default stages (whose
-views then load the renderer's kernels from the cache).
+views then load the renderer's kernels from the cache) beside a second child compiling the kernels
+of the checks (the rasteriser's visit counts, the render check's per-ray hits).
 
     python -m pipeline.kernels            # about 30 s on two cores when nothing is cached
     python -m pipeline.kernels --if-stale # nothing when the caches are newer than their sources
@@ -67,6 +68,25 @@ def render_kernels() -> None:
     r.render(vm, K, 64, 48, features=np.ones((len(gs.means), 3), np.float32))
 
 
+def analysis_kernels() -> None:
+    """The kernels of the checks and benchmarks: the rasteriser counting the Gaussians it reads
+    (visits) and the render check's per-ray hits."""
+    import numpy as np
+
+    from navcore.render import cpu_fast
+    from navcore.render.ray_hits import panorama_hit_depth_cpu, ray_gaussians
+    from stages.synthesize.generate import SyntheticConfig, generate_scene
+
+    gs = generate_scene(0, SyntheticConfig(num_gaussians=3000)).gaussians
+    vm = np.eye(4, dtype=np.float32)
+    vm[2, 3] = 3.0
+    K = np.array([[40, 0, 32], [0, 40, 24], [0, 0, 1]], np.float32)
+    cpu_fast.render_one(cpu_fast.prepare(gs), vm, K, 64, 48, 0, visits=np.zeros((len(gs.means), 2), np.uint8))
+    n = len(gs.means)
+    panorama_hit_depth_cpu(ray_gaussians(gs), np.zeros((1, 1, 3)), np.array([0, n]), np.arange(n), 8, 4, -0.5, 0.5,
+                           0.0, 2.0)
+
+
 def pipeline_kernels(root: Path, *overrides: str) -> None:
     from hydra import compose, initialize_config_dir
     from rich.console import Console
@@ -85,20 +105,26 @@ def pipeline_kernels(root: Path, *overrides: str) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m pipeline.kernels", description=__doc__.split("\n")[0])
     ap.add_argument("--if-stale", action="store_true", help="do nothing when the caches are newer than their sources")
-    ap.add_argument("--render-only", action="store_true", help=argparse.SUPPRESS)  # the child process
+    ap.add_argument("--only", choices=("render", "analysis"), help=argparse.SUPPRESS)  # the child processes
     args = ap.parse_args(argv)
-    if args.render_only:
-        render_kernels()
+    if args.only:
+        render_kernels() if args.only == "render" else analysis_kernels()
         return 0
     if args.if_stale and not stale():
         return 0
     t = time.perf_counter()
-    child = subprocess.Popen([sys.executable, "-m", "pipeline.kernels", "--render-only"], cwd=PROJECT)
+    def child(what: str) -> subprocess.Popen:
+        return subprocess.Popen([sys.executable, "-m", "pipeline.kernels", "--only", what], cwd=PROJECT)
+
+    render = child("render")
     with tempfile.TemporaryDirectory(prefix="navarena_kernels_") as tmp:
         pipeline_kernels(Path(tmp), "stages=[costmap]")
-        if child.wait() != 0:
+        if render.wait() != 0:
             raise RuntimeError("compiling the renderer's kernels failed (see above)")
+        analysis = child("analysis")  # on the other core while the rest of the stages run here
         pipeline_kernels(Path(tmp))
+        if analysis.wait() != 0:
+            raise RuntimeError("compiling the analysis kernels failed (see above)")
     print(f"CPU kernels compiled and cached in {time.perf_counter() - t:.0f} s")
     return 0
 
