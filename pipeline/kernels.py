@@ -7,7 +7,7 @@ runs a tiny scene through the stages up to the costmap, then the rest of the def
 views then load the renderer's kernels from the cache) beside a second child compiling the kernels
 of the checks (the rasteriser's visit counts, the render check's per-ray hits).
 
-    python -m pipeline.kernels            # about 30 s on two cores when nothing is cached
+    python -m pipeline.kernels            # about 40 s on two cores when nothing is cached
     python -m pipeline.kernels --if-stale # nothing when the caches are newer than their sources
 """
 from __future__ import annotations
@@ -51,21 +51,29 @@ def stale(project: Path = PROJECT) -> list[Path]:
     return bad
 
 
+def _tiny_view():
+    """A small generated scene and one 64 x 48 camera 3 m in front of it: (gaussians, viewmat, K)."""
+    import numpy as np
+
+    from stages.synthesize.generate import SyntheticConfig, generate_scene
+
+    gs = generate_scene(0, SyntheticConfig(num_gaussians=3000)).gaussians
+    vm = np.eye(4, dtype=np.float32)
+    vm[2, 3] = 3.0
+    return gs, vm, np.array([[40, 0, 32], [0, 40, 24], [0, 0, 1]], np.float32)
+
+
 def render_kernels() -> None:
     """The CPU renderer's kernels: colour and depth, with extra channels, and with features."""
     import numpy as np
 
     from navcore.render import Renderer
-    from stages.synthesize.generate import SyntheticConfig, generate_scene
 
-    gs = generate_scene(0, SyntheticConfig(num_gaussians=3000)).gaussians
+    gs, vm, K = _tiny_view()
     r = Renderer(gs, "cpu")
-    vm = np.eye(4, dtype=np.float32)[None]
-    vm[0, 2, 3] = 3.0
-    K = np.array([[[40, 0, 32], [0, 40, 24], [0, 0, 1]]], np.float32)
-    r.render(vm, K, 64, 48)
-    r.render(vm, K, 64, 48, extra=np.ones((len(gs.means), 2), np.float32))
-    r.render(vm, K, 64, 48, features=np.ones((len(gs.means), 3), np.float32))
+    r.render(vm[None], K[None], 64, 48)
+    r.render(vm[None], K[None], 64, 48, extra=np.ones((len(gs.means), 2), np.float32))
+    r.render(vm[None], K[None], 64, 48, features=np.ones((len(gs.means), 3), np.float32))
 
 
 def analysis_kernels() -> None:
@@ -75,14 +83,10 @@ def analysis_kernels() -> None:
 
     from navcore.render import cpu_fast
     from navcore.render.ray_hits import panorama_hit_depth_cpu, ray_gaussians
-    from stages.synthesize.generate import SyntheticConfig, generate_scene
 
-    gs = generate_scene(0, SyntheticConfig(num_gaussians=3000)).gaussians
-    vm = np.eye(4, dtype=np.float32)
-    vm[2, 3] = 3.0
-    K = np.array([[40, 0, 32], [0, 40, 24], [0, 0, 1]], np.float32)
-    cpu_fast.render_one(cpu_fast.prepare(gs), vm, K, 64, 48, 0, visits=np.zeros((len(gs.means), 2), np.uint8))
+    gs, vm, K = _tiny_view()
     n = len(gs.means)
+    cpu_fast.render_one(cpu_fast.prepare(gs), vm, K, 64, 48, 0, visits=np.zeros((n, 2), np.uint8))
     panorama_hit_depth_cpu(ray_gaussians(gs), np.zeros((1, 1, 3)), np.array([0, n]), np.arange(n), 8, 4, -0.5, 0.5,
                            0.0, 2.0)
 

@@ -163,6 +163,18 @@ def episode_run(tmp_path_factory, make_cfg):
     return root, over, summary
 
 
+@pytest.fixture(scope="session")
+def copy_data_root():
+    """copy(src, dest, *leave_out): a copy of a finished data root at dest (a data root holds no
+    absolute path of its own: every marker and manifest is relative to it), less its run summaries,
+    its locks and the entries matching the leave_out patterns (shutil.ignore_patterns)."""
+    import shutil
+
+    def copy(src: Path, dest: Path, *leave_out: str) -> None:
+        shutil.copytree(src, dest, dirs_exist_ok=True, ignore=shutil.ignore_patterns("_runs", "_locks", *leave_out))
+    return copy
+
+
 SHARED_RUN_MODULES = sorted(p.stem for p in Path(__file__).parent.glob("test_*.py")
                             if "episode_run" in p.read_text(encoding="utf-8"))
 """The test modules using the session's episode_run data root: make test's --dist loadfile sends

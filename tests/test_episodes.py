@@ -2,7 +2,6 @@
 import gzip
 import json
 import math
-import shutil
 
 import numpy as np
 import pandas as pd
@@ -299,15 +298,14 @@ def test_stored_episodes_query_with_pandas_and_pass_the_recheck(episode_run):
     assert summary["results"][-1]["stage"] == "export:finalize"
 
 
-def test_episode_shards_are_byte_identical_on_rerun_with_workers(episode_run, tmp_path, make_cfg):
+def test_episode_shards_are_byte_identical_on_rerun_with_workers(episode_run, tmp_path, make_cfg, copy_data_root):
     from pipeline.executor import execute
 
     root, over, _ = episode_run
     # the finished root less the episodes and what follows them: only the episodes stage runs again
     # (the upstream stages' bytes across worker counts: test_pipeline's test_same_config_same_bytes...)
-    shutil.copytree(root, tmp_path, dirs_exist_ok=True, ignore=shutil.ignore_patterns(
-        "_runs", "_locks", "05_episodes", "06_trajectories", "07_eval", "09_assets", "10_exports", "episodes",
-        "goal_images", "asset", "export*"))
+    copy_data_root(root, tmp_path, "05_episodes", "06_trajectories", "07_eval", "09_assets", "10_exports", "episodes",
+                   "goal_images", "asset", "export*")
     s = execute(make_cfg(tmp_path, *over[:-1], "stages=[episodes]", "executor=local", "executor.n_workers=2",
                          "executor.dashboard=false"))
     assert not s["failures"] and {r["stage"]: r["status"] for r in s["results"]}["episodes"] == "done"

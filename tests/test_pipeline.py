@@ -1,7 +1,6 @@
 """The pipeline: outputs, markers, reruns, config changes, failures, determinism, Dask."""
 import json
 import os
-import shutil
 from pathlib import Path
 
 import numpy as np
@@ -20,21 +19,18 @@ def statuses(summary):
 
 
 @pytest.fixture(scope="module")
-def costmap_root(tmp_path_factory, make_cfg):
-    """The small scene through the costmap (stages=[costmap], the defaults), made once: tests that
-    start from it copy it (copy_root) instead of running the same stages again."""
+def costmap_root(tmp_path_factory, make_cfg, copy_data_root):
+    """copy(dest) -> scene id: a copy of the small scene through the costmap (stages=[costmap], the
+    defaults), made once, for tests that would otherwise run the same stages again."""
     root = tmp_path_factory.mktemp("costmap_root")
     s = execute(make_cfg(root, "stages=[costmap]"))
     assert set(statuses(s).values()) == {"done"} and not s["failures"], s["failures"]
-    return root, s["results"][0]["scene_id"]
+    sid = s["results"][0]["scene_id"]
 
-
-def copy_root(costmap_root, dest: Path) -> str:
-    """A copy of the costmap_root data root at dest (a data root holds no absolute path of its
-    own: every marker and manifest is relative to it); returns the scene id."""
-    root, sid = costmap_root
-    shutil.copytree(root, dest, dirs_exist_ok=True, ignore=shutil.ignore_patterns("_runs", "_locks"))
-    return sid
+    def copy(dest: Path) -> str:
+        copy_data_root(root, dest)
+        return sid
+    return copy
 
 
 def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
@@ -134,7 +130,7 @@ def test_voxel_opacity_field_is_a_storage_key(tmp_path, make_cfg, costmap_root):
     h_on = config_hashes(make_cfg(tmp_path, "voxelize.store_opacity=true"))
     assert h == h_old
     assert {k for k in h if h[k] != h_on[k]} == {"voxelize"}
-    sid = copy_root(costmap_root, tmp_path)  # execute(cfg)
+    sid = costmap_root(tmp_path)  # execute(cfg)
     assert set(statuses(execute(cfg)).values()) == {"cached"}  # the copy is the same finished root
     vox = tmp_path / "02_voxels" / f"{sid}.zarr"
     g = zarr.open_group(str(vox), mode="r")
@@ -226,7 +222,7 @@ def test_damaged_outputs_behind_a_marker_are_recomputed(tmp_path, make_cfg, cost
     """Markers record their outputs' sizes and sha256: a deleted or truncated output recomputes its
     stage (verify=size, a stat per file); a same-size change needs verify=checksum."""
     over = ("stages=[costmap,episodes]", "task=[pointnav]", "task.pointnav.episodes_per_scene=5")
-    sid = copy_root(costmap_root, tmp_path)
+    sid = costmap_root(tmp_path)
     s1 = execute(make_cfg(tmp_path, *over))
     st = statuses(s1)
     assert st["costmap"] == "cached" and st["episodes"] == "done" and not s1["failures"]
@@ -317,7 +313,7 @@ def test_changed_settings_of_a_stage_the_run_does_not_name_are_refused(tmp_path,
     stage recomputes, and the run summary says what changed."""
     from pipeline.executor import UnknownKeysError, main_cfg
 
-    sid = copy_root(costmap_root, tmp_path)  # execute(make_cfg(tmp_path, "stages=[costmap]"))
+    sid = costmap_root(tmp_path)  # execute(make_cfg(tmp_path, "stages=[costmap]"))
     marker = tmp_path / "_markers" / "costmap" / f"{sid}.json"
     before = marker.read_bytes()
     assert json.loads(before)["config"]["costmap"]["resolution"] == 0.05  # markers record their settings
@@ -338,7 +334,7 @@ def test_changed_settings_of_a_stage_the_run_does_not_name_are_refused(tmp_path,
 
 def test_same_config_same_bytes_whatever_the_workers(tmp_path, make_cfg, costmap_root):
     """Sync and a 2-process Dask LocalCluster produce byte-identical stores."""
-    copy_root(costmap_root, tmp_path / "a")  # execute(make_cfg(tmp_path / "a", "stages=[costmap]")), sync
+    costmap_root(tmp_path / "a")  # execute(make_cfg(tmp_path / "a", "stages=[costmap]")), sync
     execute(make_cfg(tmp_path / "b", "stages=[costmap]", "executor=local", "executor.n_workers=2",
                      "executor.dashboard=false"))
     files_a = sorted(p.relative_to(tmp_path / "a") for p in (tmp_path / "a" / "03_costmaps").rglob("*") if p.is_file())
@@ -544,7 +540,7 @@ def test_interrupted_write_leaves_nothing_trusted(tmp_path, monkeypatch, make_cf
 
 def test_stored_costmap_loads_into_the_same_queries(tmp_path, costmap_root):
 
-    sid = copy_root(costmap_root, tmp_path)
+    sid = costmap_root(tmp_path)
     path = tmp_path / "03_costmaps" / f"{sid}.zarr"
     cm = CostmapDataset(path).load("locobot")
     g = zarr.open_group(str(path))["locobot"]
