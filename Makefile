@@ -198,7 +198,7 @@ submit: $(STAMP)
 # issue 14's and 48's proof: the fault-injection scenarios against an undisturbed run (the SLURM
 # ones on a one-node SLURM it starts when root), 10,000 fuzz cases a reader layout, an agent-server
 # frame type, and of catalogs, label folders and labelled meshes; a run under chaos (5 minutes;
-# CHAOS_MINUTES=60: the scale simulation for an hour, 2,580 scenes); then data/08_reports/bench_faults.{json,md}
+# CHAOS_MINUTES=60: the scale simulation for an hour, 3,300 scenes, then all of them undisturbed: about 2 hours); then data/08_reports/bench_faults.{json,md}
 # the fuzzers are single-threaded: three side by side on the two cores (readers split in two
 # halves of about equal time), then the halves' reports merged
 FUZZ_A = sog,spz_v2,supersplat_ply,npy_folder
