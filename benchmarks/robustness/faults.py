@@ -717,7 +717,8 @@ def markdown(rep: dict) -> str:
                   f"| client peak memory | {ch['client_peak_rss_mb']} MB |",
                   f"| markers not current (outputs hashed) | {len(ch['markers_not_current'])} |",
                   f"| scenes compared byte for byte | {ch['compared']['scenes']} ({ch['compared']['files']:,} files) |",
-                  f"| byte mismatches | {len(ch['byte_mismatches'])} |"]
+                  f"| byte mismatches | {len(ch['byte_mismatches'])} |",
+                  *(["", ch["note"]] if ch.get("note") else [])]
     if rep.get("provenance"):  # a merged report's parts were measured at different times
         lines += ["", "Where the parts of this report were measured:", ""] + [f"- {p}" for p in rep["provenance"]]
     if "fuzz_cases" in rep:
