@@ -20,7 +20,12 @@ $(STAMP): pyproject.toml
 	$(PIP) --upgrade pip
 	# the CPU build of torch (an unpinned torch would pull several GB of CUDA packages)
 	$(PIP) "torch==2.13.0" || $(PIP) torch --index-url https://download.pytorch.org/whl/cpu
-	$(PIP) -e ".[test,bench,lerobot,open_vocab,docs]"
+	# the consumer library (navcore, navarena) editable, with the pipeline project's dependency groups
+	# (pyproject.toml [dependency-groups]; pip >= 25.1)
+	$(PIP) -e ".[lerobot,open_vocab]" --group pipeline --group test --group bench --group docs
+	# the pipeline (pipeline/, stages/) is the checkout's own, never in the wheel: this venv imports it
+	# from here, wherever it runs (navarena run, python -m pipeline, Dask workers)
+	$(BIN)/python -c "import pathlib, sysconfig; pathlib.Path(sysconfig.get_paths()['purelib'], 'navarena_checkout.pth').write_text(str(pathlib.Path.cwd()) + chr(10))"
 	# the lerobot package and the torchvision / torchcodec it imports, next to our CPU torch 2.13:
 	# torchvision 0.28.0 is the release made for torch 2.13, but PyPI builds it for CUDA torch, so its
 	# operators cannot load here; navarena.torchvision_fix (a .pth import hook) lets its Python part load
@@ -69,7 +74,7 @@ bench-render-check: $(STAMP)
 dataset: $(STAMP)
 	$(BIN)/python -m pipeline $(ARGS)
 
-# lint (ruff) and the import contracts (navcore <- stages <- pipeline) first, then the tests
+# lint (ruff) and the import contracts (navcore <- stages <- pipeline; navarena <- navcore) first, then the tests
 # the default tests, spread over TEST_WORKERS processes (pytest-xdist, a module per process, the
 # modules sharing the session's episode data root on one: tests/conftest.py; 0: this process): on
 # the 2-core CI machine 2 took the tests from 502 s to 439 s (the pipeline tests wait on
@@ -139,8 +144,6 @@ bench-release: $(STAMP)
 eval: $(STAMP)
 	$(BIN)/python -m pipeline stages=[evaluate] $(ARGS)
 
-# on a CUDA machine: writes data/08_reports/voxelize_gpu.json; bench-spatial merges it (or
-# `python -m benchmarks.map.spatial --merge-gpu` folds it into an existing report)
 # the real indoor scenes of ../shared/data/real_indoor end to end (catalogs/real_indoor.yaml), the
 # render-based costmap check, and the realistic synthetic scenes against the mesh
 bench-real: $(STAMP)
@@ -182,6 +185,8 @@ bench-scale: $(STAMP)
 	$(BIN)/python -m benchmarks.scale.bench_scale report --data data --real-root data/real_indoor \
 	    --compact-root data/real_indoor_compact --docs docs/bench_scale.md
 
+# on a CUDA machine: writes data/08_reports/voxelize_gpu.json; bench-spatial merges it (or
+# `python -m benchmarks.map.spatial --merge-gpu` folds it into an existing report)
 bench-spatial-gpu: $(STAMP)
 	$(BIN)/python -m benchmarks.map.voxelize_gpu $(ARGS)
 
@@ -193,8 +198,6 @@ SUBMIT_FLAGS ?=
 submit: $(STAMP)
 	$(BIN)/python -m pipeline.submit --shards $(SHARDS) --scheduler $(SCHEDULER) $(SUBMIT_FLAGS) -- $(ARGS)
 
-# the batch-scheduler tests: a one-node SLURM on this machine (scripts/slurm_localhost.sh, root),
-# then make submit (array job, shards, cancel and resubmit) and executor=slurm (dask-jobqueue)
 # issue 14's and 48's proof: the fault-injection scenarios against an undisturbed run (the SLURM
 # ones on a one-node SLURM it starts when root), 10,000 fuzz cases a reader layout, an agent-server
 # frame type, and of catalogs, label folders and labelled meshes; a run under chaos (5 minutes;
@@ -222,6 +225,8 @@ test-faults: $(STAMP)
 	    data/08_reports/fuzz_b/fuzz_readers.json
 	$(BIN)/python -m benchmarks.robustness.faults --docs --merge data/08_reports/faults_scenarios.json
 
+# the batch-scheduler tests: a one-node SLURM on this machine (scripts/slurm_localhost.sh, root),
+# then make submit (array job, shards, cancel and resubmit) and executor=slurm (dask-jobqueue)
 test-slurm: $(STAMP)
 	scripts/slurm_localhost.sh
 	$(BIN)/python -m pytest -q -m slurm tests/test_slurm.py $(ARGS)

@@ -86,8 +86,10 @@ def export_lerobot(root, out, split: str | None = "train", tasks=("pointnav", "i
     """Write the LeRobot dataset of `split` of the data root `root` to `out` (replaced whole:
     written beside it and renamed in place). Returns a summary (episodes, frames, bytes). A progress
     display (episodes, frames, frames/s, time left) unless quiet."""
+    from navcore.optional import require
     from navcore.render.frames import SceneFrames, chosen_episodes
 
+    require("datasets", "the LeRobot export")  # before any frame is rendered
     if TRAJECTORY_HZ % fps:
         raise ValueError(f"fps must divide the trajectories' {TRAJECTORY_HZ} Hz, got {fps}")
     if width % 2 or height % 2:

@@ -8,12 +8,12 @@ from pathlib import Path
 from hydra.core.config_store import ConfigStore
 
 from navcore.gaussians.content import ContentConfig
+from navcore.gaussians.floor import AlignConfig
 from navcore.gaussians.validate import ValidationLimits
 from navcore.nav.embodiment import Embodiment
 from navcore.voxels.field import VoxelizeConfig
 from pipeline.graph import DEFAULT_STAGES
 from pipeline.release.config import ReleaseConfig
-from stages.align.floor import AlignConfig
 from stages.costmap.build import CostmapConfig
 from stages.episodes.config import EpisodesConfig, PlannerConfig, TaskConfig
 from stages.evaluate.config import EvaluateConfig

@@ -157,14 +157,14 @@ def command_help(name: str) -> str:
     import io
     import os
 
-    from pipeline.__main__ import TOOLS
+    from navarena.cli import CONSUMER, PRODUCER
 
     old = os.environ.get("COLUMNS")
     os.environ["COLUMNS"] = "100"
     buf = io.StringIO()
     try:
         with contextlib.redirect_stdout(buf), contextlib.suppress(SystemExit):
-            importlib.import_module(TOOLS[name][0]).main(["--help"])
+            importlib.import_module({**CONSUMER, **PRODUCER}[name][0]).main(["--help"])
     finally:
         if old is None:
             os.environ.pop("COLUMNS", None)
@@ -175,10 +175,12 @@ def command_help(name: str) -> str:
 
 def cli_markdown() -> str:
     """docs/reference/cli.md: `navarena --help` and every subcommand's help."""
-    from pipeline.__main__ import TOOLS, usage
+    from navarena.cli import CONSUMER, PRODUCER, usage
 
     L = ["# Command line", "",
-         "`navarena` is installed into the venv (`.venv/bin/navarena`; `python -m pipeline` is the same). Generated "
+         "`navarena` is installed with the library (`pip install navarena`; in a checkout `.venv/bin/navarena`, and "
+         "`python -m navarena`). Its `run` and `release` commands are the pipeline project's (a checkout); "
+         "`python -m pipeline` is `navarena run`. Generated "
          "from the commands' own help by `python -m pipeline.config_reference`.", "", "```text", usage().rstrip(), "```", "",
          "## navarena run", "",
          "The pipeline. Arguments are Hydra overrides: `key=value` for any key of the "
@@ -187,14 +189,14 @@ def cli_markdown() -> str:
          "or `+preset=habitat` for a preset. `navarena run --cfg job` prints the resolved config, `navarena run --help` "
          "Hydra's help. Exit status: 0; 1 when a (stage, scene) failed or the run was refused (`allow_failures=true`: "
          "0); 2 for an unknown configuration key.", ""]
-    for name in TOOLS:
+    for name in [*CONSUMER, *(n for n in PRODUCER if n != "run")]:
         L += [f"## navarena {name}", "", "```text", command_help(name), "```", ""]
     return "\n".join(L)
 
 
 def data_markdown() -> str:
     """docs/reference/data.md: the stage graph (what each stage needs, the config sections whose
-    change recomputes it, GPU use), the data layout (catalogs/layout.yaml) and the table schemas."""
+    change recomputes it, GPU use), the data layout (navcore/io/layout.yaml) and the table schemas."""
     import yaml
 
     from navcore.instances import INSTANCE_SCHEMA
@@ -202,7 +204,7 @@ def data_markdown() -> str:
     from pipeline.graph import DEFAULT_STAGES, STAGES
 
     L = ["# Stages, data layout and schemas", "",
-         "Generated from the stage graph (`pipeline/graph.py`), the layout (`catalogs/layout.yaml`) and the "
+         "Generated from the stage graph (`pipeline/graph.py`), the layout (`navcore/io/layout.yaml`) and the "
          "schemas (`navcore/io/episode_schema.py`, `navcore/instances.py`) by `python -m pipeline.config_reference`.",
          "", "## The stage graph", "",
          "One Dask task per (stage, scene); a stage runs after its own scene's upstream stages only. A stage is "
@@ -215,7 +217,9 @@ def data_markdown() -> str:
     for st in STAGES:
         L.append(f"| `{st.name}` | {', '.join(st.needs) or '-'} | {', '.join(f'`{c}`' for c in st.config) or '-'} | "
                  f"{st.version} | {'yes' if st.gpu else ''} | {'yes' if st.name in DEFAULT_STAGES else 'no'} |")
-    layout = yaml.safe_load((Path(__file__).resolve().parents[1] / "catalogs" / "layout.yaml").read_text())
+    from navcore.io.catalog import LAYOUT_FILE
+
+    layout = yaml.safe_load(LAYOUT_FILE.read_text())
     L += ["", "## The data layout", "", "Logical dataset names (what stages and tools ask the catalog for) and "
           "where they live under the data root (`{root}`).", "", "| dataset | path | type |", "|---|---|---|"]
     for name, e in (layout.get("datasets") or layout).items():

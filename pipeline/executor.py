@@ -16,7 +16,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from navcore.io.atomic import sweep_stale_temporaries
-from navcore.io.catalog import Catalog, SceneEntry
+from navcore.io.catalog import open_catalog
 from pipeline import sources
 from pipeline.backends import run_on_dask
 from pipeline.config import unknown_keys
@@ -29,19 +29,6 @@ from pipeline.tasks import finalize_due, new_run, run_finalize, run_task
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
 
 
-def open_catalog(cfg) -> tuple[Catalog, list[SceneEntry], Path]:
-    """The run's catalog (paths relative to the working directory or the project), its selected
-    scenes and the catalog file."""
-    root = Path(cfg.data_root)
-    if not root.is_absolute():
-        root = Path.cwd() / root
-    cat_file = Path(cfg.scenes.catalog)
-    if not cat_file.is_absolute():
-        cat_file = (Path.cwd() / cat_file) if (Path.cwd() / cat_file).exists() else PROJECT_ROOT / cat_file
-    catalog = Catalog(cat_file, root, cfg.scenes.count, cfg.scenes.num_gaussians)
-    return catalog, catalog.select(cfg.scenes.shard, cfg.scenes.num_shards, cfg.scenes.ids, cfg.scenes.limit), cat_file
-
-
 def execute(cfg, console: Console | None = None) -> dict:
     """Run the configured stages over the configured scenes; returns (and writes) the run summary."""
     console = console or Console()
@@ -49,7 +36,7 @@ def execute(cfg, console: Console | None = None) -> dict:
     if unknown:  # a misspelt key added with `+` would otherwise be accepted and ignored
         raise UnknownKeysError(f"unknown configuration key(s): {'; '.join(unknown)}. Every key: docs/configuration.md "
                                f"(navarena run --cfg job prints the resolved config)")
-    catalog, scenes, cat_file = open_catalog(cfg)
+    catalog, scenes, cat_file = open_catalog(cfg, PROJECT_ROOT)
     root = catalog.root
     stages = closure(list(cfg.stages))
     hashes = config_hashes(cfg)

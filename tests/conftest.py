@@ -129,9 +129,9 @@ def room_with_door(grid_costmap):
 @pytest.fixture(scope="session")
 def ctx(room_with_door):
     """The evaluation SceneContext of room_with_door (no renderer)."""
+    from navcore.eval.env import SceneContext
     from navcore.nav.embodiment import Embodiment
     from navcore.nav.geodesic import NavGraph
-    from stages.evaluate.env import SceneContext
 
     cm = room_with_door
     return SceneContext(cm, NavGraph(cm, ~cm.occupancy), Embodiment(radius=cm.radius))
@@ -140,7 +140,7 @@ def ctx(room_with_door):
 @pytest.fixture(scope="session")
 def make_episode():
     """episode(start, goal, radius, geodesic, max_steps, **kw): a hand-made evaluation Episode."""
-    from stages.evaluate.episode import Episode
+    from navcore.eval.episode import Episode
 
     def make(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), radius=0.5, geodesic=2.0, max_steps=50, **kw):
         g = np.array(goal, float)

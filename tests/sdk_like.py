@@ -178,7 +178,7 @@ class SdkLikeClient:
     def __init__(self, url: str, timeout: float = 10.0):
         from websockets.sync.client import connect
 
-        self.ws = connect(url, compression=None, max_size=None, ping_interval=None, open_timeout=timeout)
+        self.ws = connect(url, compression=None, max_size=None, ping_interval=None, open_timeout=timeout).__enter__()
         self.timeout, self.seq = timeout, 0
 
     def send(self, kind: str, payload) -> int:

@@ -11,11 +11,12 @@ from pathlib import Path
 import pytest
 
 LAYERS = ("navcore", "stages", "pipeline")  # lowest first
+PACKAGES = (*LAYERS, "navarena")  # navarena: the library's commands, over navcore only
 
 
 def modules(project_root: Path) -> dict[str, Path]:
     out = {}
-    for top in LAYERS:
+    for top in PACKAGES:
         for f in sorted((project_root / top).rglob("*.py")):
             parts = list(f.relative_to(project_root).with_suffix("").parts)
             if parts[-1] == "__init__":
@@ -31,13 +32,13 @@ def imports_of(name: str, path: Path, known: set[str]) -> list[tuple[str, str, i
     out = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            out += [(a.name, "", node.lineno) for a in node.names if a.name.split(".")[0] in LAYERS]
+            out += [(a.name, "", node.lineno) for a in node.names if a.name.split(".")[0] in PACKAGES]
         elif isinstance(node, ast.ImportFrom):
             mod = node.module or ""
             if node.level:
                 base = pkg.split(".")[: len(pkg.split(".")) - node.level + 1]
                 mod = ".".join(base + ([mod] if mod else []))
-            if mod.split(".")[0] not in LAYERS:
+            if mod.split(".")[0] not in PACKAGES:
                 continue
             for a in node.names:
                 sub = f"{mod}.{a.name}"
@@ -56,6 +57,11 @@ def test_imports_never_go_up_a_layer_and_stages_do_not_import_each_other(graph):
     bad = []
     for m, imps in edges.items():
         for target, _, line in imps:
+            top, ttop = m.split(".")[0], target.split(".")[0]
+            if "navarena" in (top, ttop):  # the library: navarena -> navcore, never the pipeline project
+                if top == "navarena" and ttop not in ("navcore", "navarena") or top != "navarena" and top == "navcore":
+                    bad.append(f"{m}:{line} imports {target} (the library reaches only navcore)")
+                continue
             lm, lt = LAYERS.index(m.split(".")[0]), LAYERS.index(target.split(".")[0])
             if lt > lm:
                 bad.append(f"{m}:{line} imports {target} (a higher layer)")
@@ -149,9 +155,10 @@ def test_stages_read_and_write_through_catalog_datasets(project_root):
 def test_layout_datasets_have_known_types(project_root):
     import yaml
 
+    from navcore.io.catalog import LAYOUT_FILE
     from navcore.io.datasets import TYPES
 
-    layout = yaml.safe_load((project_root / "catalogs" / "layout.yaml").read_text())
+    layout = yaml.safe_load(LAYOUT_FILE.read_text())
     for name, entry in layout.items():
         assert isinstance(entry, str) or entry["type"] in TYPES, name
 
@@ -163,10 +170,10 @@ def test_registries_list_without_importing_heavy_modules(project_root):
     import sys
 
     code = ("import sys\n"
-            "from stages.evaluate.agents import AGENTS\n"
+            "from navcore.eval.agents import AGENTS\n"
             "from stages.semantics.segmenters import SEGMENTERS\n"
             "from stages.episodes.planner import PLANNERS\n"
-            "from stages.evaluate.metrics import METRICS\n"
+            "from navcore.eval.metrics import METRICS\n"
             "from navcore.gaussians.formats import READERS\n"
             "names = [list(r) for r in (AGENTS, SEGMENTERS, PLANNERS, METRICS, READERS)]\n"
             "assert 'sam3' in names[1] and 'stages.semantics.sam3_segmenter' not in sys.modules\n"
@@ -177,24 +184,20 @@ def test_registries_list_without_importing_heavy_modules(project_root):
     subprocess.run([sys.executable, "-c", code], cwd=project_root, check=True)
 
 
-def test_moved_modules_keep_their_old_paths_for_one_release():
-    """pipeline/ holds the orchestration; what moved (the catalog to navcore.io, the user tools to
-    navarena) still imports from its old path, with a DeprecationWarning naming the new one."""
+def test_moved_modules_leave_no_alias_behind(project_root):
+    """What moved out of pipeline/ and stages/ (the catalog to navcore.io, the user tools and the gym
+    env to navarena, the evaluator's library to navcore.eval) has one import path: the old ones are
+    gone, and no module is a shim of another."""
     import importlib
-    import sys
-    import warnings
 
-    moved = (("pipeline.observations", "navarena.observations", "ExpertObservations"),
-             ("pipeline.lerobot_export", "navarena.lerobot", "export_lerobot"),
-             ("pipeline.render_episodes", "navarena.render_episodes", "render_episodes"),
-             ("pipeline.catalog", "navcore.io.catalog", "Catalog"))
-    for old, new, name in moved:
-        sys.modules.pop(old, None)
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            mod = importlib.import_module(old)
-        assert getattr(mod, name) is getattr(importlib.import_module(new), name)
-        assert any(issubclass(c.category, DeprecationWarning) and new in str(c.message) for c in caught), old
+    for old in ("pipeline.catalog", "pipeline.observations", "pipeline.lerobot_export", "pipeline.render_episodes",
+                "pipeline.inspect_scene", "stages.evaluate.env", "stages.evaluate.gym_env", "stages.evaluate.protocol",
+                "stages.align.floor"):
+        with pytest.raises(ModuleNotFoundError):
+            importlib.import_module(old)
+    shims = [str(p.relative_to(project_root)) for top in PACKAGES for p in (project_root / top).rglob("*.py")
+             if "Deprecated import path" in p.read_text() or "import *" in p.read_text()]
+    assert not shims, shims
 
 
 def test_pipeline_holds_orchestration_only(project_root):
@@ -202,10 +205,6 @@ def test_pipeline_holds_orchestration_only(project_root):
                      "submit", "summary", "tasks", "config_guard", "episode_progress",
                      "sources",  # whether the outside files a marker's outputs came from are still those
                      "config_reference",  # the configuration / CLI reference pages, generated from config and __main__
-                     "inspect_scene",  # `navarena inspect`: needs the align stage's floor fit, so not in navarena/
                      "kernels"}  # compiles the CPU kernels ahead of a first run (a tiny run of the stages)
-    aliases = {"catalog", "observations", "lerobot_export", "render_episodes"}  # deprecated paths, one release
     found = {p.stem for p in (project_root / "pipeline").glob("*.py")}
-    assert found <= orchestration | aliases, found - orchestration - aliases
-    for name in aliases:
-        assert "Deprecated import path" in (project_root / "pipeline" / f"{name}.py").read_text()
+    assert found <= orchestration, found - orchestration

@@ -8,11 +8,11 @@ import sys
 import numpy as np
 import pytest
 
-from pipeline.__main__ import TOOLS
+from navarena.cli import CONSUMER
 
 
 def navarena(*args, timeout=300):
-    return subprocess.run([sys.executable, "-m", "pipeline", *args], capture_output=True, text=True, timeout=timeout)
+    return subprocess.run([sys.executable, "-m", "navarena", *args], capture_output=True, text=True, timeout=timeout)
 
 
 def test_help_lists_every_command_and_each_help_fits_a_screen():
@@ -22,7 +22,7 @@ def test_help_lists_every_command_and_each_help_fits_a_screen():
 
     h = navarena("inspect", "--help")  # the entry point dispatches to the command's own help ...
     assert h.returncode == 0 and h.stdout.startswith("usage: navarena inspect [-h]"), h.stderr[-500:]
-    for name in TOOLS:  # ... which, in a 100-column terminal, fits a screen (in-process: no interpreter each)
+    for name in [*CONSUMER, "release"]:  # ... which, in a 100-column terminal, fits a screen (in-process: no interpreter each)
         assert f"\n  {name} " in p.stdout
         lines = command_help(name).splitlines()
         assert lines[0].startswith(f"usage: navarena {name}"), name
@@ -47,7 +47,7 @@ def tilted_scene(small_scene, tmp_path_factory):
 
 
 def test_inspect_finds_the_up_axis_and_the_units(tilted_scene, small_scene):
-    from pipeline.inspect_scene import main
+    from navarena.inspect_scene import main
 
     p = navarena("inspect", str(tilted_scene / "room.spz"), "--json", "--picture", str(tilted_scene / "top.png"))
     assert p.returncode == 0, p.stderr[-1000:]
@@ -62,7 +62,7 @@ def test_inspect_finds_the_up_axis_and_the_units(tilted_scene, small_scene):
 
 
 def test_inspect_says_file_not_found(tmp_path, capsys):
-    from pipeline.inspect_scene import main
+    from navarena.inspect_scene import main
 
     assert main([str(tmp_path / "nothing.ply")]) == 2
     assert "file not found" in capsys.readouterr().err

@@ -22,13 +22,13 @@ def test_config_reference_covers_every_key_and_is_current(project_root):
     assert len([k for k in keys() if not k.section]) > 300
     for key in ("costmap.resolution", "semantics.detector.camera_height", "evaluate.agent", "allow_failures"):
         assert f"| `{key}` |" in page
-    from pipeline.__main__ import TOOLS
+    from navarena.cli import CONSUMER
     from pipeline.config_reference import CLI_OUT, DATA_OUT, cli_markdown, data_markdown
 
     assert DATA_OUT.read_text() == data_markdown(), "docs/reference/data.md is not current"
     cli, page = cli_markdown(), CLI_OUT.read_text()  # argparse's layout varies with Python: the commands must match
     assert [x for x in cli.splitlines() if x.startswith("## ")] == [x for x in page.splitlines() if x.startswith("## ")]
-    assert all(f"## navarena {name}" in page and f"usage: navarena {name}" in page for name in TOOLS)
+    assert all(f"## navarena {name}" in page and f"usage: navarena {name}" in page for name in [*CONSUMER, "release"])
 
 
 def test_config_reference_reads_field_docstrings():

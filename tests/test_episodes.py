@@ -639,8 +639,8 @@ def test_episodes_do_not_start_blind(room_with_door):
 def test_success_regions_footprint_and_centre_known_answers(room_with_door):
     """A 2 x 1 m bed: under the footprint rule its side is reached 1 m from its edge, under the
     paper's centre rule only 1 m from its centre; the stored rule decides in the evaluator."""
+    from navcore.eval.episode import Episode
     from stages.episodes.generate import success_region
-    from stages.evaluate.episode import Episode
 
     bed = {"center_x": 2.0, "center_y": 1.0, "min_x": 1.0, "min_y": 0.5, "max_x": 3.0, "max_y": 1.5}
     fp, c = success_region(bed, "footprint"), success_region(bed, "centre")

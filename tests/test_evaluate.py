@@ -4,11 +4,11 @@ import math
 import numpy as np
 import pytest
 
+from navcore.eval.agents import make_agent
+from navcore.eval.env import EnvConfig, NavEnv
+from navcore.eval.loop import run_episode, run_episodes
+from navcore.eval.metrics import aggregate, dtw, episode_metrics
 from navcore.nav.actions import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
-from stages.evaluate.agents import make_agent
-from stages.evaluate.env import EnvConfig, NavEnv
-from stages.evaluate.loop import run_episode, run_episodes
-from stages.evaluate.metrics import aggregate, dtw, episode_metrics
 
 
 def test_moves_collisions_and_action_forms(ctx, make_episode):
@@ -205,12 +205,12 @@ def test_oracle_succeeds_random_rarely_and_a_crashing_agent_fails_its_episode(ct
     assert rows[0]["sr"] == 0 and rows[0]["steps"] == 3
     with pytest.raises(ValueError, match="unknown agent"):
         make_agent("nope")
-    assert type(make_agent("stages.evaluate.agents:RandomAgent")).__name__ == "RandomAgent"
+    assert type(make_agent("navcore.eval.agents:RandomAgent")).__name__ == "RandomAgent"
 
 
 def test_batched_env_matches_single_envs_and_gym_wrapper(ctx, make_episode):
-    from stages.evaluate.batch import BatchNavEnv
-    from stages.evaluate.gym_env import NavGymEnv
+    from navarena.gym_env import NavGymEnv
+    from navcore.eval.batch import BatchNavEnv
 
     eps = [make_episode(start=(1.0, 0.5, a), max_steps=60) for a in (0.0, 1.5, -1.0)]
     for i, e in enumerate(eps):
@@ -310,7 +310,7 @@ def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run, make
 
 
 def test_batched_loop_equals_the_single_loop_for_in_process_agents(ctx, make_episode):
-    from stages.evaluate.loop import InProcessBatch, run_episodes_batched
+    from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
     eps = [make_episode(start=(1.0, 0.5, a), goal=g, geodesic=2.3, max_steps=300)
            for a, g in ((0.0, (3.0, 0.5)), (1.0, (3.5, 2.5)), (-2.0, (1.5, 2.5)), (2.5, (3.0, 1.5)))]
@@ -326,7 +326,7 @@ def test_batched_loop_equals_the_single_loop_for_in_process_agents(ctx, make_epi
 # ---- blocked moves (navcore.nav.dynamics) ----------------------------------------------------------
 
 def _env_with(ctx, mode):
-    from stages.evaluate.env import DynamicsConfig
+    from navcore.eval.env import DynamicsConfig
 
     return NavEnv(ctx, EnvConfig(render=False, dynamics=DynamicsConfig(blocked=mode)))
 

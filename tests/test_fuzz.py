@@ -139,10 +139,10 @@ def test_hostile_frames_end_in_recorded_failures(spec):
 def test_frames_that_found_defects():
     import msgpack
 
+    from navcore.eval.agents import make_agent
+    from navcore.eval.protocol.codec import ProtocolError, decode_value, unpack
+    from navcore.eval.protocol.server import Session
     from navcore.nav.actions import ActionSpace
-    from stages.evaluate.agents import make_agent
-    from stages.evaluate.protocol.codec import ProtocolError, decode_value, unpack
-    from stages.evaluate.protocol.server import Session
 
     # a list as the frame type: was a TypeError (unhashable) instead of a protocol error
     with pytest.raises(ProtocolError):

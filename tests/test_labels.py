@@ -276,7 +276,7 @@ def test_real_scannet_scan_yields_objectnav_for_every_goal_category(tmp_path, sc
 
     from benchmarks.captures.scan_truth import rates
     from navcore.gaussians.formats import read_gaussians
-    from pipeline.executor import open_catalog
+    from navcore.io.catalog import open_catalog
 
     g = read_gaussians(scannet_scan)
     floor = g.means[g.extras["segment"] == 1].astype(np.float64) @ t[:3, :3].T + t[:3, 3]  # NYU40 line 1: floor

@@ -786,7 +786,7 @@ def test_map_pictures_carry_a_scale_bar_of_the_right_length():
 def test_an_older_runs_task_never_overwrites_a_newer_runs_output(tmp_path, make_cfg):
     """The write fence: a task of a run that started before the one whose marker it finds (an orphan
     of a killed client, still running on an external cluster) is superseded, not run."""
-    from pipeline.executor import open_catalog
+    from navcore.io.catalog import open_catalog
     from pipeline.graph import config_hashes, scene_hash
     from pipeline.tasks import new_run, run_task
 

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from sdk_like import AGENTS, SdkLikeClient, SdkLikeServer
 
-from stages.evaluate.agents import make_agent
-from stages.evaluate.env import EnvConfig
-from stages.evaluate.loop import run_episodes, run_episodes_batched
-from stages.evaluate.protocol.client import RemoteAgent, RemoteBatchAgent
-from stages.evaluate.protocol.codec import (
+from navcore.eval.agents import make_agent
+from navcore.eval.env import EnvConfig
+from navcore.eval.loop import run_episodes, run_episodes_batched
+from navcore.eval.protocol.client import RemoteAgent, RemoteBatchAgent
+from navcore.eval.protocol.codec import (
     ProtocolError,
     decode_value,
     encode_array,
@@ -62,7 +62,7 @@ def test_frames_are_checked():
 
 def start_server_process(tmp_path, cwd, agent="depth_reactive"):
     port_file = tmp_path / "port"
-    proc = subprocess.Popen([sys.executable, "-m", "stages.evaluate.protocol", "--agent", agent, "--port", "0",
+    proc = subprocess.Popen([sys.executable, "-m", "navarena.serve_agent", "--agent", agent, "--port", "0",
                              "--port-file", str(port_file)], cwd=cwd)
     for _ in range(300):
         if port_file.exists() and port_file.read_text():
@@ -241,7 +241,7 @@ def test_batch_flow_records_every_queued_episode_when_the_client_fails(ctx, make
 
 
 def _our_server(action_space, agent="random"):
-    from stages.evaluate.protocol.server import serve_agent
+    from navcore.eval.protocol.server import serve_agent
 
     box = {}
     threading.Thread(target=serve_agent, daemon=True,

@@ -7,10 +7,10 @@ import pytest
 from navcore.gaussians import GaussianScene
 from navcore.gaussians.cameras import cameras_from_json
 from navcore.gaussians.content import content_mask
+from navcore.gaussians.floor import AlignConfig, axis_name, fit_floor, floor_transform
 from navcore.nav.embodiment import Embodiment
 from navcore.voxels import VoxelizeConfig
 from navcore.voxels.grid import grid_for_points
-from stages.align.floor import AlignConfig, axis_name, fit_floor, floor_transform
 from stages.costmap.build import CostmapConfig, build_costmap, obstacle_candidates
 from stages.synthesize.generate import SyntheticConfig, generate_scene
 from stages.synthesize.realism import AXES, RealismConfig

@@ -4,10 +4,10 @@ import pytest
 
 from navcore.gaussians import GaussianScene
 from navcore.gaussians.content import CONTENT_KEY, content_mask, content_of
+from navcore.gaussians.floor import AlignConfig, fit_floor, floor_transform
 from navcore.nav.costmap import Costmap
 from navcore.nav.embodiment import Embodiment
 from navcore.voxels import VoxelGrid, VoxelizeConfig, opacity_field
-from stages.align.floor import AlignConfig, fit_floor, floor_transform
 from stages.costmap.build import CostmapConfig, build_costmap, interpolation_margin
 
 
@@ -107,7 +107,7 @@ def test_floor_refinement_converges_from_a_tilted_start_known_answer():
     """A 16 x 6 m floor 3 cm thick with wall feet and furniture bases in a 15 cm band: from a start
     1.3 deg off (17 cm across the hall, more than the old 5 cm band held) the refinement lands
     within 0.01 deg of the floor's plane, and it stops on its own (converged, bounded passes)."""
-    from stages.align.floor import refine_floor_plane
+    from navcore.gaussians.floor import refine_floor_plane
 
     r = np.random.default_rng(0)
     floor = np.c_[r.uniform(0, 16, 60_000), r.uniform(0, 6, 60_000), r.normal(0, 0.01, 60_000)]

@@ -18,7 +18,9 @@ ALLOWED = {
     ("navcore/registry.py", "importlib.import_module"):
         "a 'package.module:attr' the user's own config names (an agent, segmenter, planner, metric); catalogs, "
         "sources and results never reach it (formats are looked up in a fixed table, navcore.gaussians.formats)",
-    ("pipeline/__main__.py", "importlib.import_module"): "the CLI's fixed tool table (TOOLS), never input",
+    ("navarena/cli.py", "importlib.import_module"): "the CLI's fixed command tables (CONSUMER, PRODUCER), never input",
+    ("navcore/optional.py", "importlib.import_module"): "a fixed package name of the library's own call sites",
+    ("navarena/__init__.py", "importlib.import_module"): "the fixed table of the public API's names (_API), never input",
     ("pipeline/config_reference.py", "importlib.import_module"): "the CLI's fixed tool table, for the generated reference",
     ("navarena/doctor.py", "importlib.import_module"): "a fixed list of packages whose presence doctor reports",
     ("benchmarks/scale/render_cpu.py", "importlib.import_module"):

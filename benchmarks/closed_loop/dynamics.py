@@ -56,8 +56,8 @@ class ForwardSteer:
 def old_rule_env(ctx, cfg):
     """The environment with the rule before issue 39: a blocked translation left the pose and the
     step's heading change unchanged."""
+    from navcore.eval.env import NavEnv
     from navcore.nav.poses import wrap_angle
-    from stages.evaluate.env import NavEnv
 
     class OldRule(NavEnv):
         def _move(self, dx, dy, dyaw):
@@ -78,13 +78,13 @@ def old_rule_env(ctx, cfg):
 
 
 def run(root: Path, tasks: list[str], episodes: int) -> dict:
+    from navcore.eval.agents import RandomAgent
+    from navcore.eval.env import DynamicsConfig, EnvConfig, NavEnv, SceneContext
+    from navcore.eval.episode import Episode
+    from navcore.eval.loop import run_episode
     from navcore.io.catalog import Catalog
     from navcore.nav.embodiment import load_embodiment
     from navcore.nav.geodesic import NavGraph
-    from stages.evaluate.agents import RandomAgent
-    from stages.evaluate.env import DynamicsConfig, EnvConfig, NavEnv, SceneContext
-    from stages.evaluate.episode import Episode
-    from stages.evaluate.loop import run_episode
 
     cat = Catalog.for_root(root)
     emb = load_embodiment("locobot")

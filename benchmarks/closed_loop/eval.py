@@ -23,6 +23,8 @@ import numpy as np
 
 from benchmarks import machine
 from benchmarks.pages import write_page
+from navcore.eval.env import EnvConfig, NavEnv, SceneContext
+from navcore.eval.episode import Episode
 from navcore.io import jsonio
 from navcore.io.datasets import CostmapDataset
 from navcore.nav.costmap import Costmap
@@ -31,8 +33,6 @@ from navcore.nav.geodesic import NavGraph, eligible_cells
 from navcore.voxels.field import VoxelizeConfig
 from stages.costmap.build import CostmapConfig, build_costmap
 from stages.episodes.config import EpisodesConfig
-from stages.evaluate.env import EnvConfig, NavEnv, SceneContext
-from stages.evaluate.episode import Episode
 
 
 def bench_scene(seed: int, n: int, backend: str = "cpu"):
@@ -60,7 +60,7 @@ def random_episodes(ctx, k: int, rng, max_steps: int = 500) -> list[Episode]:
 
 def steps_per_second(ctx, width: int, height: int, n_slots: int, n_steps: int, rng, device_obs=False) -> dict:
     """Batched random-walk steps per second (render included), median of 3 runs."""
-    from stages.evaluate.batch import BatchNavEnv
+    from navcore.eval.batch import BatchNavEnv
 
     env = BatchNavEnv(ctx, n_slots, EnvConfig(width=width, height=height, protocol="explicit_stop"),
                       device_obs=device_obs)  # random moves never end an episode: every slot steps
@@ -120,9 +120,9 @@ def agents_on_dataset(data: Path) -> dict:
     """Oracle and random agent over every stored episode of the dataset, both protocols."""
     import pandas as pd
 
-    from stages.evaluate.agents import make_agent
-    from stages.evaluate.loop import run_episodes
-    from stages.evaluate.metrics import aggregate
+    from navcore.eval.agents import make_agent
+    from navcore.eval.loop import run_episodes
+    from navcore.eval.metrics import aggregate
 
     eps = pd.read_parquet(data / "05_episodes")
     eps["scene_id"] = eps["scene_id"].astype(str)

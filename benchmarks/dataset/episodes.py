@@ -132,9 +132,9 @@ def throughput_at_density(cfg, per_task: int) -> dict:
     from omegaconf import OmegaConf
 
     from navcore.instances import load_instances
+    from navcore.io.catalog import open_catalog
     from navcore.nav.geodesic import NavGraph, eligible_cells
     from navcore.seeds import stream_seed
-    from pipeline.executor import open_catalog
     from stages.episodes.config import PlannerConfig, TaskConfig
     from stages.episodes.generate import EpisodeGenerator
 
@@ -165,8 +165,8 @@ def compare_planners(cfg, n: int = 100) -> dict:
     """Each registered planner on the first scene's PointNav: throughput and expert quality."""
     from omegaconf import OmegaConf
 
+    from navcore.io.catalog import open_catalog
     from navcore.nav.geodesic import NavGraph, eligible_cells
-    from pipeline.executor import open_catalog
     from stages.episodes.config import PlannerConfig, TaskConfig
     from stages.episodes.generate import EpisodeGenerator
     from stages.episodes.planner import PLANNERS
@@ -223,7 +223,7 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     run = run_stage(args.data, args.episodes)
     data = Path(args.data)
-    from pipeline.executor import open_catalog
+    from navcore.io.catalog import open_catalog
 
     # the run's scene set only: other scene sets may share the data root (bench-real's real scenes)
     scenes = sorted(s.scene_id for s in open_catalog(run["cfg"])[1])

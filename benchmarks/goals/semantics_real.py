@@ -37,8 +37,9 @@ def prepare_scan(scan: Path, root: Path, name: str, fmt: str | None = "npy_folde
     extension) under root; (catalog, scene, cfg)."""
     from hydra import compose, initialize_config_dir
 
+    from navcore.io.catalog import open_catalog
     from pipeline.config import CONF_DIR, register_configs
-    from pipeline.executor import execute, open_catalog
+    from pipeline.executor import execute
 
     register_configs()
     fmt_key = f", format: {fmt}" if fmt else ""

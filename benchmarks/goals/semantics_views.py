@@ -43,10 +43,10 @@ def run(args) -> dict:
     from omegaconf import OmegaConf
 
     from navcore.instances import load_instances
+    from navcore.io.catalog import open_catalog
     from navcore.render import Renderer
     from navcore.seeds import stream_seed
     from pipeline.config import CONF_DIR, register_configs
-    from pipeline.executor import open_catalog
     from stages.semantics.config import SemanticsConfig
     from stages.semantics.segmenters import OracleSegmenter
     from stages.semantics.stage import covering_cameras, predict_instances

@@ -124,7 +124,7 @@ def env_worker(args) -> None:
     import torch
 
     from benchmarks.closed_loop.eval import steps_per_second
-    from pipeline.executor import open_catalog
+    from navcore.io.catalog import open_catalog
     from stages.evaluate.stage import scene_context
 
     cfg = compose(Path(args.data), Path(args.catalog))

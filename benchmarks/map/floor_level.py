@@ -122,8 +122,8 @@ def floor_level(means: np.ndarray, alphas: np.ndarray, slab_m: float = SLAB_M, c
 def align_source(path: str):
     """A real source through the pipeline's content mask and floor fit: the aligned content."""
     from navcore.gaussians.content import CONTENT_KEY, content_mask, content_of
+    from navcore.gaussians.floor import AlignConfig, fit_floor, floor_transform
     from navcore.gaussians.formats import read_gaussians
-    from stages.align.floor import AlignConfig, fit_floor, floor_transform
 
     g = read_gaussians(path)
     g = g[0] if isinstance(g, tuple) else g

@@ -25,11 +25,11 @@ import numpy as np
 
 from benchmarks.pages import write_page
 from navcore.gaussians.content import CONTENT_KEY, content_mask, content_of
+from navcore.gaussians.floor import AlignConfig, fit_floor, floor_transform
 from navcore.io import jsonio
 from navcore.nav.costmap import Costmap
 from navcore.nav.embodiment import Embodiment
 from navcore.voxels.field import VoxelizeConfig
-from stages.align.floor import AlignConfig, fit_floor, floor_transform
 from stages.costmap.build import CostmapConfig, build_costmap
 from stages.costmap.render_check import RenderCheckConfig, check_costmap, estimate_rates
 from stages.synthesize.generate import SyntheticConfig, generate_scene

@@ -158,8 +158,8 @@ def markers_current(root: Path, scenes: int) -> list[str]:
     """Every (stage, scene) of the simulation whose marker is not current with its outputs hashed."""
     from hydra import compose, initialize_config_dir
 
+    from navcore.io.catalog import open_catalog
     from pipeline.config import CONF_DIR, register_configs
-    from pipeline.executor import open_catalog
     from pipeline.graph import closure, config_hashes, scene_hash
     from pipeline.tasks import current
 

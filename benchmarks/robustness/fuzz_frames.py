@@ -168,10 +168,10 @@ def mutate(draw, st, anyval, special, kind: str, seq: int) -> bytes:
 
 def client_case(data: bytes, kind: str) -> str:
     """What the evaluator does with one received frame; returns the outcome class."""
+    from navcore.eval.env import decode_action
+    from navcore.eval.protocol.client import REPLY_MAX_PIXELS, is_reply
+    from navcore.eval.protocol.codec import ProtocolError, decode_value, parse_action, unpack
     from navcore.nav.actions import ActionSpace
-    from stages.evaluate.env import decode_action
-    from stages.evaluate.protocol.client import REPLY_MAX_PIXELS, is_reply
-    from stages.evaluate.protocol.codec import ProtocolError, decode_value, parse_action, unpack
 
     want = "batch_action" if kind == "batch_action" else "action"
     try:
@@ -201,7 +201,7 @@ def client_case(data: bytes, kind: str) -> str:
 
 
 def server_case(data: bytes, session) -> str:
-    from stages.evaluate.protocol.codec import unpack
+    from navcore.eval.protocol.codec import unpack
 
     out = session.respond(data)  # must never raise
     if out is None:
@@ -213,9 +213,9 @@ def server_case(data: bytes, session) -> str:
 def run(kinds: list[str], cases: int, seed: int, time_limit: float) -> dict:
     from hypothesis import HealthCheck, given, settings
 
+    from navcore.eval.agents import make_agent
+    from navcore.eval.protocol.server import Session
     from navcore.nav.actions import ActionSpace
-    from stages.evaluate.agents import make_agent
-    from stages.evaluate.protocol.server import Session
 
     st, anyval, special = strategies()
     signal.signal(signal.SIGALRM, _alarm)

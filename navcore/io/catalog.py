@@ -3,7 +3,7 @@
 A catalog YAML has ``scenes:`` (explicit entries; relative paths are relative to the catalog
 file's folder) and/or ``synthetic:`` (a generated range of
 procedural scenes, under the project's licence unless it names another), and may override
-entries of the shared layout (catalogs/layout.yaml) under
+entries of the shared layout (navcore/io/layout.yaml) under
 ``layout:``. Each layout entry is a path template and a dataset type (navcore/io/datasets.py);
 stage code asks ``catalog.dataset("costmaps", scene)`` and loads or saves through it, never
 building or opening paths itself. ``catalog.path`` is for the pipeline's own files (markers,
@@ -16,6 +16,7 @@ import os
 import re
 import string
 from dataclasses import dataclass
+from importlib import resources
 from pathlib import Path
 
 import yaml
@@ -26,7 +27,9 @@ from navcore.io.licences import PROJECT_LICENSE
 from navcore.io.paths import usable_path
 from navcore.labels.shipped import LabelSpec
 
-LAYOUT_FILE = Path(__file__).resolve().parents[2] / "catalogs" / "layout.yaml"
+LAYOUT_FILE = resources.files("navcore.io") / "layout.yaml"
+"""The shared data layout, package data of navcore: logical dataset -> path template and type (a
+catalog may override entries under ``layout:``)."""
 
 
 SAFE_COMPONENT = re.compile(r"[A-Za-z0-9][A-Za-z0-9._=-]{0,127}")
@@ -82,7 +85,7 @@ def read_catalog(path: Path) -> dict:
     return spec
 
 
-def _placeholders(template: str, file: Path = LAYOUT_FILE) -> set[str]:
+def _placeholders(template: str, file=LAYOUT_FILE) -> set[str]:
     """The {fields} a path template names (a malformed template is a ValueError naming the file)."""
     try:
         return {n for _, n, _, _ in string.Formatter().parse(template) if n is not None}
@@ -335,3 +338,19 @@ class Catalog:
             scenes = [s for s in scenes if s.scene_id in ids or s.name in ids]
         scenes = scenes[shard::num_shards]
         return scenes[:limit] if limit else scenes
+
+
+def open_catalog(cfg, project_root: Path | None = None) -> tuple[Catalog, list[SceneEntry], Path]:
+    """A run's catalog, its selected scenes and the catalog file, from a config with `data_root`
+    and the `scenes` section (file, count, num_gaussians, shard, num_shards, ids, limit). Relative
+    paths are the working directory's; a catalog file not found there is looked up under
+    `project_root` (the pipeline's checkout, where catalogs/ lives)."""
+    root = Path(cfg.data_root)
+    if not root.is_absolute():
+        root = Path.cwd() / root
+    cat_file = Path(cfg.scenes.catalog)
+    if not cat_file.is_absolute():
+        here = Path.cwd() / cat_file
+        cat_file = here if here.exists() or project_root is None else Path(project_root) / cat_file
+    catalog = Catalog(cat_file, root, cfg.scenes.count, cfg.scenes.num_gaussians)
+    return catalog, catalog.select(cfg.scenes.shard, cfg.scenes.num_shards, cfg.scenes.ids, cfg.scenes.limit), cat_file

@@ -1,7 +1,7 @@
 """Typed datasets: the one place where stored files are opened (Kedro's habit).
 
 The catalog maps a logical name (``costmaps``, ``episodes``, ...) to a path template and one of
-the types below (catalogs/layout.yaml); a stage asks ``catalog.dataset("costmaps", scene)`` and
+the types below (navcore/io/layout.yaml); a stage asks ``catalog.dataset("costmaps", scene)`` and
 calls ``load()`` / ``save(...)`` (or ``writing()`` for outputs written piece by piece). Every
 save is atomic: the data goes to a temporary sibling that is renamed into place at the end, so a
 killed run never leaves a half-written file or folder under the final name.

@@ -3,9 +3,10 @@ with their published sha256 checked, and other models of the same kinds from a u
 from __future__ import annotations
 
 import hashlib
+from importlib import resources
 from pathlib import Path
 
-MODEL_DIR = Path(__file__).resolve().parents[1] / "models" / "yolo_fastest_1.1_coco"
+MODEL_DIR = Path(str(resources.files("navcore") / "models" / "yolo_fastest_1.1_coco"))
 """The `detector` segmenter's default weights: Yolo-Fastest-1.1-XL, COCO (its README.md)."""
 MODEL_FILES = {
     "yolo-fastest-1.1-xl.weights": "fac5fb41786c1f38f04972a658443b189f48720d7d117f9a044100e98a35b0c5",
@@ -26,7 +27,9 @@ def _sha256(path: Path) -> str:
 def load_net(model: str | None):
     """(cv2.dnn net, class names) of a Darknet model folder (*.cfg, *.weights, *.names) or an ONNX
     file (with *.names beside it), or of the shipped model (None; its files checked by sha256)."""
-    import cv2
+    from navcore.optional import require
+
+    cv2 = require("cv2", "the detector segmenter (OpenCV DNN)")
 
     if model is None:
         for name, digest in MODEL_FILES.items():

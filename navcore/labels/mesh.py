@@ -47,7 +47,9 @@ class LabelledGeometry:
 
 
 def _ply_raw(path: Path) -> dict:
-    import trimesh
+    from navcore.optional import require
+
+    trimesh = require("trimesh", "reading a labelled mesh")
 
     try:
         data = path.read_bytes()
@@ -212,7 +214,9 @@ def transfer(geom: LabelledGeometry, points: np.ndarray, max_distance: float) ->
         (segment [N] class index into geom.names or -1, instance [N] or -1, distance [N] metres).
         Points farther than max_distance get -1 for both.
     """
-    import open3d as o3d
+    from navcore.optional import require
+
+    o3d = require("open3d", "transferring labels from a mesh")
 
     q = np.ascontiguousarray(points, np.float32)
     if geom.triangles is not None and len(geom.triangles):

@@ -171,7 +171,10 @@ def largest_cluster(points: np.ndarray, eps: float, spacing_factor: float = 4.0)
     connected, so that a sparsely sampled object is not cut up), the first in index order on a tie."""
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
-    from sklearn.neighbors import radius_neighbors_graph
+
+    from navcore.optional import require
+
+    radius_neighbors_graph = require("sklearn.neighbors", "grouping labelled points into instances").radius_neighbors_graph
 
     if len(points) <= 2:
         return np.ones(len(points), bool)

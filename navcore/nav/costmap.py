@@ -66,6 +66,24 @@ class Costmap:
         clearance = np.where(np.asarray(occ, bool), 0.0, 1.0).astype(np.float32)
         return cls(clearance, origin, resolution, radius=0.5, margin=0.0)
 
+    @classmethod
+    def from_inflated_map(cls, occ: np.ndarray, origin, resolution: float, radius: float) -> "Costmap":
+        """A costmap from a binary map whose occupied cells already hold the robot's radius (a
+        release's ROS map: occ [ny, nx] bool, row = y), with a continuous clearance rebuilt from the
+        signed distance to the map's free / occupied boundary, which lies half way between a free
+        and an occupied cell centre: clearance = radius + that distance (at least 0). The valid
+        region's edge is the one from_occupancy gives, but a state off a cell centre keeps its
+        margin, so motions across narrow free corridors are judged as on the stored clearance
+        rather than cell by cell. Metres."""
+        from scipy.ndimage import distance_transform_edt
+
+        occ = np.asarray(occ, bool)
+        inside = distance_transform_edt(~occ) - 0.5  # free cells: cells to the nearest occupied centre, less half
+        outside = distance_transform_edt(occ) - 0.5  # occupied cells: to the nearest free centre, less half
+        signed = np.where(occ, -outside, inside) * resolution
+        clearance = np.maximum(radius + signed, 0.0).astype(np.float32)
+        return cls(clearance, origin, resolution, radius=radius, margin=0.0)
+
     @property
     def occupancy(self) -> np.ndarray:
         """[ny, nx] bool M_occ (cell centres that are not valid states)."""

@@ -1,15 +1,16 @@
 """The robot: footprint, body height band, camera and kinematic limits.
 
-The schema's defaults are LoCoBot's (conf/embodiment/locobot.yaml names it and nothing else);
-the other files of conf/embodiment/ override what differs.
+The schema's defaults are LoCoBot's (navcore/conf/embodiment/locobot.yaml names it and nothing else);
+the other files of navcore/conf/embodiment/ override what differs.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, fields
+from importlib import resources
 
-EMBODIMENT_DIR = Path(__file__).resolve().parents[2] / "conf" / "embodiment"
-"""The embodiment files (Hydra config group `embodiment`)."""
+EMBODIMENT_DIR = resources.files("navcore.conf") / "embodiment"
+"""The embodiment files: package data of navcore, and the pipeline's Hydra config group `embodiment`
+(conf/config.yaml searches pkg://navcore.conf)."""
 
 
 @dataclass
@@ -60,13 +61,25 @@ class Limits:
                    emb.max_angular_acceleration)
 
 
+def embodiment_names() -> list[str]:
+    """The names of the embodiments navcore ships (navcore/conf/embodiment/*.yaml)."""
+    return sorted(p.name[:-5] for p in EMBODIMENT_DIR.iterdir() if p.name.endswith(".yaml"))
+
+
 def load_embodiment(name: str) -> Embodiment:
-    """An embodiment from conf/embodiment/{name}.yaml (for costmap.embodiments)."""
-    from omegaconf import OmegaConf
+    """An embodiment from navcore/conf/embodiment/{name}.yaml (for costmap.embodiments): the schema's
+    defaults with the file's keys over them, each of the field's type."""
+    import yaml
 
     path = EMBODIMENT_DIR / f"{name}.yaml"
-    if not path.exists():
-        known = sorted(p.stem for p in EMBODIMENT_DIR.glob("*.yaml"))
-        raise ValueError(f"unknown embodiment {name!r}; known: {', '.join(known)}")
-    node = OmegaConf.merge(OmegaConf.structured(Embodiment), OmegaConf.load(path))
-    return OmegaConf.to_object(node)
+    if name not in embodiment_names():
+        raise ValueError(f"unknown embodiment {name!r}; known: {', '.join(embodiment_names())}")
+    spec = yaml.safe_load(path.read_text()) or {}
+    types = {f.name: type(f.default) for f in fields(Embodiment)}
+    unknown = sorted(set(spec) - set(types))
+    if unknown:
+        raise ValueError(f"embodiment file {path}: unknown key(s) {', '.join(unknown)}; known: {', '.join(types)}")
+    try:
+        return Embodiment(**{k: types[k](v) for k, v in spec.items()})
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"embodiment file {path}: {e}") from None

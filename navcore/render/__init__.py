@@ -67,7 +67,10 @@ class Renderer:
         if backend == "auto":
             backend = "gsplat" if gsplat_available() else "cpu"
         if backend == "gsplat" and not gsplat_available():
-            raise RuntimeError("renderer backend 'gsplat' needs CUDA and the gsplat package; use backend='cpu'")
+            from navcore.optional import require
+
+            require("gsplat", "renderer backend 'gsplat'")
+            raise RuntimeError("renderer backend 'gsplat' needs CUDA (torch.cuda.is_available() is False); use backend='cpu'")
         self.backend = backend
         self.sh_degree = render_sh_degree(sh_degree, gs.sh.shape[1])  # ValueError before any work
         self.num_gaussians = len(gs.means)

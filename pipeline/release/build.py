@@ -254,14 +254,14 @@ def build_release(cfg, out: Path | None = None, console=None) -> dict:
     """Build the release of cfg's data root and scenes (cfg.release); returns its summary."""
     from rich.console import Console
 
-    from pipeline.executor import open_catalog
+    from navcore.io.catalog import open_catalog
     from pipeline.release import card, croissant, notes
 
     console = console or Console()
     t0 = dt.datetime.now(dt.timezone.utc)
     rcfg = cfg.release
     parse_version(rcfg.version)
-    catalog, scenes, cat_file = open_catalog(cfg)
+    catalog, scenes, cat_file = open_catalog(cfg, PROJECT_ROOT)
     if not catalog.root.is_dir():
         raise ReleaseError(f"data root {catalog.root} does not exist")
     out = Path(out or rcfg.out or catalog.path("releases") / f"{rcfg.name}-v{rcfg.version}").resolve()

@@ -12,9 +12,9 @@ from omegaconf import OmegaConf
 
 from navcore.gaussians.cameras import camera_file, read_cameras
 from navcore.gaussians.content import content_of
+from navcore.gaussians.floor import AlignConfig, axis_name, fit_floor, floor_transform, nearest_axis
 from navcore.gaussians.model import GaussianScene
 from navcore.gaussians.surfaces import horizontal_surfaces
-from stages.align.floor import AlignConfig, axis_name, fit_floor, floor_transform, nearest_axis
 
 
 def ceiling_height(aligned: GaussianScene, cfg: AlignConfig) -> tuple[float, str]:

@@ -123,7 +123,7 @@ class CostmapConfig:
     extra_margin: float = 0.0
     """Added to the interpolation margin, metres (a safety buffer beyond the exact bound)."""
     embodiments: list[str] = field(default_factory=list)
-    """Further embodiments (conf/embodiment/*.yaml names) to build maps for besides the main one."""
+    """Further embodiments (navcore/conf/embodiment/*.yaml names) to build maps for besides the main one."""
 
 
 @dataclass

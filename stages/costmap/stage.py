@@ -21,14 +21,14 @@ from stages.costmap.build import (
 
 
 def embodiments(cfg) -> list:
-    """The main embodiment, then costmap.embodiments (loaded from conf/embodiment)."""
+    """The main embodiment, then costmap.embodiments (loaded from navcore/conf/embodiment)."""
     main = OmegaConf.to_object(cfg.embodiment)
     extra = [load_embodiment(n) for n in cfg.costmap.embodiments if n != main.name]
     return [main] + extra
 
 
 def hashed_inputs(cfg) -> list[dict]:
-    """The embodiments this stage builds maps for, as read from conf/embodiment (part of its
+    """The embodiments this stage builds maps for, as read from navcore/conf/embodiment (part of its
     config hash: editing an embodiment file recomputes the costmaps)."""
     return [vars(e) for e in embodiments(cfg)]
 

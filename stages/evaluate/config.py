@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from stages.evaluate.env import EnvSettings
+from navcore.eval.env import EnvSettings
 
 
 @dataclass

@@ -5,7 +5,7 @@ import math
 
 import pandas as pd
 
-from stages.evaluate.metrics import aggregate
+from navcore.eval.metrics import aggregate
 
 TASKS = ("pointnav", "imagenav", "objectnav")
 DIFFICULTIES = ("easy", "medium", "hard")

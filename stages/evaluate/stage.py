@@ -14,6 +14,10 @@ import numpy as np
 import pyarrow as pa
 from omegaconf import OmegaConf
 
+from navcore.eval.env import EnvConfig, NavEnv, SceneContext
+from navcore.eval.episode import Episode
+from navcore.eval.loop import run_episode
+from navcore.eval.metrics import METRICS
 from navcore.gaussians.content import camera_scene
 from navcore.io.licences import redistributable
 from navcore.io.progress_log import ProgressLog
@@ -21,10 +25,6 @@ from navcore.nav.eval_set import EvalSetConfig, listing
 from navcore.nav.geodesic import NavGraph, eligible_cells
 from navcore.seeds import stream_seed
 from stages.evaluate.config import EvaluateConfig
-from stages.evaluate.env import EnvConfig, NavEnv, SceneContext
-from stages.evaluate.episode import Episode
-from stages.evaluate.loop import run_episode
-from stages.evaluate.metrics import METRICS
 
 REFERENCE_STRIDE = 10  # expert rows kept for DTW (every 0.5 s)
 
@@ -35,10 +35,10 @@ def run_name(ecfg: EvaluateConfig) -> str:
 
 def make_scene_agent(ecfg: EvaluateConfig, seed: int):
     if ecfg.agent.startswith(("ws://", "wss://")):
-        from stages.evaluate.protocol.client import RemoteAgent
+        from navcore.eval.protocol.client import RemoteAgent
 
         return RemoteAgent(ecfg.agent, timeout=ecfg.timeout_s, **ecfg.agent_args)
-    from stages.evaluate.agents import AGENTS, make_agent
+    from navcore.eval.agents import AGENTS, make_agent
 
     args = dict(ecfg.agent_args)
     if ecfg.agent in AGENTS:
@@ -136,10 +136,10 @@ def run(scene, cfg, catalog) -> dict:
         return row
 
     if ecfg.batch_slots > 1:  # batched: no videos (frames of many slots interleave)
-        from stages.evaluate.loop import InProcessBatch, run_episodes_batched
+        from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
         if remote:
-            from stages.evaluate.protocol.client import RemoteBatchAgent
+            from navcore.eval.protocol.client import RemoteBatchAgent
 
             client = RemoteBatchAgent(ecfg.agent, timeout=ecfg.timeout_s, **ecfg.agent_args)
         else:

@@ -27,5 +27,6 @@ and payloads nested deeper than 32 are refused. The batch flow records every que
 failure fails the slots in flight and the queue goes on (on a new connection).
 
 Modules: codec (values, frames, actions), client (the evaluator's RemoteAgent / RemoteBatchAgent),
-server (serve_agent: our agents behind the protocol), cli (``python -m stages.evaluate.protocol``).
+server (serve_agent: our agents behind the protocol); the command is ``navarena serve-agent``
+(navarena/serve_agent.py).
 """

@@ -1,14 +1,15 @@
-"""``python -m stages.evaluate.protocol --agent depth_reactive --port 8000``."""
+"""``navarena serve-agent --agent depth_reactive --port 8000`` (``python -m navarena.serve_agent``): an
+agent behind the NavArena agent-server protocol (navcore.eval.protocol), for any evaluator that speaks it."""
 from __future__ import annotations
 
-from stages.evaluate.protocol.server import serve_agent
+from navcore.eval.protocol.server import serve_agent
 
 
 def main(argv=None) -> None:
     """Serve an agent over the NavArena agent-server protocol (msgpack over WebSocket)."""
     import argparse
 
-    from stages.evaluate.agents import make_agent
+    from navcore.eval.agents import make_agent
 
     ap = argparse.ArgumentParser(prog="navarena serve-agent", description=main.__doc__)
     ap.add_argument("--agent", default="depth_reactive",
@@ -28,3 +29,7 @@ def main(argv=None) -> None:
 
     serve_agent(lambda: make_agent(args.agent), args.host, args.port, ready, action_space=args.action_space)
 
+
+
+if __name__ == "__main__":
+    main()

@@ -34,20 +34,20 @@ from navcore.nav.poses import wrap_angle
 from navcore.registry import Registry
 
 METRICS = Registry("metric", {
-    "distance_sr": "stages.evaluate.metrics:DistanceSR",
-    "stop_sr": "stages.evaluate.metrics:StopSR",
-    "sr": "stages.evaluate.metrics:SR",
-    "spl": "stages.evaluate.metrics:SPL",
-    "soft_spl": "stages.evaluate.metrics:SoftSPL",
-    "ne": "stages.evaluate.metrics:NE",
-    "ne_geodesic": "stages.evaluate.metrics:NEGeodesic",
-    "collision_rate": "stages.evaluate.metrics:CollisionRate",
-    "collision_rate_moves": "stages.evaluate.metrics:CollisionRateMoves",
-    "steps": "stages.evaluate.metrics:Steps",
-    "pose_sr": "stages.evaluate.metrics:PoseSR",
-    "osr": "stages.evaluate.metrics:OSR",
-    "dtw": "stages.evaluate.metrics:DTW",
-    "ndtw": "stages.evaluate.metrics:NDTW",
+    "distance_sr": "navcore.eval.metrics:DistanceSR",
+    "stop_sr": "navcore.eval.metrics:StopSR",
+    "sr": "navcore.eval.metrics:SR",
+    "spl": "navcore.eval.metrics:SPL",
+    "soft_spl": "navcore.eval.metrics:SoftSPL",
+    "ne": "navcore.eval.metrics:NE",
+    "ne_geodesic": "navcore.eval.metrics:NEGeodesic",
+    "collision_rate": "navcore.eval.metrics:CollisionRate",
+    "collision_rate_moves": "navcore.eval.metrics:CollisionRateMoves",
+    "steps": "navcore.eval.metrics:Steps",
+    "pose_sr": "navcore.eval.metrics:PoseSR",
+    "osr": "navcore.eval.metrics:OSR",
+    "dtw": "navcore.eval.metrics:DTW",
+    "ndtw": "navcore.eval.metrics:NDTW",
 })
 """Every metric, in the order of the result tables."""
 

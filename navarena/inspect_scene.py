@@ -28,10 +28,10 @@ SAMPLE = 400_000
 def inspect(path: str, fmt: str | None = None) -> tuple[dict, np.ndarray]:
     """The facts of the module doc as a dict (no picture), and the content's centres [N, 3]."""
     from navcore.gaussians.content import content_mask
+    from navcore.gaussians.floor import AlignConfig, axis_name, fit_floor
     from navcore.gaussians.formats import detect_format
     from navcore.gaussians.model import sh_degree_for_coeffs
     from navcore.gaussians.validate import read_validated
-    from stages.align.floor import AlignConfig, axis_name, fit_floor
 
     t0 = time.perf_counter()
     p = Path(path)

@@ -7,9 +7,9 @@ observation before episode_start or for a slot that was never started, an agent 
 """
 from __future__ import annotations
 
+from navcore.eval.env import brief
+from navcore.eval.protocol.codec import ProtocolError, action_payload, decode_value, pack, unpack
 from navcore.nav.actions import ActionSpace
-from stages.evaluate.env import brief
-from stages.evaluate.protocol.codec import ProtocolError, action_payload, decode_value, pack, unpack
 
 
 class Session:

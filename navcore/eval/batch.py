@@ -5,7 +5,7 @@ import dataclasses
 
 import numpy as np
 
-from stages.evaluate.env import EnvConfig, NavEnv
+from navcore.eval.env import EnvConfig, NavEnv
 
 
 class BatchNavEnv:

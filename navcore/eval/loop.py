@@ -5,8 +5,8 @@ import time
 
 import numpy as np
 
-from stages.evaluate.env import EnvConfig, NavEnv
-from stages.evaluate.metrics import episode_metrics
+from navcore.eval.env import EnvConfig, NavEnv
+from navcore.eval.metrics import episode_metrics
 
 
 def task_info(ep) -> dict:
@@ -94,7 +94,7 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
     each. An action the environment rejects (NaN, malformed) counts as an invalid step of its own
     slot's episode (recorded in `invalid_actions`), which goes on. `on_result(row)` is called as each
     episode finishes."""
-    from stages.evaluate.batch import BatchNavEnv
+    from navcore.eval.batch import BatchNavEnv
 
     benv = BatchNavEnv(ctx, slots, cfg)
     if isinstance(client, InProcessBatch):

@@ -2,7 +2,7 @@
 
     class MyAgent:
         def reset(self, task: dict) -> None: ...     # task: episode_id, task_type, goal spec
-        def act(self, obs: dict):  ...               # an action of stages.evaluate.env
+        def act(self, obs: dict):  ...               # an action of navcore.eval.env
 
 Privileged baselines (the oracles) also define bind(env), which the in-process evaluator calls
 after each reset: they read the episode's geodesic field, never the rendered frames.
@@ -18,10 +18,10 @@ from navcore.nav.oracle import DiscreteOracle
 from navcore.registry import Registry
 
 AGENTS = Registry("agent", {
-    "random": "stages.evaluate.agents:RandomAgent",
-    "oracle": "stages.evaluate.agents:OracleAgent",
-    "noisy_oracle": "stages.evaluate.agents:NoisyOracleAgent",
-    "depth_reactive": "stages.evaluate.agents:DepthReactiveAgent",
+    "random": "navcore.eval.agents:RandomAgent",
+    "oracle": "navcore.eval.agents:OracleAgent",
+    "noisy_oracle": "navcore.eval.agents:NoisyOracleAgent",
+    "depth_reactive": "navcore.eval.agents:DepthReactiveAgent",
 })
 make_agent = AGENTS.make
 

@@ -30,11 +30,11 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from navcore.eval.episode import Episode
 from navcore.nav.actions import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, ActionSpace
 from navcore.nav.dynamics import BLOCKED_MODES, blocked_motion
 from navcore.nav.oracle import geodesic_potential
 from navcore.nav.poses import wrap_angle
-from stages.evaluate.episode import Episode
 
 PROTOCOLS = ("distance", "explicit_stop")
 MAX_WAYPOINTS = 64

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import time
 
-from stages.evaluate.protocol.codec import (
+from navcore.eval.protocol.codec import (
     ProtocolError,
     decode_value,
     encode_observation,
@@ -70,8 +70,10 @@ class RemoteAgent:
         err = None
         for n in range(self.retries):
             try:
-                return connect(self.url, open_timeout=self.timeout, max_size=self.max_frame_bytes, compression=None,
-                               ping_interval=self.keepalive, ping_timeout=self.keepalive)
+                ws = connect(self.url, open_timeout=self.timeout, max_size=self.max_frame_bytes, compression=None,
+                             ping_interval=self.keepalive, ping_timeout=self.keepalive)
+                # entered as its context (websockets >= 17.1 deprecates a bare connect); close() ends it
+                return ws.__enter__()
             except OSError as e:  # refused, unreachable
                 err = e
                 time.sleep(min(2 ** n, 16) if n < self.retries - 1 else 0)

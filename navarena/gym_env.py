@@ -7,7 +7,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from stages.evaluate.env import EnvConfig, NavEnv
+from navcore.eval.env import EnvConfig, NavEnv
 
 
 class NavGymEnv(gym.Env):

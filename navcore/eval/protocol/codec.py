@@ -8,7 +8,7 @@ import time
 import msgpack
 import numpy as np
 
-from stages.evaluate.env import brief
+from navcore.eval.env import brief
 
 FRAME_TYPES = {"observation", "action", "episode_start", "episode_end", "error", "batch_observation",
                "batch_action", "batch_episode_start", "batch_episode_end"}

@@ -1,0 +1,190 @@
+"""``navarena eval ROOT``: an agent in closed loop on the episodes of a data root or a release.
+
+    navarena eval navarena-v1.0.0 --agent oracle --tasks pointnav --split test --episodes-per-scene 5
+    navarena eval data --agent my_pkg.policy:Agent --protocol explicit_stop --renderer cpu
+    navarena eval navarena-v1.0.0 --agent ws://127.0.0.1:8000 --split eval_zeroshot   # an agent server
+
+Writes OUT/results.parquet (one row per episode: metrics, end reason, error, executed trajectory)
+and OUT/summary.json (the metrics per task, overall and per difficulty), and prints the table.
+The library's own evaluation, with no pipeline: the pipeline's `evaluate` stage runs the same
+environment and metrics (navcore.eval) over a data root's scenes as tasks of its run.
+Ctrl-C stops after the episode in flight, and what finished is written and summarised.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from navarena.dataset import TASKS, NavDataset
+
+
+def make_agent_for(spec: str, seed: int, timeout: float, batch: bool = False):
+    """An agent from a registry name, 'package.module:Class' or a ws:// agent server."""
+    if spec.startswith(("ws://", "wss://")):
+        from navcore.eval.protocol.client import RemoteAgent, RemoteBatchAgent
+
+        return (RemoteBatchAgent if batch else RemoteAgent)(spec, timeout=timeout)
+    from navcore.eval.agents import AGENTS, make_agent
+
+    return make_agent(spec, **({"seed": seed} if spec in AGENTS else {}))
+
+
+def chosen_episodes(ds: NavDataset, args) -> dict[str, list]:
+    """scene id -> the episodes to run, every task of args.tasks; the zero-shot set of a data
+    root by its listing (a release ships it as its own split)."""
+    listing = None
+    if args.split and not ds.is_release:
+        try:
+            listing = ds.eval_set(args.split)
+        except FileNotFoundError:
+            listing = None
+    scenes = args.scenes or ds.scene_ids()
+    out: dict[str, list] = {}
+    for sid in scenes:
+        for task in args.tasks:
+            if sid not in ds.scene_ids(task):
+                continue
+            if listing is not None:
+                ids = set(listing[(listing["task"] == task) & (listing["scene_id"] == sid)]["episode_id"])
+                eps = ds.episodes(sid, task, None, args.difficulty, args.episodes_per_scene, ids=ids)
+            else:
+                eps = ds.episodes(sid, task, args.split, args.difficulty, args.episodes_per_scene)
+            out.setdefault(sid, []).extend(eps)
+    return {s: e for s, e in out.items() if e}
+
+
+def summary_table(summary: dict) -> str:
+    """The per-task table printed at the end: SR, SPL, NE, CR, steps, overall and per difficulty."""
+    cols = [("episodes", "n", "{:.0f}"), ("sr", "SR", "{:.3f}"), ("spl", "SPL", "{:.3f}"), ("ne", "NE m", "{:.2f}"),
+            ("collision_rate", "CR", "{:.3f}"), ("steps", "steps", "{:.0f}"), ("pose_sr", "Pose SR", "{:.3f}"),
+            ("stop_sr", "Stop SR", "{:.3f}")]
+    fmt = lambda f, v: "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f.format(v)  # noqa: E731
+    lines = [f"{'task':10s} {'group':8s} " + " ".join(f"{h:>8s}" for _, h, _ in cols)]
+    for task, groups in summary["tasks"].items():
+        for g, m in groups.items():
+            lines.append(f"{task:10s} {g:8s} " + " ".join(f"{fmt(f, m.get(k)):>8s}" for k, _, f in cols))
+    return "\n".join(lines)
+
+
+def write_outputs(rows: list[dict], out: Path, meta: dict) -> dict:
+    """results.parquet and summary.json under `out` (each written whole, then renamed)."""
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from navcore.eval.metrics import aggregate
+
+    out.mkdir(parents=True, exist_ok=True)
+    plain = [{k: v for k, v in r.items() if k != "trajectory"} for r in rows]
+    table = pa.Table.from_pylist(plain) if plain else pa.table({})
+    if rows:
+        traj = [np.asarray(r["trajectory"], np.float32) for r in rows]
+        table = table.append_column("trajectory_x", pa.array([t[:, 0].tolist() for t in traj], pa.list_(pa.float32())))
+        table = table.append_column("trajectory_y", pa.array([t[:, 1].tolist() for t in traj], pa.list_(pa.float32())))
+    tmp = out / "results.parquet.tmp"
+    pq.write_table(table, tmp)
+    tmp.replace(out / "results.parquet")
+    tasks = sorted({r["task"] for r in rows}, key=lambda t: TASKS.index(t) if t in TASKS else 99)
+    summary = {**meta, "episodes": len(rows),
+               "tasks": {t: aggregate([r for r in rows if r["task"] == t]) for t in tasks}}
+    clean = json.loads(json.dumps(summary, default=float).replace("NaN", "null"))
+    tmp = out / "summary.json.tmp"
+    tmp.write_text(json.dumps(clean, indent=1) + "\n")
+    tmp.replace(out / "summary.json")
+    return clean
+
+
+def evaluate(args) -> tuple[list[dict], bool]:
+    """Every chosen episode, scene by scene; (rows, interrupted)."""
+    from navarena.progress import ToolProgress
+    from navcore.eval.env import NavEnv
+    from navcore.eval.loop import InProcessBatch, run_episode, run_episodes_batched
+    from navcore.seeds import stream_seed
+
+    ds = NavDataset(args.root, args.embodiment)
+    plan = chosen_episodes(ds, args)
+    total = sum(map(len, plan.values()))
+    if not total:
+        raise SystemExit(f"navarena eval: no episodes in {ds.path} for tasks {args.tasks}, split {args.split}, "
+                         f"difficulty {args.difficulty} (scenes: {', '.join(ds.scene_ids()) or 'none'})")
+    cfg = ds.env_config(protocol=args.protocol, width=args.width, height=args.height, render=not args.no_render)
+    rows: list[dict] = []
+    interrupted = False
+    with ToolProgress("eval", total, args.quiet) as progress:
+        try:
+            for sid, eps in plan.items():
+                ctx = ds.scene_context(sid, render=not args.no_render, renderer=args.renderer)
+                seed = stream_seed(args.seed, sid, "evaluate") % 2**31
+                if args.batch_slots > 1:
+                    remote = args.agent.startswith(("ws://", "wss://"))
+                    client = make_agent_for(args.agent, seed, args.timeout, batch=True) if remote else \
+                        InProcessBatch(lambda seed=seed: make_agent_for(args.agent, seed, args.timeout))
+
+                    def done(row):
+                        rows.append(row)
+                        progress.advance(frames=int(row["steps"]))
+                        return row
+
+                    run_episodes_batched(ctx, eps, client, args.batch_slots, cfg, on_result=done)
+                else:
+                    env, client = NavEnv(ctx, cfg), make_agent_for(args.agent, seed, args.timeout)
+                    for ep in eps:
+                        rows.append(run_episode(env, client, ep))
+                        progress.advance(frames=int(rows[-1]["steps"]))
+                if hasattr(client, "close"):
+                    client.close()
+        except KeyboardInterrupt:
+            interrupted = True
+    return rows, interrupted
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="navarena eval", description="Evaluate an agent in closed loop on the episodes "
+                                 "of a data root or a release folder (navcore.eval: the pipeline's environment and metrics).")
+    ap.add_argument("root", help="a release folder (with release.json) or a data root")
+    ap.add_argument("--agent", default="oracle", help="a registered agent (oracle, random, depth_reactive, ...), "
+                    "package.module:Class, or ws://host:port (an agent server)")
+    ap.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS)
+    ap.add_argument("--split", default=None, help="only this split (train, val_seen, val_unseen, test, eval_zeroshot)")
+    ap.add_argument("--difficulty", default=None, choices=("easy", "medium", "hard"))
+    ap.add_argument("--episodes-per-scene", type=int, default=None, help="at most this many per scene and task")
+    ap.add_argument("--scenes", nargs="*", default=None, help="scene ids (default: all)")
+    ap.add_argument("--protocol", default="distance", choices=("distance", "explicit_stop"))
+    ap.add_argument("--renderer", default="auto", choices=("auto", "cpu", "gsplat"))
+    ap.add_argument("--no-render", action="store_true", help="no RGB-D (agents that need only the task and pose)")
+    ap.add_argument("--width", type=int, default=None, help="image width (default: the embodiment's)")
+    ap.add_argument("--height", type=int, default=None)
+    ap.add_argument("--batch-slots", type=int, default=1, help="episodes stepped together (one render call per step)")
+    ap.add_argument("--embodiment", default=None, help="the costmap of this embodiment (data roots with several)")
+    ap.add_argument("--seed", type=int, default=0, help="seed of stochastic agents")
+    ap.add_argument("--timeout", type=float, default=30.0, help="agent servers: seconds to wait for each action")
+    ap.add_argument("--out", default=None, help="output folder (default: navarena_eval/{agent}_{protocol})")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+    args = ap.parse_args(argv)
+    import re
+
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", f"{args.agent}_{args.protocol}").strip("_")
+    out = Path(args.out or Path("navarena_eval") / name)
+    try:
+        rows, interrupted = evaluate(args)
+    except (FileNotFoundError, KeyError, ValueError) as e:
+        print(f"navarena eval: {e}", file=sys.stderr)
+        return 2
+    meta = {"root": str(Path(args.root).resolve()), "agent": args.agent, "protocol": args.protocol,
+            "split": args.split, "seed": args.seed, "interrupted": interrupted}
+    if not rows:
+        print("navarena eval: interrupted before any episode finished; nothing written", file=sys.stderr)
+        return 130
+    summary = write_outputs(rows, out, meta)
+    print(summary_table(summary))
+    errors = sum(bool(r["error"]) for r in rows)
+    print(f"{len(rows)} episodes{' (interrupted)' if interrupted else ''}, {errors} agent errors; "
+          f"results: {out / 'results.parquet'}, {out / 'summary.json'}")
+    return 130 if interrupted else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

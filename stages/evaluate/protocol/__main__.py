@@ -1,3 +1,0 @@
-from stages.evaluate.protocol.cli import main
-
-main()

@@ -1,0 +1,245 @@
+"""The consumer library as users get it: the wheel built from this repository, installed apart from
+the checkout, with only the library's own dependencies importable.
+
+The wheel is installed with --no-deps into a temporary target; each check runs in a fresh
+interpreter whose working directory is elsewhere, with the target first on sys.path and an import
+blocker that refuses every module outside the wheel's declared dependency closure (the pipeline
+project, Hydra, Dask, OMPL, open3d, the test tools...): so a module that reaches into the checkout,
+or imports what the wheel does not declare, fails here.
+"""
+import json
+import os
+import re
+import shutil
+import socket
+import subprocess
+import sys
+import textwrap
+import time
+import zipfile
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from navarena.cli import CONSUMER
+
+WHEEL_TOPS = {"navcore", "navarena"}
+CHECKOUT_ONLY = {"pipeline", "stages", "benchmarks", "tests", "examples", "scripts"}
+
+
+def requirement_closure(requires: list[str]) -> set[str]:
+    """Normalised names of the distributions `requires` (Requires-Dist lines without an extra)
+    pulls in, transitively, as installed here."""
+    from packaging.requirements import Requirement
+
+    norm = lambda n: re.sub(r"[-_.]+", "-", n).lower()  # noqa: E731
+    seen, todo = set(), [r for r in requires]
+    while todo:
+        req = Requirement(todo.pop())
+        if req.marker is not None and not req.marker.evaluate({"extra": ""}):
+            continue
+        name = norm(req.name)
+        if name in seen:
+            continue
+        seen.add(name)
+        try:
+            todo += metadata.requires(req.name) or []
+        except metadata.PackageNotFoundError:
+            pass
+    return seen
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory, project_root):
+    """(wheel file, install target, allowed top-level modules) of the library built from a copy of
+    its sources (the build writes nothing into the checkout)."""
+    src = tmp_path_factory.mktemp("wheel_src")
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy(project_root / name, src / name)
+    for top in WHEEL_TOPS:
+        shutil.copytree(project_root / top, src / top, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    dist = tmp_path_factory.mktemp("dist")
+    p = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(dist),
+                        str(src)], capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-2000:]
+    (whl,) = dist.glob("navarena-*.whl")
+    target = tmp_path_factory.mktemp("site")
+    p = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "-q", "--target", str(target), str(whl)],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-2000:]
+    with zipfile.ZipFile(whl) as z:
+        meta = next(n for n in z.namelist() if n.endswith(".dist-info/METADATA"))
+        requires = [v for k, v in (line.split(": ", 1) for line in z.read(meta).decode().splitlines() if ": " in line)
+                    if k == "Requires-Dist" and "extra ==" not in v]
+    closure = requirement_closure(requires)
+    allowed = set(WHEEL_TOPS)
+    for top, dists in metadata.packages_distributions().items():
+        if any(re.sub(r"[-_.]+", "-", d).lower() in closure for d in dists):
+            allowed.add(top)
+    return whl, target, allowed
+
+
+def consumer_python(wheel, tmp_path, code: str, *args: str, background: bool = False, timeout: int = 300):
+    """Run `code` in a fresh interpreter as a user of the installed wheel: working directory
+    `tmp_path`, the wheel's target first on sys.path, the checkout and every module outside the
+    wheel's dependency closure refused."""
+    _, target, allowed = wheel
+    everything = {m for m in metadata.packages_distributions()} | CHECKOUT_ONLY
+    blocked = sorted(everything - allowed)
+    driver = tmp_path / f"driver_{abs(hash(code)) % 10**8}.py"
+    driver.write_text(textwrap.dedent(f"""
+        import importlib.abc, sys
+        # the venv's start-up hooks may have imported the checkout's copy: forget it
+        for m in [m for m in sys.modules if m.split(".")[0] in {sorted(WHEEL_TOPS | CHECKOUT_ONLY)!r}]:
+            del sys.modules[m]
+        import os
+        sys.path[:] = [{str(target)!r}] + [p for p in sys.path if p and os.path.realpath(p) != {os.path.realpath(Path.cwd())!r}]
+        BLOCKED = set({blocked!r})
+        class Blocker(importlib.abc.MetaPathFinder):
+            def find_spec(self, name, path=None, target=None):
+                if name.split(".")[0] in BLOCKED:
+                    raise ModuleNotFoundError(f"{{name}} is not a dependency of the navarena wheel", name=name)
+        sys.meta_path.insert(0, Blocker())
+        import navcore, navarena
+        assert navarena.__file__.startswith({str(target)!r}), navarena.__file__
+        assert navcore.__file__.startswith({str(target)!r}), navcore.__file__
+    """) + textwrap.dedent(code))
+    cmd = [sys.executable, "-P", str(driver), *args]
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    if background:
+        return subprocess.Popen(cmd, cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    return subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def test_wheel_holds_only_the_library_with_its_data(wheel, project_root):
+    whl, _, allowed = wheel
+    with zipfile.ZipFile(whl) as z:
+        names = z.namelist()
+    tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith((".dist-info", ".data"))}
+    assert tops == WHEEL_TOPS
+    for data in ("navcore/conf/embodiment/locobot.yaml", "navcore/io/layout.yaml",
+                 "navcore/models/yolo_fastest_1.1_coco/yolo-fastest-1.1-xl.weights"):
+        assert data in names, data
+    # the wheel's dependencies are the library's: no orchestration, planner or mesh library
+    assert not {"hydra", "dask", "distributed", "ompl", "open3d", "trimesh", "jsonschema"} & allowed
+    # no module of the library reads a file outside its package (the checkout's conf/, catalogs/)
+    outside = re.compile(r"__file__\)[^\n]*(parents\[\d\]|\.parent\.parent)|[\"']\.\./")
+    offenders = [str(p.relative_to(project_root)) for top in WHEEL_TOPS for p in (project_root / top).rglob("*.py")
+                 if outside.search(p.read_text()) and p.name != "cli.py"]
+    assert not offenders, offenders
+
+
+@pytest.fixture(scope="module")
+def small_release(episode_run, make_cfg, tmp_path_factory):
+    """A release folder of the session's one-scene data root (written outside that root)."""
+    from pipeline.release.build import build_release
+
+    root, over, _ = episode_run
+    out = tmp_path_factory.mktemp("wheel_release") / "navarena-v0.1.0"
+    build_release(make_cfg(root, *over, "release.version=0.1.0"), out)
+    return out
+
+
+def test_installed_wheel_verifies_evaluates_and_serves(wheel, small_release, tmp_path):
+    # the public API and every consumer command's help, from the installed wheel alone
+    p = consumer_python(wheel, tmp_path, f"""
+        import navarena
+        missing = [n for n in navarena.__all__ if getattr(navarena, n, None) is None]
+        assert not missing, missing
+        from navarena.cli import main
+        for name in {sorted(CONSUMER)!r}:
+            try:
+                main([name, "--help"])
+            except SystemExit as e:
+                assert e.code in (0, None), (name, e.code)
+        try:
+            main(["run"])
+        except SystemExit as e:
+            assert e.code == 2
+        print("API OK", navarena.__version__)
+    """)
+    assert p.returncode == 0 and "API OK 0.1.0" in p.stdout, p.stdout[-2000:] + p.stderr[-3000:]
+    assert "the pipeline is not part of the installed library" in p.stderr
+
+    # navarena verify-release on a small release
+    run_cli = "from navarena.cli import main\nimport sys\nmain(sys.argv[1:])\n"
+    p = consumer_python(wheel, tmp_path, run_cli, "verify-release", str(small_release), "--quiet")
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+
+    # 5 episodes of the environment with the CPU renderer, through the public API and the gym env
+    p = consumer_python(wheel, tmp_path, f"""
+        import numpy as np
+        from navarena import NavDataset, NavEnv, NavGymEnv, make_agent, run_episodes, aggregate
+        ds = NavDataset({str(small_release)!r})
+        sid = ds.scene_ids("pointnav")[0]
+        eps = ds.episodes(sid, "pointnav", limit=5)
+        assert len(eps) == 5
+        ctx = ds.scene_context(sid, renderer="cpu")
+        cfg = ds.env_config(width=64, height=48)
+        rows = run_episodes(ctx, eps, make_agent("oracle"), cfg)
+        # a release judges motion on its binary ROS map (the data root's clearance is finer): the
+        # oracle may miss a diagonal one-cell corridor there, never err
+        assert aggregate(rows, None)["overall"]["sr"] >= 0.8, [(r["episode_id"], r["end_reason"]) for r in rows]
+        assert not any(r["error"] for r in rows)
+        obs = NavEnv(ctx, cfg).reset(eps[0])
+        assert obs["rgb"].shape == (48, 64, 3) and obs["depth"].max() > 0
+        gym = NavGymEnv(ctx, eps, cfg)
+        o, info = gym.reset(seed=0)
+        total = 0.0
+        for _ in range(10):
+            o, r, term, trunc, info = gym.step(1)
+            total += r
+            if term or trunc:
+                break
+        assert np.isfinite(total)
+        print("ENV OK")
+    """)
+    assert p.returncode == 0 and "ENV OK" in p.stdout, p.stdout[-2000:] + p.stderr[-3000:]
+
+    # an agent served over the protocol, evaluated by navarena eval, both from the wheel
+    port_file = tmp_path / "port"
+    server = consumer_python(wheel, tmp_path, run_cli, "serve-agent", "--agent", "random", "--port", "0",
+                             "--port-file", str(port_file), background=True)
+    try:
+        deadline = time.time() + 120
+        while not port_file.exists() or not port_file.read_text().strip():
+            assert server.poll() is None and time.time() < deadline, server.stdout.read()[-2000:]
+            time.sleep(0.2)
+        port = int(port_file.read_text())
+        with socket.create_connection(("127.0.0.1", port), timeout=10):
+            pass
+        p = consumer_python(wheel, tmp_path, run_cli, "eval", str(small_release), "--agent", f"ws://127.0.0.1:{port}",
+                            "--tasks", "pointnav", "--episodes-per-scene", "3", "--no-render", "--quiet",
+                            "--out", str(tmp_path / "eval"))
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-3000:]
+    summary = json.loads((tmp_path / "eval" / "summary.json").read_text())
+    assert summary["episodes"] == 3
+    # the random agent behind the protocol: what is proven is the round trip (every episode ran to
+    # its end, no agent error)
+    import pandas as pd
+
+    res = pd.read_parquet(tmp_path / "eval" / "results.parquet")
+    assert (res["error"] == "").all() and set(res["end_reason"]) <= {"entered", "budget", "stop"}
+
+
+def test_release_and_data_root_read_the_same_episodes(episode_run, small_release):
+    """NavDataset reads a release as the data root it came from: the same scenes, episodes,
+    starts, goals and budgets, and the same embodiment and step sizes."""
+    from navarena import NavDataset
+
+    root, _, _ = episode_run
+    a, b = NavDataset(root), NavDataset(small_release)
+    assert a.is_release is False and b.is_release is True
+    assert a.scene_ids() == b.scene_ids() and a.embodiment == b.embodiment and a.actions == b.actions
+    sid = a.scene_ids()[0]
+    for task in ("pointnav", "imagenav", "objectnav"):
+        ea, eb = a.episodes(sid, task, split="train"), b.episodes(sid, task, split="train")
+        assert [e.episode_id for e in ea] == [e.episode_id for e in eb] and ea
+        for x, y in zip(ea, eb):
+            assert x.start == y.start and x.max_steps == y.max_steps and x.geodesic == pytest.approx(y.geodesic)
+            assert np.allclose(x.centres, y.centres) and np.allclose(x.reference_path, y.reference_path)
