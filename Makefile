@@ -92,8 +92,9 @@ test-all: $(STAMP)
 
 bench: bench-spatial bench-episodes bench-eval bench-semantics
 
-# the benchmark pages (docs/bench_*.md) whose code inputs changed since the commit each was measured
-# on (benchmarks/pages.py names each page's inputs and command); exits 1 when one is stale
+# the benchmark pages (docs/bench_*.md) whose inputs changed since they were measured: the hashes of
+# the stages they measure (as the pipeline's markers) and the digest of their code (benchmarks/pages.py
+# names each page's stages, code and command); exits 1 when one is stale
 bench-stale: $(STAMP)
 	$(BIN)/python -m benchmarks.pages stale --strict
 

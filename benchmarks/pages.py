@@ -1,15 +1,26 @@
-"""The benchmark pages under docs/: each names the commit its figures were measured on, and
-`make bench-stale` lists the pages whose code inputs changed since that commit.
+"""The benchmark pages under docs/: each names the commit its figures were measured on and the
+inputs they depend on, and `make bench-stale` lists the pages whose inputs changed since.
+
+A page's inputs are what its figures are a function of:
+- the pipeline stages whose outputs it measures, by the hash the pipeline keys its markers with
+  (pipeline.graph.config_hashes on the default config: each stage's version, config sections and
+  upstream hashes), so a refactor that keeps every stage's output bytes keeps the page fresh and a
+  version bump or a changed default makes it stale;
+- its code: the benchmark's own module and what it times beside stage outputs (the renderer for a
+  frames/s figure, the orchestration for the fault suite), by a digest of their top-level
+  definitions (code_digest: a function moved between files, an import or a comment changed, is no
+  change).
 
 A page ends with a stamp written by ``write_page``:
 
     Measured on commit `c4c884e` (2026-11-26) with `make bench-spatial`.
     <!-- bench-page: commit=c4c884e1... dirty=0 date=2026-11-26 -->
+    <!-- bench-inputs: {"code": "9f3c...", "stages": {"costmap": "2f6d..."}} -->
 
-``dirty=1`` says the run had uncommitted changes in the page's inputs (the figures then belong to
+``dirty=1`` says the run had uncommitted changes in the page's code (the figures then belong to
 the commit that lands them, and the check reports the page until it is re-run on a clean tree).
-PAGES names, for every docs/bench_*.md, the command that refreshes it and the code it measures
-(paths of files or folders); a test checks that every page is listed and stamped.
+PAGES names, for every docs/bench_*.md, the command that refreshes it, its stages and its code;
+a test checks that every page is listed and stamped.
 
     python -m benchmarks.pages stale [--strict]     # the stale pages and the changed files
     python -m benchmarks.pages list                 # every page with its commit and command
@@ -17,7 +28,10 @@ PAGES names, for every docs/bench_*.md, the command that refreshes it and the co
 from __future__ import annotations
 
 import argparse
+import ast
 import datetime
+import hashlib
+import json
 import re
 import subprocess
 import sys
@@ -27,103 +41,150 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 STAMP_RE = re.compile(r"<!-- bench-page: commit=(?P<commit>[0-9a-f]{7,40}) dirty=(?P<dirty>[01]) "
-                      r"date=(?P<date>[0-9-]+) -->")
+                      r"date=(?P<date>[0-9-]+) -->(\n<!-- bench-inputs: (?P<inputs>\{.*\}) -->)?")
 
-_SPATIAL = ("stages/costmap", "stages/align", "navcore/voxels", "navcore/nav/costmap.py", "navcore/gaussians",
-            "stages/synthesize")
-_PIPELINE = ("pipeline", "conf", "stages", "navcore")
+ALL_STAGES = ("synthesize", "ingest", "voxelize", "align", "costmap", "screen", "semantics", "asset", "episodes",
+              "goal_images", "export")
 
 
 @dataclass(frozen=True)
 class Page:
     command: str
-    inputs: tuple[str, ...]
+    code: tuple[str, ...]
+    """Files or folders whose code the figures depend on beside stage outputs (the benchmark's own first)."""
+    stages: tuple[str, ...] = ()
+    """Pipeline stages whose outputs the figures measure (a stage's hash covers its upstream)."""
+
+    @property
+    def inputs(self) -> tuple[str, ...]:
+        return self.code
 
 
+_RENDER = ("navcore/render",)
 PAGES: dict[str, Page] = {
-    "bench_spatial.md": Page("make bench-spatial", _SPATIAL + ("benchmarks/map/spatial.py",)),
-    "bench_episodes.md": Page("make bench-episodes", _PIPELINE + ("benchmarks/dataset/episodes.py",)),
-    "bench_eval.md": Page("make bench-eval", _PIPELINE + ("benchmarks/closed_loop/eval.py",)),
-    "bench_real.md": Page("make bench-real", _PIPELINE + ("benchmarks/captures/real.py", "benchmarks/captures/scan_truth.py",
-                                                          "catalogs/real_indoor.yaml")),
-    "bench_screening.md": Page("make bench-screening", _SPATIAL + ("stages/screen", "navcore/nav/screening.py",
-                                                                   "navcore/render", "benchmarks/captures/screening.py")),
+    "bench_spatial.md": Page("make bench-spatial", ("benchmarks/map/spatial.py",), ("costmap",)),
+    "bench_episodes.md": Page("make bench-episodes", ("benchmarks/dataset/episodes.py",), ("episodes", "goal_images")),
+    "bench_eval.md": Page("make bench-eval", ("benchmarks/closed_loop/eval.py", "navcore/eval", *_RENDER), ("episodes",)),
+    "bench_real.md": Page("make bench-real", ("benchmarks/captures/real.py", "benchmarks/captures/scan_truth.py",
+                                              "catalogs/real_indoor.yaml"), ("costmap", "screen", "episodes")),
+    "bench_screening.md": Page("make bench-screening", ("benchmarks/captures/screening.py", *_RENDER), ("screen",)),
     "bench_reflections.md": Page("python -m benchmarks.map.reflections --docs",
-                                 ("stages/align", "stages/synthesize", "navcore/gaussians",
-                                  "benchmarks/map/reflections.py", "benchmarks/map/spatial.py")),
-    "bench_semantics.md": Page("make bench-semantics", ("stages/semantics", "navcore/instances.py", "navcore/render",
-                                                        "stages/synthesize", "benchmarks/goals/semantics.py")),
-    "bench_semantics_real.md": Page("make bench-semantics", ("stages/semantics", "navcore/instances.py",
-                                                             "navcore/labels", "benchmarks/goals/semantics_real.py")),
-    "bench_semantics_detector.md": Page("make bench-semantics",
-                                        ("stages/semantics", "navcore/instances.py", "navcore/labels", "navcore/io/models.py",
-                                         "benchmarks/goals/semantics_detector.py", "benchmarks/goals/semantics_real.py")),
+                                 ("benchmarks/map/reflections.py", "benchmarks/map/spatial.py"), ("align",)),
+    "bench_semantics.md": Page("make bench-semantics", ("benchmarks/goals/semantics.py",), ("semantics",)),
+    "bench_semantics_real.md": Page("make bench-semantics", ("benchmarks/goals/semantics_real.py",), ("semantics",)),
+    "bench_semantics_detector.md": Page("make bench-semantics", ("benchmarks/goals/semantics_detector.py",
+                                                                 "benchmarks/goals/semantics_real.py"), ("semantics",)),
     "bench_semantics_views.md": Page("python -m benchmarks.goals.semantics_views --data DATA",
-                                     ("stages/semantics", "navcore/instances.py", "benchmarks/goals/semantics_views.py")),
+                                     ("benchmarks/goals/semantics_views.py",), ("semantics",)),
     "bench_blind_views.md": Page("python -m benchmarks.dataset.blind_views --docs docs/bench_blind_views.md",
-                                 ("stages/costmap", "stages/episodes", "navcore/render", "navcore/gaussians/content.py",
-                                  "benchmarks/dataset/blind_views.py")),
-    "bench_faults.md": Page("make test-faults", ("pipeline", "navcore/io", "navcore/gaussians/formats",
-                                                 "benchmarks/robustness/faults.py", "benchmarks/robustness/fuzz_frames.py",
-                                                 "benchmarks/robustness/fuzz_readers.py", "tests/test_faults.py")),
-    "bench_gpu.md": Page("make bench-gpu", ("navcore/render", "navcore/voxels", "stages/semantics", "stages/evaluate",
-                                            "benchmarks/gpu/bench_gpu.py", "benchmarks/gpu/multi_gpu.py",
-                                            "benchmarks/gpu/render_gpu.py")),
-    "bench_release.md": Page("make bench-release", ("pipeline/release", "navarena/verify_release.py", "navcore/io/release.py",
-                                                    "navcore/nav/eval_set.py", "benchmarks/publishing/release.py")),
-    "bench_scale.md": Page("make bench-scale", _PIPELINE + ("benchmarks/scale/bench_scale.py", "benchmarks/dataset/storage.py",
-                                                            "benchmarks/scale/render_cpu.py")),
+                                 ("benchmarks/dataset/blind_views.py", *_RENDER), ("episodes",)),
+    "bench_faults.md": Page("make test-faults", ("benchmarks/robustness/faults.py", "benchmarks/robustness/fuzz_frames.py",
+                                                 "benchmarks/robustness/fuzz_readers.py", "tests/test_faults.py", "pipeline",
+                                                 "navcore/io", "navcore/gaussians/formats", "navcore/eval/protocol"),
+                            ALL_STAGES),
+    "bench_gpu.md": Page("make bench-gpu", ("benchmarks/gpu/bench_gpu.py", "benchmarks/gpu/multi_gpu.py",
+                                            "benchmarks/gpu/render_gpu.py", *_RENDER, "navcore/voxels", "navcore/eval"),
+                         ("voxelize", "semantics", "episodes")),
+    "bench_release.md": Page("make bench-release", ("benchmarks/publishing/release.py", "pipeline/release",
+                                                    "navarena/verify_release.py", "navcore/io/release.py"), ("export",)),
+    "bench_scale.md": Page("make bench-scale", ("benchmarks/scale/bench_scale.py", "benchmarks/dataset/storage.py",
+                                                "benchmarks/scale/render_cpu.py", "pipeline", *_RENDER), ALL_STAGES),
 }
+
+
+def _strip_docstring(node):
+    body = getattr(node, "body", None)
+    if isinstance(body, list) and body and isinstance(body[0], ast.Expr) and isinstance(getattr(body[0], "value", None), ast.Constant) \
+            and isinstance(body[0].value.value, str):
+        node.body = body[1:] or [ast.Pass()]
+    for child in ast.iter_child_nodes(node):
+        _strip_docstring(child)
+    return node
+
+
+def code_digest(paths: tuple[str, ...], root: Path = ROOT) -> str:
+    """A digest of the code under `paths` that ignores where each definition lives: the sorted
+    AST dumps (docstrings, comments and imports left out) of every module's top-level statements,
+    and the bytes of any other file. Moving a function between the files of the inputs keeps it."""
+    parts = []
+    for p in paths:
+        base = root / p
+        files = sorted(base.rglob("*")) if base.is_dir() else [base]
+        for f in files:
+            if not f.is_file() or "__pycache__" in f.parts:
+                continue
+            if f.suffix == ".py":
+                tree = ast.parse(f.read_text())
+                parts += [ast.dump(_strip_docstring(n)) for n in tree.body
+                          if not isinstance(n, (ast.Import, ast.ImportFrom))
+                          and not (isinstance(n, ast.Expr) and isinstance(getattr(n, "value", None), ast.Constant))]
+            elif f.suffix in (".yaml", ".yml", ".md", ".json", ".toml"):
+                parts.append(hashlib.sha256(f.read_bytes()).hexdigest())
+    return hashlib.sha256("\n".join(sorted(parts)).encode()).hexdigest()[:16]
+
+
+def default_stage_hashes() -> dict[str, str]:
+    """Every stage's hash on the default config, as the pipeline keys its markers."""
+    from hydra import compose, initialize_config_dir
+
+    from pipeline.config import CONF_DIR, register_configs
+    from pipeline.graph import config_hashes
+
+    register_configs()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return config_hashes(compose(config_name="config"))
+
+
+def page_inputs(name: str, root: Path = ROOT, stage_hashes: dict[str, str] | None = None) -> dict:
+    """{"code": digest, "stages": {stage: hash}} of page `name` now."""
+    page = PAGES[name]
+    hashes = stage_hashes if stage_hashes is not None else (default_stage_hashes() if page.stages else {})
+    return {"code": code_digest(page.code, root), "stages": {s: hashes[s] for s in page.stages}}
 
 
 def _git(*args: str, cwd: Path = ROOT) -> str:
     return subprocess.run(["git", *args], cwd=cwd, check=True, capture_output=True, text=True).stdout.strip()
 
 
-def stamp(name: str, root: Path = ROOT, date: str | None = None) -> str:
-    """The lines that end page ``name``: the commit of ``root``'s HEAD, whether the page's inputs
-    had uncommitted changes, the date and the command."""
+def stamp(name: str, root: Path = ROOT, date: str | None = None, stage_hashes: dict[str, str] | None = None) -> str:
+    """The lines that end page ``name``: the commit of ``root``'s HEAD, whether the page's code
+    had uncommitted changes, the date, the command and the page's inputs."""
     page = PAGES[name]
     commit = _git("rev-parse", "HEAD", cwd=root)
-    dirty = bool(_git("status", "--porcelain", "--", *page.inputs, cwd=root))
+    dirty = bool(_git("status", "--porcelain", "--", *page.code, cwd=root))
     date = date or datetime.date.today().isoformat()
     note = " plus uncommitted changes" if dirty else ""
+    inputs = json.dumps(page_inputs(name, root, stage_hashes), sort_keys=True)
     return (f"Measured on commit `{commit[:7]}`{note} ({date}) with `{page.command}`; `make bench-stale` lists "
-            f"the pages whose code changed since.\n<!-- bench-page: commit={commit} dirty={int(dirty)} date={date} -->\n")
+            f"the pages whose inputs changed since.\n<!-- bench-page: commit={commit} dirty={int(dirty)} date={date} -->\n"
+            f"<!-- bench-inputs: {inputs} -->\n")
 
 
-def write_page(name: str, markdown: str, root: Path = ROOT) -> Path:
+def write_page(name: str, markdown: str, root: Path = ROOT, stage_hashes: dict[str, str] | None = None) -> Path:
     """Write docs/<name> (a page of PAGES) with its stamp; returns the path."""
     if name not in PAGES:
         raise KeyError(f"{name} is not a benchmark page of benchmarks.pages.PAGES")
     path = root / "docs" / name
-    body = STAMP_RE.sub("", markdown).rstrip() + "\n\n"
-    path.write_text(body + stamp(name, root))
+    body = re.sub(r"Measured on commit `[0-9a-f]+`[^\n]*\n(?=<!-- bench-page)", "", markdown)
+    body = STAMP_RE.sub("", body).rstrip() + "\n\n"
+    path.write_text(body + stamp(name, root, stage_hashes=stage_hashes))
     return path
 
 
 def read_stamp(path: Path) -> dict | None:
-    """{'commit', 'dirty', 'date'} of a page, or None when it carries no stamp."""
+    """{'commit', 'dirty', 'date', 'inputs'} of a page (inputs None for a page stamped before pages
+    were keyed to their inputs), or None when it carries no stamp."""
     m = STAMP_RE.search(path.read_text())
-    return None if m is None else {"commit": m["commit"], "dirty": m["dirty"] == "1", "date": m["date"]}
+    if m is None:
+        return None
+    return {"commit": m["commit"], "dirty": m["dirty"] == "1", "date": m["date"],
+            "inputs": json.loads(m["inputs"]) if m["inputs"] else None}
 
 
-def changed_inputs(commit: str, inputs: tuple[str, ...], root: Path = ROOT) -> list[str]:
-    """Input files whose content changed between `commit` and the working tree; a file only moved
-    (a rename with identical content, e.g. benchmarks/ regrouped into sections) is not a change."""
-    under = lambda path: any(path == i or path.startswith(i.rstrip("/") + "/") for i in inputs)  # noqa: E731
-    out = []
-    for line in _git("diff", "--name-status", "-M", commit, cwd=root).splitlines():
-        status, *paths = line.split("\t")
-        if status == "R100":
-            continue
-        out += [p for p in paths[-1:] if under(p)] + [p for p in paths[:-1] if under(p) and status.startswith("R")]
-    return out
-
-
-def stale_pages(root: Path = ROOT) -> dict[str, list[str]]:
-    """Page name -> why it is stale: the input files changed between its commit and the working
-    tree (uncommitted changes included), or a missing / unknown stamp, or a dirty run."""
+def stale_pages(root: Path = ROOT, stage_hashes: dict[str, str] | None = None) -> dict[str, list[str]]:
+    """Page name -> why it is stale: its stages' hashes or its code changed since it was measured
+    (uncommitted changes included), or a missing / unkeyed stamp, or a run with uncommitted code."""
+    hashes = stage_hashes
     out: dict[str, list[str]] = {}
     for name, page in PAGES.items():
         path = root / "docs" / name
@@ -134,13 +195,16 @@ def stale_pages(root: Path = ROOT) -> dict[str, list[str]]:
         if st is None:
             out[name] = ["no bench-page stamp"]
             continue
-        try:
-            changed = changed_inputs(st["commit"], page.inputs, root)
-            changed += _git("ls-files", "--others", "--exclude-standard", "--", *page.inputs, cwd=root).splitlines()
-        except subprocess.CalledProcessError:
-            out[name] = [f"commit {st['commit'][:7]} is not in this repository's history"]
+        if st["inputs"] is None:
+            out[name] = ["measured before pages were keyed to their inputs (stage hashes, code digest)"]
             continue
-        why = sorted(set(changed))
+        if hashes is None and page.stages:
+            hashes = default_stage_hashes()
+        now, then = page_inputs(name, root, hashes or {}), st["inputs"]
+        why = [f"stage {s}: {then.get('stages', {}).get(s)} -> {h}" for s, h in now["stages"].items()
+               if then.get("stages", {}).get(s) != h]
+        if now["code"] != then.get("code"):
+            why.append(f"code of {', '.join(page.code)}")
         if st["dirty"]:
             why.insert(0, "measured with uncommitted changes")
         if why:

@@ -63,8 +63,9 @@ def summary_table(summary: dict) -> str:
             ("stop_sr", "Stop SR", "{:.3f}")]
     fmt = lambda f, v: "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f.format(v)  # noqa: E731
     lines = [f"{'task':10s} {'group':8s} " + " ".join(f"{h:>8s}" for _, h, _ in cols)]
+    order = {"overall": 0, "easy": 1, "medium": 2, "hard": 3}
     for task, groups in summary["tasks"].items():
-        for g, m in groups.items():
+        for g, m in sorted(groups.items(), key=lambda kv: (order.get(kv[0], 9), kv[0])):
             lines.append(f"{task:10s} {g:8s} " + " ".join(f"{fmt(f, m.get(k)):>8s}" for k, _, f in cols))
     return "\n".join(lines)
 

@@ -132,11 +132,24 @@ def test_wheel_holds_only_the_library_with_its_data(wheel, project_root):
 
 
 @pytest.fixture(scope="module")
-def small_release(episode_run, make_cfg, tmp_path_factory):
-    """A release folder of the session's one-scene data root (written outside that root)."""
-    from pipeline.release.build import build_release
+def release_root(episode_run, make_cfg, copy_data_root, tmp_path_factory):
+    """A copy of the session's one-scene data root, brought back to its own overrides (other modules
+    re-run stages of the shared root with theirs): nothing recomputed when none did."""
+    from pipeline.executor import execute
 
     root, over, _ = episode_run
+    copy = tmp_path_factory.mktemp("wheel_root")
+    copy_data_root(root, copy, "07_eval", "11_releases")
+    assert not execute(make_cfg(copy, *over))["failures"]
+    return copy, over
+
+
+@pytest.fixture(scope="module")
+def small_release(release_root, make_cfg, tmp_path_factory):
+    """A release folder of that data root (written outside it)."""
+    from pipeline.release.build import build_release
+
+    root, over = release_root
     out = tmp_path_factory.mktemp("wheel_release") / "navarena-v0.1.0"
     build_release(make_cfg(root, *over, "release.version=0.1.0"), out)
     return out
@@ -227,12 +240,12 @@ def test_installed_wheel_verifies_evaluates_and_serves(wheel, small_release, tmp
     assert (res["error"] == "").all() and set(res["end_reason"]) <= {"entered", "budget", "stop"}
 
 
-def test_release_and_data_root_read_the_same_episodes(episode_run, small_release):
+def test_release_and_data_root_read_the_same_episodes(release_root, small_release):
     """NavDataset reads a release as the data root it came from: the same scenes, episodes,
     starts, goals and budgets, and the same embodiment and step sizes."""
     from navarena import NavDataset
 
-    root, _, _ = episode_run
+    root, _ = release_root
     a, b = NavDataset(root), NavDataset(small_release)
     assert a.is_release is False and b.is_release is True
     assert a.scene_ids() == b.scene_ids() and a.embodiment == b.embodiment and a.actions == b.actions
