@@ -1,9 +1,11 @@
-"""Evaluate your own policy in closed loop: a class with reset(task) and act(obs).
+"""Evaluate your own policy in closed loop: a class with reset(task) and act(obs), run with the
+library alone (navarena: no pipeline) on a data root or a release folder.
 
-    .venv/bin/python examples/custom_policy.py [DATA_ROOT] [--episodes 5]
+    python examples/custom_policy.py [DATA_ROOT_OR_RELEASE] [--episodes 5]
 
 The same policy runs from the command line, its module importable (here the repository root is on
-the path): navarena run stages=[evaluate] evaluate.agent=examples.custom_policy:GoalSeeker
+the path): navarena eval data --agent examples.custom_policy:GoalSeeker --tasks pointnav, or in the
+pipeline: navarena run stages=[evaluate] evaluate.agent=examples.custom_policy:GoalSeeker
 
 `obs` holds the robot's `pose` (x, y, yaw), the goal (PointNav: `pointgoal` = distance and bearing
 in the robot frame), and with rendering on `rgb` [H, W, 3] and `depth` [H, W] (metres). An action is
@@ -11,10 +13,7 @@ in the robot frame), and with rendering on `rgb` [H, W, 3] and `depth` [H, W] (m
 """
 import argparse
 import math
-import sys
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
 STOP, FORWARD, LEFT, RIGHT = 0, 1, 2, 3
 
 
@@ -44,31 +43,20 @@ class GoalSeeker:
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("root", nargs="?", default="data")
+    ap.add_argument("root", nargs="?", default="data", help="a data root or a release folder")
     ap.add_argument("--episodes", type=int, default=5, help="PointNav episodes a scene")
-    ap.add_argument("overrides", nargs="*", help="more config overrides (e.g. scenes.catalog=... as the root was made)")
-    a = ap.parse_intermixed_args(argv)
-    sys.path.insert(0, str(ROOT))
-    from hydra import compose, initialize_config_dir
+    a = ap.parse_args(argv)
+    from navarena import NavDataset, aggregate, run_episodes
 
-    from pipeline.config import CONF_DIR, register_configs
-    from pipeline.executor import execute
-
-    register_configs()
-    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        cfg = compose("config", overrides=[
-            f"data_root={Path(a.root).resolve()}", "stages=[evaluate]", "evaluate.agent=examples.custom_policy:GoalSeeker",
-            "evaluate.tasks=[pointnav]", f"evaluate.episodes_per_scene={a.episodes}", "evaluate.width=80",
-            "evaluate.height=60", "evaluate.renderer=cpu", "evaluate.run=goal_seeker", "executor=sync", *a.overrides])
-    summary = execute(cfg)
-    if summary["failures"]:
-        raise SystemExit(f"evaluation failed: {summary['failures']}")
-    import json
-
-    res = json.loads((Path(a.root) / "07_eval" / "goal_seeker" / "summary.json").read_text())
-    overall = res["tasks"]["pointnav"]["overall"]
-    print(f"GoalSeeker on {res['episodes']} PointNav episodes: SR {overall['sr']:.2f}, SPL {overall['spl']:.2f}")
-    return res
+    ds = NavDataset(a.root)
+    cfg = ds.env_config(width=80, height=60)
+    rows = []
+    for sid in ds.scene_ids("pointnav"):
+        ctx = ds.scene_context(sid, renderer="cpu")
+        rows += run_episodes(ctx, ds.episodes(sid, "pointnav", limit=a.episodes), GoalSeeker(), cfg)
+    overall = aggregate(rows)["overall"]
+    print(f"GoalSeeker on {len(rows)} PointNav episodes: SR {overall['sr']:.2f}, SPL {overall['spl']:.2f}")
+    return rows
 
 
 if __name__ == "__main__":

@@ -55,6 +55,16 @@ def test_config_reference_reads_field_docstrings():
     assert got["flag"].default == "false" and got["undocumented"].doc == ""
 
 
+def test_no_page_tells_users_to_import_the_pipeline_project(project_root):
+    """Users script against the library (navarena, navcore); pipeline/ and stages/ are the checkout's."""
+    import re
+
+    pages = [project_root / "README.md", *(project_root / "docs").rglob("*.md"), *(project_root / "examples").glob("*.py")]
+    told = [f"{p.relative_to(project_root)}: {m.group(0)}" for p in pages
+            for m in re.finditer(r"(from|import) (stages|pipeline)\b[^\n]*", p.read_text())]
+    assert not told, told
+
+
 def test_readme_is_short_and_names_the_data_root(project_root):
     text = (project_root / "README.md").read_text()
     assert len(text.splitlines()) <= 250

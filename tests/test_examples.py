@@ -23,12 +23,10 @@ def test_query_episodes(episode_run, project_root, tmp_path):
     assert "expert steps" in out and (tmp_path / "geo.png").stat().st_size > 5_000
 
 
-def test_custom_policy_is_evaluated_in_closed_loop(episode_run, project_root, small_scene_overrides):
-    root, over, _ = episode_run
-    same = [*small_scene_overrides, *over[1:]]  # the settings the root was made with (make_cfg)
-    out = run_example(project_root, "custom_policy.py", root, "--episodes", 1, *same)
-    assert "GoalSeeker on 1 PointNav episodes: SR" in out
-    assert (root / "07_eval" / "goal_seeker" / "results.json").is_file()
+def test_custom_policy_is_evaluated_in_closed_loop(episode_run, project_root):
+    root, _, _ = episode_run
+    out = run_example(project_root, "custom_policy.py", root, "--episodes", 2)
+    assert "GoalSeeker on 2 PointNav episodes: SR" in out  # the library alone: 2 episodes of the one scene
 
 
 @pytest.mark.filterwarnings("ignore")
