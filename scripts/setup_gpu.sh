@@ -61,7 +61,10 @@ then :; else
     "$BIN/python" -m pip install -q torch --index-url "https://download.pytorch.org/whl/$TAG"
   fi
 fi
-"$BIN/python" -m pip install -q $PIP_SRC -e ".[gpu,open_vocab,test]"
+# the library with its gpu extra, plus the pipeline project's dependency groups (pyproject.toml)
+"$BIN/python" -m pip install -q $PIP_SRC -e ".[gpu,open_vocab]" --group pipeline --group test
+# the checkout's pipeline/ and stages/ on the venv's path (as make setup does)
+"$BIN/python" -c "import pathlib, sysconfig; pathlib.Path(sysconfig.get_paths()['purelib'], 'navarena_checkout.pth').write_text(str(pathlib.Path.cwd()) + chr(10))"
 mkdir -p data/08_reports
 "$BIN/python" -m navcore.render.ready --json data/08_reports/gpu_ready.json
 touch "$VENV/.installed-gpu"
