@@ -165,26 +165,9 @@ bench-screening: $(STAMP)
 	$(BIN)/python -m benchmarks.captures.screening --real-data data/real_indoor --docs $(ARGS)
 
 # issue 13's proof (about two hours on two cores): storage of the default and real datasets, the
-# release cost (one-core sample runs of a real and a synthetic 1.5 M-Gaussian scene at 1/10 of the
-# release density; GPU stage times from release_gpu.json, written on a CUDA machine by
-# `python -m benchmarks.publishing.release_gpu`), the 2,000-scene simulation, the SLURM tests, the CPU renderer
-COST = executor=sync goal_images.enabled=true task.pointnav.episodes_per_scene=400 \
-       task.imagenav.episodes_per_scene=400 task.objectnav.episodes_per_scene=280
-ONE_CORE = NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1 SOURCE_DATE_EPOCH=1700000000
+# release cost, the 2,000-scene simulation, the SLURM tests, the CPU renderer (benchmarks/scale/suite.py)
 bench-scale: $(STAMP)
-	test -f data/_runs/latest.json || $(BIN)/python -m pipeline
-	$(BIN)/python -m pipeline scenes=real_indoor data_root=data/real_indoor
-	$(BIN)/python -m pipeline scenes=real_indoor data_root=data/real_indoor_compact ingest.store=reference \
-	    asset.aligned_format=spz voxelize.store_opacity=false
-	$(ONE_CORE) $(BIN)/python -m pipeline data_root=data/cost_real scenes=real_indoor scenes.limit=1 $(COST)
-	$(ONE_CORE) $(BIN)/python -m pipeline data_root=data/cost_synthetic scenes.count=1 scenes.num_gaussians=1500000 $(COST)
-	$(BIN)/python -m benchmarks.scale.bench_scale cost data/cost_real data/cost_synthetic
-	$(BIN)/python -m benchmarks.scale.render_cpu --real-root data/real_indoor
-	$(BIN)/python -m benchmarks.scale.render_cpu --bound --real-root data/real_indoor
-	$(BIN)/python -m benchmarks.scale.bench_scale sim --root data/sim
-	$(BIN)/python -m benchmarks.scale.bench_scale slurm
-	$(BIN)/python -m benchmarks.scale.bench_scale report --data data --real-root data/real_indoor \
-	    --compact-root data/real_indoor_compact --docs docs/bench_scale.md
+	$(BIN)/python -m benchmarks.scale.suite $(ARGS)
 
 # on a CUDA machine: writes data/08_reports/voxelize_gpu.json; bench-spatial merges it (or
 # `python -m benchmarks.map.spatial --merge-gpu` folds it into an existing report)
@@ -199,32 +182,13 @@ SUBMIT_FLAGS ?=
 submit: $(STAMP)
 	$(BIN)/python -m pipeline.submit --shards $(SHARDS) --scheduler $(SCHEDULER) $(SUBMIT_FLAGS) -- $(ARGS)
 
-# issue 14's and 48's proof: the fault-injection scenarios against an undisturbed run (the SLURM
-# ones on a one-node SLURM it starts when root), 10,000 fuzz cases a reader layout, an agent-server
-# frame type, and of catalogs, label folders and labelled meshes; a run under chaos (5 minutes;
-# CHAOS_MINUTES=60: the scale simulation for an hour, 3,300 scenes, then all of them undisturbed: about 2 hours); then data/08_reports/bench_faults.{json,md}
-# the fuzzers are single-threaded: three side by side on the two cores (readers split in two
-# halves of about equal time), then the halves' reports merged
-FUZZ_A = sog,spz_v2,supersplat_ply,npy_folder
-FUZZ_B = spz_v3,inria_ply,splat,spz_v4,sog_lod
+# issue 14's and 48's proof (benchmarks/robustness/suite.py): the fault-injection scenarios, 10,000
+# fuzz cases of each input kind, reader layout and agent-server frame type, a run under chaos
+# (CHAOS_MINUTES=60: the scale simulation for an hour, about 2 hours in all), then
+# data/08_reports/bench_faults.{json,md} and docs/bench_faults.md
 CHAOS_MINUTES ?= 5
 test-faults: $(STAMP)
-	mkdir -p data/08_reports
-	-scripts/slurm_localhost.sh  # the batch-cluster scenarios need it (root); without it they are skipped
-	NAVARENA_FAULTS_KILLS=20 NAVARENA_FAULTS_REPORT=data/08_reports/faults_scenarios.json \
-	    $(BIN)/python -m pytest -q -m faults tests/test_faults.py $(ARGS)
-	$(BIN)/python -m benchmarks.robustness.fuzz_inputs --cases 10000 > data/fuzz_inputs.log 2>&1; \
-	    r=$$?; tail -6 data/fuzz_inputs.log; test $$r = 0
-	$(BIN)/python -m benchmarks.robustness.chaos --minutes $(CHAOS_MINUTES)
-	$(BIN)/python -m benchmarks.robustness.fuzz_frames --cases 10000 > data/fuzz_frames.log 2>&1 & f=$$!; \
-	$(BIN)/python -m benchmarks.robustness.fuzz_readers --cases 10000 --kinds $(FUZZ_A) --work /tmp/navarena_fuzz_a \
-	    --out data/08_reports/fuzz_a > data/fuzz_a.log 2>&1 & a=$$!; \
-	$(BIN)/python -m benchmarks.robustness.fuzz_readers --cases 10000 --kinds $(FUZZ_B) --work /tmp/navarena_fuzz_b \
-	    --out data/08_reports/fuzz_b; b=$$?; \
-	wait $$a; ra=$$?; wait $$f; rf=$$?; tail -3 data/fuzz_frames.log data/fuzz_a.log; test $$b$$ra$$rf = 000
-	$(BIN)/python -m benchmarks.robustness.fuzz_readers --merge data/08_reports/fuzz_a/fuzz_readers.json \
-	    data/08_reports/fuzz_b/fuzz_readers.json
-	$(BIN)/python -m benchmarks.robustness.faults --docs --merge data/08_reports/faults_scenarios.json
+	$(BIN)/python -m benchmarks.robustness.suite --chaos-minutes $(CHAOS_MINUTES) $(ARGS)
 
 # the batch-scheduler tests: a one-node SLURM on this machine (scripts/slurm_localhost.sh, root),
 # then make submit (array job, shards, cancel and resubmit) and executor=slurm (dask-jobqueue)

@@ -78,7 +78,8 @@ PAGES: dict[str, Page] = {
                                      ("benchmarks/goals/semantics_views.py",), ("semantics",)),
     "bench_blind_views.md": Page("python -m benchmarks.dataset.blind_views --docs docs/bench_blind_views.md",
                                  ("benchmarks/dataset/blind_views.py", *_RENDER), ("episodes",)),
-    "bench_faults.md": Page("make test-faults", ("benchmarks/robustness/faults.py", "benchmarks/robustness/fuzz_frames.py",
+    "bench_faults.md": Page("make test-faults", ("benchmarks/robustness/suite.py", "benchmarks/robustness/faults.py",
+                                                 "benchmarks/robustness/fuzz_frames.py",
                                                  "benchmarks/robustness/fuzz_readers.py", "tests/test_faults.py", "pipeline",
                                                  "navcore/io", "navcore/gaussians/formats", "navcore/eval/protocol"),
                             ALL_STAGES),
@@ -87,7 +88,8 @@ PAGES: dict[str, Page] = {
                          ("voxelize", "semantics", "episodes")),
     "bench_release.md": Page("make bench-release", ("benchmarks/publishing/release.py", "pipeline/release",
                                                     "navarena/verify_release.py", "navcore/io/release.py"), ("export",)),
-    "bench_scale.md": Page("make bench-scale", ("benchmarks/scale/bench_scale.py", "benchmarks/dataset/storage.py",
+    "bench_scale.md": Page("make bench-scale", ("benchmarks/scale/suite.py", "benchmarks/scale/bench_scale.py",
+                                                "benchmarks/dataset/storage.py",
                                                 "benchmarks/scale/render_cpu.py", "pipeline", *_RENDER), ALL_STAGES),
 }
 

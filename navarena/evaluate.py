@@ -19,17 +19,7 @@ import sys
 from pathlib import Path
 
 from navarena.dataset import TASKS, NavDataset
-
-
-def make_agent_for(spec: str, seed: int, timeout: float, batch: bool = False):
-    """An agent from a registry name, 'package.module:Class' or a ws:// agent server."""
-    if spec.startswith(("ws://", "wss://")):
-        from navcore.eval.protocol.client import RemoteAgent, RemoteBatchAgent
-
-        return (RemoteBatchAgent if batch else RemoteAgent)(spec, timeout=timeout)
-    from navcore.eval.agents import AGENTS, make_agent
-
-    return make_agent(spec, **({"seed": seed} if spec in AGENTS else {}))
+from navcore.eval.agents import agent_for
 
 
 def chosen_episodes(ds: NavDataset, args) -> dict[str, list]:
@@ -121,8 +111,8 @@ def evaluate(args) -> tuple[list[dict], bool]:
                 seed = stream_seed(args.seed, sid, "evaluate") % 2**31
                 if args.batch_slots > 1:
                     remote = args.agent.startswith(("ws://", "wss://"))
-                    client = make_agent_for(args.agent, seed, args.timeout, batch=True) if remote else \
-                        InProcessBatch(lambda seed=seed: make_agent_for(args.agent, seed, args.timeout))
+                    client = agent_for(args.agent, seed, args.timeout, batch=True) if remote else \
+                        InProcessBatch(lambda seed=seed: agent_for(args.agent, seed, args.timeout))
 
                     def done(row):
                         rows.append(row)
@@ -131,7 +121,7 @@ def evaluate(args) -> tuple[list[dict], bool]:
 
                     run_episodes_batched(ctx, eps, client, args.batch_slots, cfg, on_result=done)
                 else:
-                    env, client = NavEnv(ctx, cfg), make_agent_for(args.agent, seed, args.timeout)
+                    env, client = NavEnv(ctx, cfg), agent_for(args.agent, seed, args.timeout)
                     for ep in eps:
                         rows.append(run_episode(env, client, ep))
                         progress.advance(frames=int(rows[-1]["steps"]))

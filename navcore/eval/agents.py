@@ -26,6 +26,19 @@ AGENTS = Registry("agent", {
 make_agent = AGENTS.make
 
 
+def agent_for(spec: str, seed: int = 0, timeout: float = 60.0, batch: bool = False, **kwargs):
+    """An agent from a registry name, 'package.module:Class' or a ws:// agent server (a
+    RemoteBatchAgent with batch=True). A registry agent gets the seed unless kwargs name one;
+    kwargs go to the agent's constructor (or to the remote client)."""
+    if spec.startswith(("ws://", "wss://")):
+        from navcore.eval.protocol.client import RemoteAgent, RemoteBatchAgent
+
+        return (RemoteBatchAgent if batch else RemoteAgent)(spec, timeout=timeout, **kwargs)
+    if spec in AGENTS:
+        kwargs.setdefault("seed", seed)
+    return make_agent(spec, **kwargs)
+
+
 class RandomAgent:
     """Uniform over forward / left / right; never stops (seeded)."""
 

@@ -14,6 +14,7 @@ import numpy as np
 import pyarrow as pa
 from omegaconf import OmegaConf
 
+from navcore.eval.agents import agent_for
 from navcore.eval.env import EnvConfig, NavEnv, SceneContext
 from navcore.eval.episode import Episode
 from navcore.eval.loop import run_episode
@@ -31,19 +32,6 @@ REFERENCE_STRIDE = 10  # expert rows kept for DTW (every 0.5 s)
 
 def run_name(ecfg: EvaluateConfig) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", ecfg.run).strip("_")
-
-
-def make_scene_agent(ecfg: EvaluateConfig, seed: int):
-    if ecfg.agent.startswith(("ws://", "wss://")):
-        from navcore.eval.protocol.client import RemoteAgent
-
-        return RemoteAgent(ecfg.agent, timeout=ecfg.timeout_s, **ecfg.agent_args)
-    from navcore.eval.agents import AGENTS, make_agent
-
-    args = dict(ecfg.agent_args)
-    if ecfg.agent in AGENTS:
-        args.setdefault("seed", seed)
-    return make_agent(ecfg.agent, **args)
 
 
 def eval_set_config(cfg) -> EvalSetConfig | None:
@@ -143,10 +131,10 @@ def run(scene, cfg, catalog) -> dict:
 
             client = RemoteBatchAgent(ecfg.agent, timeout=ecfg.timeout_s, **ecfg.agent_args)
         else:
-            client = InProcessBatch(lambda: make_scene_agent(ecfg, seed))
+            client = InProcessBatch(lambda: agent_for(ecfg.agent, seed, ecfg.timeout_s, **ecfg.agent_args))
         rows = run_episodes_batched(ctx, episodes, client, ecfg.batch_slots, env_cfg, on_result=logged)
     else:
-        env, agent, rows = NavEnv(ctx, env_cfg), make_scene_agent(ecfg, seed), []
+        env, agent, rows = NavEnv(ctx, env_cfg), agent_for(ecfg.agent, seed, ecfg.timeout_s, **ecfg.agent_args), []
         for ep in episodes:
             frames = [] if (ecfg.render and len(videos) < ecfg.videos) else None
             rows.append(logged(run_episode(env, agent, ep, frames)))
