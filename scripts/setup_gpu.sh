@@ -40,6 +40,10 @@ if [ -n "${WHEELS:-}" ]; then
   PIP_SRC="--no-index --find-links $WHEELS"
 fi
 test -x "$BIN/python" || "$PY" -m venv --system-site-packages "$VENV"
+# a python3 that is itself a venv (an image's /opt/torch/.venv with its CUDA torch): ours sees its
+# packages too, after its own (--system-site-packages reaches only the base interpreter's)
+PARENT=$("$PY" -c "import sys, sysconfig; print(sysconfig.get_paths()['purelib'] if sys.prefix != sys.base_prefix else '')")
+[ -z "$PARENT" ] || "$BIN/python" -c "import pathlib, sys, sysconfig; pathlib.Path(sysconfig.get_paths()['purelib'], 'parent_venv.pth').write_text(sys.argv[1] + chr(10))" "$PARENT"
 "$BIN/python" -m pip install -q --upgrade pip $PIP_SRC || true
 
 # keep an importable torch whose CUDA the driver runs; otherwise install the matching build
@@ -61,8 +65,18 @@ then :; else
     "$BIN/python" -m pip install -q torch --index-url "https://download.pytorch.org/whl/$TAG"
   fi
 fi
-# the library with its gpu extra, plus the pipeline project's dependency groups (pyproject.toml)
-"$BIN/python" -m pip install -q $PIP_SRC -e ".[gpu,open_vocab]" --group pipeline --group test
+if [ -n "$PIP_SRC" ]; then
+  # offline: every wheel of the folder as it is, then the project itself, neither resolved (a folder
+  # carried to an offline machine holds what that machine lacks); pip check names what is still
+  # missing: optional parts (open3d for mesh labels, av for videos, mlcroissant for releases) may be
+  "$BIN/python" -m pip install -q --no-index --no-deps "$WHEELS"/*.whl
+  "$BIN/python" -m pip install -q --no-index --no-deps --no-build-isolation -e .
+  "$BIN/python" -m pip check || echo "make setup-gpu: the requirements above are not in $WHEELS nor installed;" \
+    "navarena doctor says what each is for"
+else
+  # the library with its gpu extra, plus the pipeline project's dependency groups (pyproject.toml)
+  "$BIN/python" -m pip install -q -e ".[gpu,open_vocab]" --group pipeline --group test
+fi
 # the checkout's pipeline/ and stages/ on the venv's path (as make setup does)
 "$BIN/python" -c "import pathlib, sysconfig; pathlib.Path(sysconfig.get_paths()['purelib'], 'navarena_checkout.pth').write_text(str(pathlib.Path.cwd()) + chr(10))"
 mkdir -p data/08_reports

@@ -22,6 +22,8 @@ AGENTS = Registry("agent", {
     "oracle": "navcore.eval.agents:OracleAgent",
     "noisy_oracle": "navcore.eval.agents:NoisyOracleAgent",
     "depth_reactive": "navcore.eval.agents:DepthReactiveAgent",
+    # the learned baselines, trained on NavArena's own episodes (navcore/models/<name>/model_card.md)
+    "pointnav_bc": "navcore.baselines.agent:LearnedPointNavAgent",
 })
 make_agent = AGENTS.make
 

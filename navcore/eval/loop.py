@@ -76,6 +76,11 @@ class InProcessBatch:
                 self.agents[slot].bind(self.benv.envs[slot])
 
     def act(self, observations: dict) -> dict:
+        slots = list(observations)
+        kinds = {type(self.agents[s]) for s in slots}
+        batch = getattr(next(iter(kinds)), "act_batch", None) if len(kinds) == 1 else None
+        if batch is not None:  # a learned policy: every slot in one forward pass
+            return dict(zip(slots, batch([self.agents[s] for s in slots], [observations[s] for s in slots])))
         return {slot: self.agents[slot].act(o) for slot, o in observations.items()}
 
     def end(self, results: dict) -> None:

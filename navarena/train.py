@@ -1,0 +1,390 @@
+"""navarena train: a learned PointNav baseline from a data root or a release, by behaviour cloning
+and DAgger.
+
+    navarena train data --out runs/pointnav_bc                  # defaults: 1 BC round + 3 DAgger rounds
+    navarena train data --out runs/pn --rounds 1                # behaviour cloning only
+    navarena train data --out runs/pn --resume                  # go on from the last finished round
+
+Round 0 (behaviour cloning): the expert (the costmap's geodesic oracle, navcore.nav.oracle: the
+same one that made the stored action sequences) drives the training episodes in the batched
+environment; every step is rendered at the expert's pose and labelled with its action.
+Rounds 1..: DAgger. The learner drives (the expert's action is executed instead with probability
+beta^round), and every state it visits is labelled with the expert's action there: the geodesic
+field gives the oracle's action at any pose, so the learner is taught to recover from its own
+mistakes. The rounds' data are aggregated and the network is trained on all of it.
+Episodes run under explicit_stop, so the expert's STOP inside the goal region is learned.
+
+After each round the checkpoint is evaluated in closed loop on held-out episodes (the val_unseen
+split's scenes, else the test split's), and the run folder gets:
+    model.pt                 the policy (navcore.baselines.checkpoint; weights_only loading)
+    model_card.json / .md    data, config, seed, per-round curve (loss, SR, SPL), timings
+    rounds/round_<r>.npz     the round's labelled steps (resume reads them back)
+    checkpoint.pt            network + optimiser + round (resume)
+Deterministic for a seed on one device (the CPU renderer; gsplat's GPU sums are not bitwise
+reproducible).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from navarena.dataset import NavDataset
+from navcore.baselines.checkpoint import load_checkpoint, save_checkpoint
+from navcore.baselines.model import NO_ACTION, PointNavNet, PointNavSpec, depth_input, goal_input, parameter_count
+from navcore.nav.actions import STOP
+from navcore.nav.oracle import DiscreteOracle
+from navcore.seeds import stream_seed
+
+
+@dataclass
+class TrainConfig:
+    """Every setting of a training run (recorded in the model card)."""
+
+    task: str = "pointnav"
+    rounds: int = 4
+    """Round 0 is behaviour cloning; rounds 1.. are DAgger."""
+    episodes_per_round: int = 1024
+    """Training episodes collected per round (drawn over the training scenes)."""
+    beta: float = 0.5
+    """DAgger: probability beta^round of executing the expert's action instead of the learner's."""
+    max_learner_steps: int = 400
+    """A learner-driven episode is cut after this many steps (its labels are kept)."""
+    grad_steps: int = 1500
+    """Gradient steps after each round's collection."""
+    batch_episodes: int = 16
+    """Episodes (whole sequences) per gradient step."""
+    lr: float = 5e-4
+    weight_decay: float = 1e-5
+    slots: int = 64
+    """Episodes stepped together per scene (one render call per step)."""
+    width: int = 128
+    height: int = 96
+    """Render size of the training frames (the network pools them to its own input size)."""
+    train_split: str = "train"
+    val_split: str | None = None
+    """Held-out episodes for the per-round closed-loop check (None: val_unseen if present, else test)."""
+    val_episodes: int = 64
+    scenes: int | None = None
+    """Use the first N training scenes (the scene-scaling runs); None: all."""
+    renderer: str = "auto"
+    device: str = "auto"
+    seed: int = 0
+    spec: PointNavSpec = field(default_factory=PointNavSpec)
+
+
+class Steps:
+    """Labelled sequences of one or more rounds: per step uint8 depth, float goal, prev action,
+    label; `starts` index each sequence."""
+
+    def __init__(self, depth, goal, prev, label, lengths):
+        self.depth, self.goal, self.prev, self.label = depth, goal, prev, label
+        self.lengths = np.asarray(lengths, np.int64)
+        self.starts = np.concatenate([[0], np.cumsum(self.lengths)[:-1]]).astype(np.int64)
+
+    @classmethod
+    def concat(cls, parts: list["Steps"]) -> "Steps":
+        return cls(*(np.concatenate([getattr(p, k) for p in parts]) for k in ("depth", "goal", "prev", "label")),
+                   np.concatenate([p.lengths for p in parts]))
+
+    def save(self, path: Path) -> None:
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez_compressed(tmp, depth=self.depth, goal=self.goal, prev=self.prev, label=self.label,
+                            lengths=self.lengths)
+        tmp.replace(path)
+
+    @classmethod
+    def load(cls, path: Path) -> "Steps":
+        z = np.load(path)
+        return cls(z["depth"], z["goal"], z["prev"], z["label"], z["lengths"])
+
+    def __len__(self) -> int:
+        return int(self.lengths.sum())
+
+
+def resolve_device(device: str) -> str:
+    return ("cuda" if torch.cuda.is_available() else "cpu") if device == "auto" else device
+
+
+class Trainer:
+    def __init__(self, root, out, cfg: TrainConfig, quiet: bool = False):
+        self.ds, self.out, self.cfg, self.quiet = NavDataset(root), Path(out), cfg, quiet
+        self.device = resolve_device(cfg.device)
+        torch.manual_seed(cfg.seed)
+        self.net = PointNavNet(cfg.spec).to(self.device)
+        self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
+        self.splits = {sid: set(self.ds.episode_table(sid, cfg.task)["split"]) for sid in self.ds.scene_ids(cfg.task)}
+        self.train_scenes = self.scenes_of(cfg.train_split)
+        if cfg.scenes:
+            self.train_scenes = self.train_scenes[:cfg.scenes]
+        if not self.train_scenes:
+            raise SystemExit(f"navarena train: {root} has no {cfg.task} episodes in split {cfg.train_split!r}")
+        self.val_split = cfg.val_split or next((s for s in ("val_unseen", "test") if self._has_split(s)), None)
+        self._ctx: dict = {}
+        self._train_eps: dict = {}
+        self.curve: list[dict] = []
+        self.frames = 0
+        self.render_seconds = 0.0
+
+    def log(self, msg: str) -> None:
+        if not self.quiet:
+            print(msg, flush=True)
+
+    def scenes_of(self, split: str) -> list[str]:
+        """Scenes with episodes of the split (held-out splits hold whole scenes)."""
+        return [sid for sid, splits in self.splits.items() if split in splits]
+
+    def _has_split(self, split: str) -> bool:
+        return bool(self.scenes_of(split))
+
+    def ctx(self, sid: str):
+        if sid not in self._ctx:
+            self._ctx[sid] = self.ds.scene_context(sid, renderer=self.cfg.renderer)
+        return self._ctx[sid]
+
+    # ------------------------------------------------------------------ collection
+    def collect(self, rnd: int) -> Steps:
+        cfg = self.cfg
+        rng = np.random.default_rng(stream_seed(cfg.seed, "train-collect", str(rnd)) % 2**32)
+        per_scene = np.bincount(rng.integers(0, len(self.train_scenes), cfg.episodes_per_round),
+                                minlength=len(self.train_scenes))
+        beta = cfg.beta ** rnd if rnd else 1.0
+        parts, t0, n_eps = [], time.perf_counter(), 0
+        for i, sid in enumerate(self.train_scenes):
+            if not per_scene[i]:
+                continue
+            eps = self._train_eps.get(sid) or self._train_eps.setdefault(sid, self.ds.episodes(sid, cfg.task, cfg.train_split))
+            pick = rng.choice(len(eps), int(per_scene[i]), replace=len(eps) < per_scene[i])
+            parts.append(self._rollouts(sid, [eps[j] for j in pick], beta, rng))
+            n_eps += len(pick)
+            steps = sum(len(p) for p in parts)
+            dt = time.perf_counter() - t0
+            left = dt / n_eps * (cfg.episodes_per_round - n_eps)
+            self.log(f"  round {rnd} collect: {n_eps}/{cfg.episodes_per_round} episodes, {steps} frames, "
+                     f"{steps / dt:.0f} frames/s, {left:.0f} s left")
+        return Steps.concat(parts)
+
+    @torch.no_grad()
+    def _rollouts(self, sid: str, episodes: list, beta: float, rng) -> Steps:
+        """Episodes of one scene, `slots` at a time: the executed action is the expert's with
+        probability beta, else the learner's; every step is labelled with the expert's."""
+        from navcore.eval.batch import BatchNavEnv
+
+        cfg, ctx = self.cfg, self.ctx(sid)
+        env_cfg = self.ds.env_config(protocol="explicit_stop", width=cfg.width, height=cfg.height)
+        queue = list(episodes)
+        n = min(cfg.slots, len(queue))
+        benv = BatchNavEnv(ctx, n, env_cfg, device_obs=self.device != "cpu")
+        seqs: list[dict] = []
+        slot_ep, slot_seq, oracle = [None] * n, [None] * n, [None] * n
+        h = self.net.initial_state(n, self.device)
+        prev = torch.full((n,), NO_ACTION, dtype=torch.long, device=self.device)
+        obs = [None] * n
+
+        def start(i):
+            ep = queue.pop(0)
+            slot_ep[i] = ep
+            oracle[i] = DiscreteOracle(ctx.field(ep).grid, ctx.costmap, ep.regions, ep.success_radius, ep.goal_yaw,
+                                       ep.heading_tolerance, env_cfg.actions.forward_step, env_cfg.actions.turn)
+            slot_seq[i] = {"depth": [], "goal": [], "prev": [], "label": []}
+            h[:, i] = 0
+            prev[i] = NO_ACTION
+            obs[i] = benv.reset_slot(i, ep)
+
+        for i in range(n):
+            start(i)
+        while any(e is not None for e in slot_ep):
+            live = [i for i in range(n) if slot_ep[i] is not None]
+            t = time.perf_counter()
+            d = depth_input(torch.stack([torch.as_tensor(obs[i]["depth"]) for i in live]).to(self.device), cfg.spec)
+            g = goal_input(np.stack([obs[i]["pointgoal"] for i in live])).to(self.device)
+            self.render_seconds += time.perf_counter() - t
+            idx = torch.tensor(live, device=self.device)
+            logits, hl = self.net.step(d, g, prev[idx], h[:, idx])
+            h[:, idx] = hl
+            learner = logits.argmax(1).tolist()
+            d8 = (d[:, 0] * 255 + 0.5).to(torch.uint8).cpu().numpy()
+            gn, pv = g.cpu().numpy(), prev[idx].cpu().numpy()
+            actions = [None] * n
+            for k, i in enumerate(live):
+                s = benv.envs[i].state
+                label = oracle[i].action(s.x, s.y, s.yaw)
+                label = STOP if label < 0 else label  # no progress possible: the oracle agent stops too
+                seq = slot_seq[i]
+                seq["depth"].append(d8[k])
+                seq["goal"].append(gn[k])
+                seq["prev"].append(pv[k])
+                seq["label"].append(label)
+                a = label if rng.random() < beta else int(learner[k])
+                actions[i] = a
+                prev[i] = a
+            obs_all, _ = benv.step(actions)
+            for i in live:
+                obs[i] = obs_all[i]
+                s = benv.envs[i].state
+                if s.done or s.steps >= cfg.max_learner_steps:
+                    seqs.append(slot_seq[i])
+                    slot_ep[i] = None
+                    if queue:
+                        start(i)
+        self.frames += sum(len(s["label"]) for s in seqs)
+        return Steps(np.concatenate([np.stack(s["depth"]) for s in seqs]),
+                     np.concatenate([np.stack(s["goal"]) for s in seqs]).astype(np.float32),
+                     np.concatenate([np.asarray(s["prev"], np.int8) for s in seqs]),
+                     np.concatenate([np.asarray(s["label"], np.int8) for s in seqs]),
+                     [len(s["label"]) for s in seqs])
+
+    # ------------------------------------------------------------------ training
+    def fit(self, data: Steps, rnd: int) -> float:
+        cfg, dev = self.cfg, self.device
+        rng = np.random.default_rng(stream_seed(cfg.seed, "train-fit", str(rnd)) % 2**32)
+        self.net.train()
+        losses, t0 = [], time.perf_counter()
+        for step in range(cfg.grad_steps):
+            pick = rng.integers(0, len(data.lengths), cfg.batch_episodes)
+            lens = data.lengths[pick]
+            tmax = int(lens.max())
+            tidx = np.arange(tmax)[:, None]
+            mask = tidx < lens[None]
+            rows = np.where(mask, data.starts[pick][None] + np.minimum(tidx, lens[None] - 1), 0)
+            depth = torch.from_numpy(data.depth[rows]).to(dev).float().div_(255)[:, :, None]
+            goal = torch.from_numpy(data.goal[rows]).to(dev)
+            prev = torch.from_numpy(data.prev[rows].astype(np.int64)).to(dev)
+            label = torch.from_numpy(data.label[rows].astype(np.int64)).to(dev)
+            m = torch.from_numpy(mask).to(dev)
+            logits, _ = self.net(depth, goal, prev)
+            loss = (nn.functional.cross_entropy(logits.flatten(0, 1), label.flatten(), reduction="none")
+                    * m.flatten()).sum() / m.sum()
+            self.opt.zero_grad()
+            loss.backward()
+            nn.utils.clip_grad_norm_(self.net.parameters(), 1.0)
+            self.opt.step()
+            losses.append(loss.item())
+            if (step + 1) % max(1, cfg.grad_steps // 5) == 0:
+                dt = time.perf_counter() - t0
+                self.log(f"  round {rnd} fit: step {step + 1}/{cfg.grad_steps}, loss {np.mean(losses[-50:]):.3f}, "
+                         f"{(cfg.grad_steps - step - 1) * dt / (step + 1):.0f} s left")
+        self.net.eval()
+        return float(np.mean(losses[-max(1, len(losses) // 10):]))
+
+    # ------------------------------------------------------------------ evaluation
+    def evaluate(self, model: Path, sha: str, split: str, n: int, width: int | None = None,
+                 height: int | None = None) -> dict:
+        """Closed-loop SR / SPL of the saved policy on n episodes of `split` (distance protocol)."""
+        from navcore.baselines.agent import LearnedPointNavAgent
+        from navcore.eval.loop import InProcessBatch, run_episodes_batched
+        from navcore.eval.metrics import aggregate
+
+        scenes = self.scenes_of(split)
+        per = max(1, math.ceil(n / max(1, len(scenes))))
+        rows = []
+        cfg = self.ds.env_config(protocol="distance", width=width or self.cfg.width, height=height or self.cfg.height)
+        for sid in scenes:
+            eps = self.ds.episodes(sid, self.cfg.task, split)[:per]
+            factory = lambda: LearnedPointNavAgent(checkpoint=str(model), sha256=sha, device=self.device)  # noqa: E731
+            rows += run_episodes_batched(self.ctx(sid), eps, InProcessBatch(factory), min(self.cfg.slots, len(eps)), cfg)
+        return aggregate(rows)["overall"]
+
+    # ------------------------------------------------------------------ the run
+    def run(self, resume: bool = False) -> dict:
+        cfg, out = self.cfg, self.out
+        (out / "rounds").mkdir(parents=True, exist_ok=True)
+        first = 0
+        if resume and (out / "checkpoint.pt").is_file():
+            ck = torch.load(out / "checkpoint.pt", map_location=self.device, weights_only=True)
+            self.net.load_state_dict(ck["net"])
+            self.opt.load_state_dict(ck["opt"])
+            torch.set_rng_state(ck["torch_rng"])
+            self.curve, self.frames = list(ck["curve"]), int(ck["frames"])
+            first = int(ck["round"]) + 1
+            self.log(f"resuming after round {first - 1}")
+        parts = [Steps.load(out / "rounds" / f"round_{r}.npz") for r in range(first)]
+        t_run = time.perf_counter()
+        for rnd in range(first, cfg.rounds):
+            t0 = time.perf_counter()
+            new = self.collect(rnd)
+            new.save(out / "rounds" / f"round_{rnd}.npz")
+            parts.append(new)
+            t_collect = time.perf_counter() - t0
+            data = Steps.concat(parts)
+            t1 = time.perf_counter()
+            loss = self.fit(data, rnd)
+            t_fit = time.perf_counter() - t1
+            sha = self.save_model(final=False)
+            entry = {"round": rnd, "kind": "bc" if rnd == 0 else "dagger", "beta": cfg.beta ** rnd if rnd else 1.0,
+                     "new_frames": len(new), "frames": len(data), "episodes": int(len(data.lengths)),
+                     "loss": round(loss, 4), "collect_s": round(t_collect, 1), "fit_s": round(t_fit, 1),
+                     "collect_frames_per_s": round(len(new) / t_collect, 1)}
+            if self.val_split and cfg.val_episodes:
+                m = self.evaluate(out / "model.pt", sha, self.val_split, cfg.val_episodes)
+                entry.update({"val_split": self.val_split, "val_episodes": m["episodes"],
+                              "val_sr": round(m["sr"], 4), "val_spl": round(m["spl"], 4)})
+            self.curve.append(entry)
+            self.log(f"round {rnd} ({entry['kind']}): {entry}")
+            torch.save({"net": self.net.state_dict(), "opt": self.opt.state_dict(), "round": rnd,
+                        "torch_rng": torch.get_rng_state(), "curve": self.curve, "frames": self.frames},
+                       out / "checkpoint.pt")
+        sha = self.save_model(final=True, seconds=time.perf_counter() - t_run)
+        return {"model": str(out / "model.pt"), "sha256": sha, "curve": self.curve}
+
+    def meta(self, seconds: float | None = None) -> dict:
+        info = self.ds.info()
+        return {"task": self.cfg.task, "data": {"root": str(self.ds.path), "release": info.get("version"),
+                                                "train_scenes": self.train_scenes, "split": self.cfg.train_split},
+                "config": {**asdict(self.cfg), "spec": self.cfg.spec.to_dict()}, "seed": self.cfg.seed,
+                "curve": self.curve, "parameters": parameter_count(self.net), "frames": self.frames,
+                "device": torch.cuda.get_device_name() if self.device.startswith("cuda") else platform.processor()
+                or platform.machine(), "train_seconds": None if seconds is None else round(seconds, 1)}
+
+    def save_model(self, final: bool, seconds: float | None = None) -> str:
+        meta = self.meta(seconds)
+        sha = save_checkpoint(self.out / "model.pt", "pointnav", self.cfg.spec.to_dict(), self.net.state_dict(), meta)
+        if final:
+            card = {"name": self.out.name, "file": "model.pt", "sha256": sha, **meta}
+            (self.out / "model_card.json").write_text(json.dumps(card, indent=1, default=str) + "\n")
+        return sha
+
+
+def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
+    ap = ap or argparse.ArgumentParser(prog="navarena train", description=__doc__,
+                                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("root", help="a data root (make dataset) or a release folder")
+    ap.add_argument("--out", required=True, help="the run folder (model.pt, model_card.json, rounds/)")
+    ap.add_argument("--resume", action="store_true", help="go on after the last finished round in --out")
+    d = TrainConfig()
+    for name in ("rounds", "episodes_per_round", "grad_steps", "batch_episodes", "slots", "width", "height",
+                 "val_episodes", "scenes", "seed", "max_learner_steps"):
+        ap.add_argument("--" + name.replace("_", "-"), type=int, default=getattr(d, name))
+    for name in ("beta", "lr", "weight_decay"):
+        ap.add_argument("--" + name.replace("_", "-"), type=float, default=getattr(d, name))
+    for name in ("train_split", "val_split", "renderer", "device"):
+        ap.add_argument("--" + name.replace("_", "-"), default=getattr(d, name))
+    ap.add_argument("--quiet", action="store_true")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    fields_ = {k: getattr(a, k) for k in TrainConfig.__dataclass_fields__ if k not in ("spec", "task")}
+    cfg = TrainConfig(**fields_)
+    res = Trainer(a.root, a.out, cfg, quiet=a.quiet).run(resume=a.resume)
+    print(f"wrote {res['model']} (sha256 {res['sha256'][:12]}...)")
+    return 0
+
+
+def read_policy(path) -> dict:
+    """A trained policy's checkpoint payload (see navcore.baselines.checkpoint)."""
+    return load_checkpoint(path)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,98 @@
+"""The learned baselines as agents of the evaluator (registry names in navcore.eval.agents:
+`pointnav_bc`, ...), in-process or behind the agent server (navarena serve-agent --agent pointnav_bc).
+
+    agent = LearnedPointNavAgent()                          # the shipped pointnav_bc
+    agent = LearnedPointNavAgent(checkpoint="runs/pn/model.pt", device="cuda")
+
+The policy acts greedily (argmax). Agents of one checkpoint and device share one network; the
+batched evaluator steps all of its slots in one forward pass (act_batch).
+"""
+from __future__ import annotations
+
+import json
+from functools import lru_cache
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from navcore.baselines.checkpoint import load_checkpoint
+from navcore.baselines.model import NO_ACTION, PointNavNet, PointNavSpec, depth_input, goal_input
+
+MODELS = Path(str(resources.files("navcore") / "models"))
+
+
+def shipped(name: str) -> tuple[Path, str]:
+    """(model file, published sha256) of a shipped baseline (navcore/models/<name>/model_card.json)."""
+    card_file = MODELS / name / "model_card.json"
+    if not card_file.is_file():
+        raise FileNotFoundError(f"no shipped baseline {name!r} ({card_file} is missing; reinstall the package)")
+    card = json.loads(card_file.read_text())
+    return MODELS / name / card["file"], card["sha256"]
+
+
+def default_device(device: str | None) -> str:
+    if device in (None, "auto"):
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return device
+
+
+@lru_cache(maxsize=8)
+def _load_net(path: str, sha256: str | None, device: str) -> PointNavNet:
+    ck = load_checkpoint(path, kind="pointnav", sha256=sha256)
+    net = PointNavNet(PointNavSpec(**ck["spec"]))
+    try:
+        net.load_state_dict(ck["state_dict"])
+    except RuntimeError as e:
+        from navcore.baselines.checkpoint import CheckpointError
+
+        raise CheckpointError(f"{path}: its weights do not fit the PointNav network: {str(e).splitlines()[0]}") from None
+    return net.to(device).eval()
+
+
+class LearnedPointNavAgent:
+    """PointNav from depth and the goal vector (navcore.baselines.model.PointNavNet).
+
+    Args:
+        checkpoint: a policy file of navarena train (None: the shipped `name`).
+        name: the shipped baseline read when no checkpoint is given.
+        sha256: the checkpoint's expected sha256 (checked on load when given).
+        device: auto (CUDA when there) | cpu | cuda[:i].
+    """
+
+    task = "pointnav"
+
+    def __init__(self, checkpoint: str | None = None, name: str = "pointnav_bc", device: str | None = "auto",
+                 sha256: str | None = None, **_):
+        path, digest = (Path(checkpoint), sha256) if checkpoint else shipped(name)
+        self.device = default_device(device)
+        self.net = _load_net(str(path), digest, self.device)
+        self.h = None
+        self.prev = NO_ACTION
+
+    def reset(self, task: dict) -> None:
+        self.h, self.prev = self.net.initial_state(1, self.device), NO_ACTION
+
+    def act(self, obs: dict):
+        return type(self).act_batch([self], [obs])[0]
+
+    @classmethod
+    @torch.no_grad()
+    def act_batch(cls, agents: list, observations: list[dict]) -> list[int]:
+        """One forward pass for agents of one network (the batched evaluator's slots)."""
+        net, dev = agents[0].net, agents[0].device
+        for o in observations:
+            if "depth" not in o or "pointgoal" not in o:
+                raise ValueError("the PointNav baseline needs depth and pointgoal observations "
+                                 "(rendering on, task pointnav)")
+        depth = torch.stack([torch.as_tensor(o["depth"]).to(dev) for o in observations])
+        d = depth_input(depth, net.spec)
+        g = goal_input(np.stack([o["pointgoal"] for o in observations])).to(dev)
+        prev = torch.tensor([a.prev for a in agents], device=dev)
+        h = torch.cat([a.h if a.h is not None else net.initial_state(1, dev) for a in agents], 1)
+        logits, h = net.step(d, g, prev, h)
+        acts = logits.argmax(1).tolist()
+        for i, a in enumerate(agents):
+            a.h, a.prev = h[:, i:i + 1], int(acts[i])
+        return [int(x) for x in acts]

@@ -1,0 +1,74 @@
+"""Policy checkpoints: one torch file holding plain data only (tensors, numbers, strings, lists,
+dicts), read with torch.load(weights_only=True), so a file cannot run code when loaded. A
+damaged, truncated or unsafe file is refused with an error naming it.
+
+    {"format": "navarena-policy/1", "kind": "pointnav", "spec": {...}, "state_dict": {...},
+     "meta": {...}}           # meta: what the training recorded (data, config, seed, curve)
+
+The shipped baselines (navcore/models/<name>/) are checked against their published sha256 first.
+"""
+from __future__ import annotations
+
+import hashlib
+import io
+import os
+from pathlib import Path
+
+import torch
+
+FORMAT = "navarena-policy/1"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be used (damaged, unsafe, of another kind or format)."""
+
+
+def sha256_of(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def save_checkpoint(path, kind: str, spec: dict, state_dict: dict, meta: dict | None = None) -> str:
+    """Write atomically (a temporary file renamed into place); returns the file's sha256. Tensors
+    are saved contiguous and on the CPU, so the bytes do not depend on the device trained on."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    payload = {"format": FORMAT, "kind": kind, "spec": dict(spec),
+               "state_dict": {k: v.detach().cpu().contiguous().clone() for k, v in state_dict.items()},
+               "meta": meta or {}}
+    buf = io.BytesIO()
+    torch.save(payload, buf)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(buf.getvalue())
+    os.replace(tmp, path)
+    return hashlib.sha256(buf.getvalue()).hexdigest()
+
+
+def load_checkpoint(path, kind: str | None = None, sha256: str | None = None) -> dict:
+    """The checkpoint's payload (see the module docstring), its tensors on the CPU. Raises
+    FileNotFoundError, or CheckpointError naming the file and what is wrong."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"policy checkpoint {path} does not exist")
+    if sha256 is not None and (got := sha256_of(path)) != sha256:
+        raise CheckpointError(f"{path}: sha256 {got[:12]}... differs from the published {sha256[:12]}...; the file "
+                              f"is damaged or not the shipped one (reinstall the package)")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # a damaged zip, a pickle of code (refused by weights_only), anything else
+        what = "holds objects other than plain data (refused: loading it could run code)" \
+            if isinstance(e, __import__("pickle").UnpicklingError) else "is damaged or not a torch file"
+        raise CheckpointError(f"{path}: {what}: {str(e).splitlines()[0][:200]}") from None
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        raise CheckpointError(f"{path}: not a NavArena policy checkpoint (format "
+                              f"{payload.get('format') if isinstance(payload, dict) else type(payload).__name__!r}, "
+                              f"expected {FORMAT!r})")
+    for key in ("kind", "spec", "state_dict"):
+        if key not in payload:
+            raise CheckpointError(f"{path}: the checkpoint has no {key!r}")
+    if kind is not None and payload["kind"] != kind:
+        raise CheckpointError(f"{path}: a {payload['kind']!r} policy, not {kind!r}")
+    return payload
