@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import platform
 import sys
 import time
@@ -39,7 +40,7 @@ import torch
 from torch import nn
 
 from navarena.dataset import NavDataset
-from navcore.baselines.checkpoint import load_checkpoint, save_checkpoint
+from navcore.baselines.checkpoint import load_checkpoint, save_checkpoint, sha256_of
 from navcore.baselines.model import NO_ACTION, PointNavNet, PointNavSpec, depth_input, goal_input, parameter_count
 from navcore.nav.actions import STOP
 from navcore.nav.oracle import DiscreteOracle
@@ -76,6 +77,8 @@ class TrainConfig:
     val_episodes: int = 64
     scenes: int | None = None
     """Use the first N training scenes (the scene-scaling runs); None: all."""
+    workers: int = 0
+    """Collection processes (0: this one); on CUDA they share the GPUs round-robin."""
     renderer: str = "auto"
     device: str = "auto"
     seed: int = 0
@@ -129,8 +132,8 @@ class Trainer:
         if not self.train_scenes:
             raise SystemExit(f"navarena train: {root} has no {cfg.task} episodes in split {cfg.train_split!r}")
         self.val_split = cfg.val_split or next((s for s in ("val_unseen", "test") if self._has_split(s)), None)
-        self._ctx: dict = {}
-        self._train_eps: dict = {}
+        self.collector = Collector(root, cfg, self.device)  # this process's scenes (evaluation; collection
+        self.pool = None                                     # too when workers = 0)
         self.curve: list[dict] = []
         self.frames = 0
         self.render_seconds = 0.0
@@ -147,101 +150,30 @@ class Trainer:
         return bool(self.scenes_of(split))
 
     def ctx(self, sid: str):
-        if sid not in self._ctx:
-            self._ctx[sid] = self.ds.scene_context(sid, renderer=self.cfg.renderer)
-        return self._ctx[sid]
+        return self.collector.ctx(sid)
 
     # ------------------------------------------------------------------ collection
-    def collect(self, rnd: int) -> Steps:
+    def collect(self, rnd: int, model: Path, sha: str | None) -> Steps:
+        """The round's labelled episodes: each training scene's share of episodes_per_round, in
+        scene order (each scene's episodes and random stream depend on the seed, round and scene
+        only, so the result is the same with any number of workers)."""
         cfg = self.cfg
         rng = np.random.default_rng(stream_seed(cfg.seed, "train-collect", str(rnd)) % 2**32)
         per_scene = np.bincount(rng.integers(0, len(self.train_scenes), cfg.episodes_per_round),
                                 minlength=len(self.train_scenes))
-        beta = cfg.beta ** rnd if rnd else 1.0
+        jobs = [(sid, int(k), rnd, str(model) if rnd else None, sha) for sid, k in zip(self.train_scenes, per_scene) if k]
         parts, t0, n_eps = [], time.perf_counter(), 0
-        for i, sid in enumerate(self.train_scenes):
-            if not per_scene[i]:
-                continue
-            eps = self._train_eps.get(sid) or self._train_eps.setdefault(sid, self.ds.episodes(sid, cfg.task, cfg.train_split))
-            pick = rng.choice(len(eps), int(per_scene[i]), replace=len(eps) < per_scene[i])
-            parts.append(self._rollouts(sid, [eps[j] for j in pick], beta, rng))
-            n_eps += len(pick)
+        results = self.pool.imap(_collect_job, jobs) if self.pool is not None else map(self.collector.job, jobs)
+        for (sid, k, *_), part in zip(jobs, results):
+            parts.append(part)
+            n_eps += k
             steps = sum(len(p) for p in parts)
             dt = time.perf_counter() - t0
             left = dt / n_eps * (cfg.episodes_per_round - n_eps)
             self.log(f"  round {rnd} collect: {n_eps}/{cfg.episodes_per_round} episodes, {steps} frames, "
                      f"{steps / dt:.0f} frames/s, {left:.0f} s left")
+        self.frames += sum(len(p) for p in parts)
         return Steps.concat(parts)
-
-    @torch.no_grad()
-    def _rollouts(self, sid: str, episodes: list, beta: float, rng) -> Steps:
-        """Episodes of one scene, `slots` at a time: the executed action is the expert's with
-        probability beta, else the learner's; every step is labelled with the expert's."""
-        from navcore.eval.batch import BatchNavEnv
-
-        cfg, ctx = self.cfg, self.ctx(sid)
-        env_cfg = self.ds.env_config(protocol="explicit_stop", width=cfg.width, height=cfg.height)
-        queue = list(episodes)
-        n = min(cfg.slots, len(queue))
-        benv = BatchNavEnv(ctx, n, env_cfg, device_obs=self.device != "cpu")
-        seqs: list[dict] = []
-        slot_ep, slot_seq, oracle = [None] * n, [None] * n, [None] * n
-        h = self.net.initial_state(n, self.device)
-        prev = torch.full((n,), NO_ACTION, dtype=torch.long, device=self.device)
-        obs = [None] * n
-
-        def start(i):
-            ep = queue.pop(0)
-            slot_ep[i] = ep
-            oracle[i] = DiscreteOracle(ctx.field(ep).grid, ctx.costmap, ep.regions, ep.success_radius, ep.goal_yaw,
-                                       ep.heading_tolerance, env_cfg.actions.forward_step, env_cfg.actions.turn)
-            slot_seq[i] = {"depth": [], "goal": [], "prev": [], "label": []}
-            h[:, i] = 0
-            prev[i] = NO_ACTION
-            obs[i] = benv.reset_slot(i, ep)
-
-        for i in range(n):
-            start(i)
-        while any(e is not None for e in slot_ep):
-            live = [i for i in range(n) if slot_ep[i] is not None]
-            t = time.perf_counter()
-            d = depth_input(torch.stack([torch.as_tensor(obs[i]["depth"]) for i in live]).to(self.device), cfg.spec)
-            g = goal_input(np.stack([obs[i]["pointgoal"] for i in live])).to(self.device)
-            self.render_seconds += time.perf_counter() - t
-            idx = torch.tensor(live, device=self.device)
-            logits, hl = self.net.step(d, g, prev[idx], h[:, idx])
-            h[:, idx] = hl
-            learner = logits.argmax(1).tolist()
-            d8 = (d[:, 0] * 255 + 0.5).to(torch.uint8).cpu().numpy()
-            gn, pv = g.cpu().numpy(), prev[idx].cpu().numpy()
-            actions = [None] * n
-            for k, i in enumerate(live):
-                s = benv.envs[i].state
-                label = oracle[i].action(s.x, s.y, s.yaw)
-                label = STOP if label < 0 else label  # no progress possible: the oracle agent stops too
-                seq = slot_seq[i]
-                seq["depth"].append(d8[k])
-                seq["goal"].append(gn[k])
-                seq["prev"].append(pv[k])
-                seq["label"].append(label)
-                a = label if rng.random() < beta else int(learner[k])
-                actions[i] = a
-                prev[i] = a
-            obs_all, _ = benv.step(actions)
-            for i in live:
-                obs[i] = obs_all[i]
-                s = benv.envs[i].state
-                if s.done or s.steps >= cfg.max_learner_steps:
-                    seqs.append(slot_seq[i])
-                    slot_ep[i] = None
-                    if queue:
-                        start(i)
-        self.frames += sum(len(s["label"]) for s in seqs)
-        return Steps(np.concatenate([np.stack(s["depth"]) for s in seqs]),
-                     np.concatenate([np.stack(s["goal"]) for s in seqs]).astype(np.float32),
-                     np.concatenate([np.asarray(s["prev"], np.int8) for s in seqs]),
-                     np.concatenate([np.asarray(s["label"], np.int8) for s in seqs]),
-                     [len(s["label"]) for s in seqs])
 
     # ------------------------------------------------------------------ training
     def fit(self, data: Steps, rnd: int) -> float:
@@ -308,10 +240,27 @@ class Trainer:
             first = int(ck["round"]) + 1
             self.log(f"resuming after round {first - 1}")
         parts = [Steps.load(out / "rounds" / f"round_{r}.npz") for r in range(first)]
+        sha = sha256_of(out / "model.pt") if first else None
+        if cfg.workers:
+            import torch.multiprocessing as tmp
+
+            gpus = torch.cuda.device_count() if self.device.startswith("cuda") else 0
+            self.pool = tmp.get_context("spawn").Pool(cfg.workers, initializer=_init_worker,
+                                                      initargs=(str(self.ds.path), cfg, self.device, gpus))
         t_run = time.perf_counter()
+        try:
+            return self._rounds(first, parts, sha, t_run)
+        finally:
+            if self.pool is not None:
+                self.pool.close()
+                self.pool.join()
+                self.pool = None
+
+    def _rounds(self, first: int, parts: list, sha: str | None, t_run: float) -> dict:
+        cfg, out = self.cfg, self.out
         for rnd in range(first, cfg.rounds):
             t0 = time.perf_counter()
-            new = self.collect(rnd)
+            new = self.collect(rnd, out / "model.pt", sha)
             new.save(out / "rounds" / f"round_{rnd}.npz")
             parts.append(new)
             t_collect = time.perf_counter() - t0
@@ -336,22 +285,148 @@ class Trainer:
         sha = self.save_model(final=True, seconds=time.perf_counter() - t_run)
         return {"model": str(out / "model.pt"), "sha256": sha, "curve": self.curve}
 
-    def meta(self, seconds: float | None = None) -> dict:
+    TIMING = ("collect_s", "fit_s", "collect_frames_per_s")
+    """Curve fields that vary run to run (kept in the model card, not in model.pt)."""
+
+    def meta(self) -> dict:
+        """What model.pt records: the data, the full config, the seed and the curve (no timings, so
+        one config and seed on one device give the same bytes)."""
         info = self.ds.info()
-        return {"task": self.cfg.task, "data": {"root": str(self.ds.path), "release": info.get("version"),
-                                                "train_scenes": self.train_scenes, "split": self.cfg.train_split},
+        return {"task": self.cfg.task, "data": {"root": str(self.ds.path), "kind": info["kind"],
+                                                "release": info.get("version"), "train_scenes": self.train_scenes,
+                                                "split": self.cfg.train_split},
                 "config": {**asdict(self.cfg), "spec": self.cfg.spec.to_dict()}, "seed": self.cfg.seed,
-                "curve": self.curve, "parameters": parameter_count(self.net), "frames": self.frames,
-                "device": torch.cuda.get_device_name() if self.device.startswith("cuda") else platform.processor()
-                or platform.machine(), "train_seconds": None if seconds is None else round(seconds, 1)}
+                "curve": [{k: v for k, v in e.items() if k not in self.TIMING} for e in self.curve],
+                "parameters": parameter_count(self.net), "frames": self.frames}
 
     def save_model(self, final: bool, seconds: float | None = None) -> str:
-        meta = self.meta(seconds)
+        meta = self.meta()
         sha = save_checkpoint(self.out / "model.pt", "pointnav", self.cfg.spec.to_dict(), self.net.state_dict(), meta)
         if final:
-            card = {"name": self.out.name, "file": "model.pt", "sha256": sha, **meta}
+            dev = torch.cuda.get_device_name() if self.device.startswith("cuda") else \
+                f"{platform.machine()} CPU, {os.cpu_count()} cores"
+            card = {"name": self.out.name, "file": "model.pt", "sha256": sha, "licence": "Apache-2.0", **meta,
+                    "curve": self.curve, "trained_on": dev, "workers": self.cfg.workers,
+                    "train_seconds": None if seconds is None else round(seconds, 1)}
             (self.out / "model_card.json").write_text(json.dumps(card, indent=1, default=str) + "\n")
         return sha
+
+
+class Collector:
+    """Rollouts of training episodes in the batched environment, labelled by the expert (see the
+    module docstring); one per process (the trainer's, or each collection worker's)."""
+
+    def __init__(self, root, cfg: TrainConfig, device: str):
+        self.ds, self.cfg, self.device = NavDataset(root), cfg, device
+        self.net = PointNavNet(cfg.spec).to(device).eval()
+        self._ctx: dict = {}
+        self._eps: dict = {}
+        self._sha = None
+
+    def ctx(self, sid: str):
+        if sid not in self._ctx:
+            self._ctx[sid] = self.ds.scene_context(sid, renderer=self.cfg.renderer)
+        return self._ctx[sid]
+
+    def job(self, job) -> Steps:
+        sid, k, rnd, model, sha = job
+        if model is not None and sha != self._sha:  # this round's learner
+            ck = load_checkpoint(model, kind="pointnav", sha256=sha)
+            self.net.load_state_dict(ck["state_dict"])
+            self._sha = sha
+        cfg = self.cfg
+        if sid not in self._eps:
+            self._eps[sid] = self.ds.episodes(sid, cfg.task, cfg.train_split)
+        eps = self._eps[sid]
+        rng = np.random.default_rng(stream_seed(cfg.seed, sid, f"train-collect-{rnd}") % 2**32)
+        pick = rng.choice(len(eps), k, replace=len(eps) < k)
+        return self.rollouts(sid, [eps[j] for j in pick], cfg.beta ** rnd if rnd else 1.0, rng)
+
+    @torch.no_grad()
+    def rollouts(self, sid: str, episodes: list, beta: float, rng) -> Steps:
+        """Episodes of one scene, `slots` at a time: the executed action is the expert's with
+        probability beta, else the learner's; every step is labelled with the expert's."""
+        from navcore.eval.batch import BatchNavEnv
+
+        cfg, ctx, dev = self.cfg, self.ctx(sid), self.device
+        env_cfg = self.ds.env_config(protocol="explicit_stop", width=cfg.width, height=cfg.height)
+        queue = list(episodes)
+        n = min(cfg.slots, len(queue))
+        benv = BatchNavEnv(ctx, n, env_cfg, device_obs=dev != "cpu")
+        seqs: list[dict] = []
+        slot_ep, slot_seq, oracle = [None] * n, [None] * n, [None] * n
+        h = self.net.initial_state(n, dev)
+        prev = torch.full((n,), NO_ACTION, dtype=torch.long, device=dev)
+        obs = [None] * n
+
+        def start(i):
+            ep = queue.pop(0)
+            slot_ep[i] = ep
+            oracle[i] = DiscreteOracle(ctx.field(ep).grid, ctx.costmap, ep.regions, ep.success_radius, ep.goal_yaw,
+                                       ep.heading_tolerance, env_cfg.actions.forward_step, env_cfg.actions.turn)
+            slot_seq[i] = {"depth": [], "goal": [], "prev": [], "label": []}
+            h[:, i] = 0
+            prev[i] = NO_ACTION
+            obs[i] = benv.reset_slot(i, ep)
+
+        for i in range(n):
+            start(i)
+        while any(e is not None for e in slot_ep):
+            live = [i for i in range(n) if slot_ep[i] is not None]
+            d = depth_input(torch.stack([torch.as_tensor(obs[i]["depth"]) for i in live]).to(dev), cfg.spec)
+            g = goal_input(np.stack([obs[i]["pointgoal"] for i in live])).to(dev)
+            idx = torch.tensor(live, device=dev)
+            if beta < 1.0:
+                logits, hl = self.net.step(d, g, prev[idx], h[:, idx])
+                h[:, idx] = hl
+                learner = logits.argmax(1).tolist()
+            d8 = (d[:, 0] * 255 + 0.5).to(torch.uint8).cpu().numpy()
+            gn, pv = g.cpu().numpy(), prev[idx].cpu().numpy()
+            actions = [None] * n
+            for k, i in enumerate(live):
+                s = benv.envs[i].state
+                label = oracle[i].action(s.x, s.y, s.yaw)
+                label = STOP if label < 0 else label  # no progress possible: the oracle agent stops too
+                seq = slot_seq[i]
+                seq["depth"].append(d8[k])
+                seq["goal"].append(gn[k])
+                seq["prev"].append(pv[k])
+                seq["label"].append(label)
+                a = label if beta >= 1.0 or rng.random() < beta else int(learner[k])
+                actions[i] = a
+                prev[i] = a
+            obs_all, _ = benv.step(actions)
+            for i in live:
+                obs[i] = obs_all[i]
+                s = benv.envs[i].state
+                if s.done or s.steps >= cfg.max_learner_steps:
+                    seqs.append(slot_seq[i])
+                    slot_ep[i] = None
+                    if queue:
+                        start(i)
+        return Steps(np.concatenate([np.stack(s["depth"]) for s in seqs]),
+                     np.concatenate([np.stack(s["goal"]) for s in seqs]).astype(np.float32),
+                     np.concatenate([np.asarray(s["prev"], np.int8) for s in seqs]),
+                     np.concatenate([np.asarray(s["label"], np.int8) for s in seqs]),
+                     [len(s["label"]) for s in seqs])
+
+
+_WORKER: dict = {}
+
+
+def _init_worker(root: str, cfg: TrainConfig, device: str, gpus: int) -> None:
+    import multiprocessing
+
+    torch.set_num_threads(1)
+    if device.startswith("cuda") and gpus:
+        ident = (multiprocessing.current_process()._identity or (1,))[0] - 1
+        device = f"cuda:{ident % gpus}"
+        torch.cuda.set_device(device)
+    _WORKER["c"] = Collector(root, cfg, device)
+
+
+def _collect_job(job) -> Steps:
+    return _WORKER["c"].job(job)
 
 
 def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
@@ -362,7 +437,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
     ap.add_argument("--resume", action="store_true", help="go on after the last finished round in --out")
     d = TrainConfig()
     for name in ("rounds", "episodes_per_round", "grad_steps", "batch_episodes", "slots", "width", "height",
-                 "val_episodes", "scenes", "seed", "max_learner_steps"):
+                 "val_episodes", "scenes", "seed", "max_learner_steps", "workers"):
         ap.add_argument("--" + name.replace("_", "-"), type=int, default=getattr(d, name))
     for name in ("beta", "lr", "weight_decay"):
         ap.add_argument("--" + name.replace("_", "-"), type=float, default=getattr(d, name))
