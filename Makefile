@@ -8,6 +8,7 @@ STAMP := $(VENV)/.installed
 ARGS ?=
 CUDA ?=
 WHEELS ?=
+GSPLAT_BUILD ?=
 
 .PHONY: docs release verify-release bench-release bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
@@ -45,7 +46,7 @@ docs: $(STAMP)
 # choose), gsplat 1.5.3 with its kernels compiled once, the segmenter extras, then the ready check;
 # offline from a folder of wheels with WHEELS=dir. Stops with a clear message without a GPU.
 setup-gpu:
-	PY=$(PY) VENV=$(VENV) CUDA=$(CUDA) WHEELS=$(WHEELS) sh scripts/setup_gpu.sh
+	PY=$(PY) VENV=$(VENV) CUDA=$(CUDA) WHEELS=$(WHEELS) GSPLAT_BUILD=$(GSPLAT_BUILD) sh scripts/setup_gpu.sh
 
 # every gpu-marked test (skipped by make test)
 test-gpu:

@@ -165,7 +165,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"navarena eval: {e}", file=sys.stderr)
         return 2
     meta = {"root": str(Path(args.root).resolve()), "agent": args.agent, "protocol": args.protocol,
-            "split": args.split, "seed": args.seed, "interrupted": interrupted}
+            "split": args.split, "difficulty": args.difficulty, "episodes_per_scene": args.episodes_per_scene,
+            "seed": args.seed, "render": None if args.no_render else
+            {"width": args.width, "height": args.height, "renderer": args.renderer},
+            "interrupted": interrupted}
     if not rows:
         print("navarena eval: interrupted before any episode finished; nothing written", file=sys.stderr)
         return 130

@@ -206,7 +206,8 @@ class Trainer:
                 self.log(f"  round {rnd} fit: step {step + 1}/{cfg.grad_steps}, loss {np.mean(losses[-50:]):.3f}, "
                          f"{(cfg.grad_steps - step - 1) * dt / (step + 1):.0f} s left")
         self.net.eval()
-        return float(np.mean(losses[-max(1, len(losses) // 10):]))
+        k = max(1, len(losses) // 10)
+        return float(np.mean(losses[:k])), float(np.mean(losses[-k:]))
 
     # ------------------------------------------------------------------ evaluation
     def evaluate(self, model: Path, sha: str, split: str, n: int, width: int | None = None,
@@ -235,7 +236,7 @@ class Trainer:
             ck = torch.load(out / "checkpoint.pt", map_location=self.device, weights_only=True)
             self.net.load_state_dict(ck["net"])
             self.opt.load_state_dict(ck["opt"])
-            torch.set_rng_state(ck["torch_rng"])
+            torch.set_rng_state(ck["torch_rng"].cpu())
             self.curve, self.frames = list(ck["curve"]), int(ck["frames"])
             first = int(ck["round"]) + 1
             self.log(f"resuming after round {first - 1}")
@@ -247,16 +248,15 @@ class Trainer:
             gpus = torch.cuda.device_count() if self.device.startswith("cuda") else 0
             self.pool = tmp.get_context("spawn").Pool(cfg.workers, initializer=_init_worker,
                                                       initargs=(str(self.ds.path), cfg, self.device, gpus))
-        t_run = time.perf_counter()
         try:
-            return self._rounds(first, parts, sha, t_run)
+            return self._rounds(first, parts, sha)
         finally:
             if self.pool is not None:
                 self.pool.close()
                 self.pool.join()
                 self.pool = None
 
-    def _rounds(self, first: int, parts: list, sha: str | None, t_run: float) -> dict:
+    def _rounds(self, first: int, parts: list, sha: str | None) -> dict:
         cfg, out = self.cfg, self.out
         for rnd in range(first, cfg.rounds):
             t0 = time.perf_counter()
@@ -266,15 +266,17 @@ class Trainer:
             t_collect = time.perf_counter() - t0
             data = Steps.concat(parts)
             t1 = time.perf_counter()
-            loss = self.fit(data, rnd)
+            loss_first, loss = self.fit(data, rnd)
             t_fit = time.perf_counter() - t1
             sha = self.save_model(final=False)
             entry = {"round": rnd, "kind": "bc" if rnd == 0 else "dagger", "beta": cfg.beta ** rnd if rnd else 1.0,
                      "new_frames": len(new), "frames": len(data), "episodes": int(len(data.lengths)),
-                     "loss": round(loss, 4), "collect_s": round(t_collect, 1), "fit_s": round(t_fit, 1),
+                     "loss_first": round(loss_first, 4), "loss": round(loss, 4), "collect_s": round(t_collect, 1), "fit_s": round(t_fit, 1),
                      "collect_frames_per_s": round(len(new) / t_collect, 1)}
             if self.val_split and cfg.val_episodes:
+                t2 = time.perf_counter()
                 m = self.evaluate(out / "model.pt", sha, self.val_split, cfg.val_episodes)
+                entry["val_s"] = round(time.perf_counter() - t2, 1)
                 entry.update({"val_split": self.val_split, "val_episodes": m["episodes"],
                               "val_sr": round(m["sr"], 4), "val_spl": round(m["spl"], 4)})
             self.curve.append(entry)
@@ -282,10 +284,10 @@ class Trainer:
             torch.save({"net": self.net.state_dict(), "opt": self.opt.state_dict(), "round": rnd,
                         "torch_rng": torch.get_rng_state(), "curve": self.curve, "frames": self.frames},
                        out / "checkpoint.pt")
-        sha = self.save_model(final=True, seconds=time.perf_counter() - t_run)
+        sha = self.save_model(final=True)
         return {"model": str(out / "model.pt"), "sha256": sha, "curve": self.curve}
 
-    TIMING = ("collect_s", "fit_s", "collect_frames_per_s")
+    TIMING = ("collect_s", "fit_s", "val_s", "collect_frames_per_s")
     """Curve fields that vary run to run (kept in the model card, not in model.pt)."""
 
     def meta(self) -> dict:
@@ -299,7 +301,7 @@ class Trainer:
                 "curve": [{k: v for k, v in e.items() if k not in self.TIMING} for e in self.curve],
                 "parameters": parameter_count(self.net), "frames": self.frames}
 
-    def save_model(self, final: bool, seconds: float | None = None) -> str:
+    def save_model(self, final: bool) -> str:
         meta = self.meta()
         sha = save_checkpoint(self.out / "model.pt", "pointnav", self.cfg.spec.to_dict(), self.net.state_dict(), meta)
         if final:
@@ -307,7 +309,7 @@ class Trainer:
                 f"{platform.machine()} CPU, {os.cpu_count()} cores"
             card = {"name": self.out.name, "file": "model.pt", "sha256": sha, "licence": "Apache-2.0", **meta,
                     "curve": self.curve, "trained_on": dev, "workers": self.cfg.workers,
-                    "train_seconds": None if seconds is None else round(seconds, 1)}
+                    "train_seconds": train_seconds(self.curve)}
             (self.out / "model_card.json").write_text(json.dumps(card, indent=1, default=str) + "\n")
         return sha
 
@@ -427,6 +429,11 @@ def _init_worker(root: str, cfg: TrainConfig, device: str, gpus: int) -> None:
 
 def _collect_job(job) -> Steps:
     return _WORKER["c"].job(job)
+
+
+def train_seconds(curve: list[dict]) -> float:
+    """Seconds of collection, fitting and validation over every round (a resumed run's too)."""
+    return round(sum(e.get(k, 0.0) for e in curve for k in ("collect_s", "fit_s", "val_s")), 1)
 
 
 def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:

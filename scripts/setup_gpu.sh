@@ -3,6 +3,7 @@
 #   make setup-gpu                     # online: torch from download.pytorch.org for the driver's CUDA
 #   make setup-gpu CUDA=12.8           # choose the CUDA build of torch yourself
 #   make setup-gpu WHEELS=/path/wheels # offline: every wheel from that folder (pip --no-index)
+#   make setup-gpu GSPLAT_BUILD=f.tgz  # reuse gsplat's kernels compiled on an earlier machine (about 100 s)
 # Steps: stop with a clear message on a machine without an NVIDIA GPU; a venv (.venv, seeing the
 # system's packages, so that a preinstalled CUDA torch is reused); a CUDA build of torch matching
 # the driver unless a matching one is already importable; the project with its gpu, open_vocab and
@@ -79,6 +80,12 @@ else
 fi
 # the checkout's pipeline/ and stages/ on the venv's path (as make setup does)
 "$BIN/python" -c "import pathlib, sysconfig; pathlib.Path(sysconfig.get_paths()['purelib'], 'navarena_checkout.pth').write_text(str(pathlib.Path.cwd()) + chr(10))"
+# GSPLAT_BUILD=file.tgz: gsplat's compiled kernels from an earlier machine of the same image and
+# versions ($VENV/torch_extensions packed with tar czf -C $VENV), so they are not compiled again;
+# unpacked after gsplat's install and touched newer than its sources (ninja rebuilds by file times)
+if [ -n "${GSPLAT_BUILD:-}" ]; then
+  tar xzf "$GSPLAT_BUILD" -C "$VENV" && find "$VENV/torch_extensions" -exec touch {} +
+fi
 mkdir -p data/08_reports
 "$BIN/python" -m navcore.render.ready --json data/08_reports/gpu_ready.json
 touch "$VENV/.installed-gpu"

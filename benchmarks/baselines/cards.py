@@ -39,14 +39,131 @@ def ship(run: Path, name: str, models: Path = MODELS) -> Path:
     return dst
 
 
-def add_evaluation(name: str, summaries: list[Path], models: Path = MODELS) -> None:
-    """Merge navarena eval summary.json files (one per agent / protocol) into the card."""
+def add_evaluation(name: str, summaries: list[Path], conditions: str, command: str, models: Path = MODELS) -> None:
+    """Merge navarena eval summary.json files (one per agent and protocol, named by their folder)
+    into the card's `evaluation`, with the conditions they were measured under and the command."""
     f = models / name / "model_card.json"
     card = json.loads(f.read_text())
+    runs = {}
     for s in summaries:
         summ = json.loads(Path(s).read_text())
-        card.setdefault("evaluation", {})[Path(s).parent.name] = summ
+        summ["root"] = Path(summ["root"]).name  # no machine's paths in a shipped card
+        runs[Path(s).parent.name] = summ
+    card["evaluation"] = {"conditions": conditions, "command": command, "runs": runs}
     f.write_text(json.dumps(card, indent=1) + "\n")
+
+
+COLUMNS = [("SR", "sr"), ("SPL", "spl"), ("NE m", "ne"), ("CR", "collision_rate"), ("AvgSteps", "steps"),
+           ("Stop SR", "stop_sr")]
+
+
+def _num(v, digits: int = 3) -> str:
+    return "-" if v is None else (f"{v:.0f}" if digits == 0 else f"{v:.{digits}f}")
+
+
+def results_table(card: dict) -> str:
+    """Agents x (overall, easy, medium, hard) of the card's evaluation runs, as markdown."""
+    ev = card.get("evaluation") or {}
+    runs = ev.get("runs") or {}
+    if not runs:
+        return "_No closed-loop evaluation recorded yet._\n"
+    lines = ["| agent | protocol | group | n | " + " | ".join(c for c, _ in COLUMNS) + " |",
+             "|---|---|---|---:|" + "---:|" * len(COLUMNS)]
+    for run, summ in runs.items():
+        for group, m in summ["tasks"][card["task"]].items():
+            cells = [_num(m.get(k), 0 if k == "steps" else 2 if k == "ne" else 3) for _, k in COLUMNS]
+            lines.append(f"| {summ['agent']} | {summ['protocol']} | {group} | {m['episodes']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def curve_table(card: dict) -> str:
+    lines = ["| round | kind | beta | new frames | frames | loss (first -> last 10 %) | val SR | val SPL | collect s | fit s |",
+             "|---:|---|---:|---:|---:|---|---:|---:|---:|---:|"]
+    for e in card["curve"]:
+        lf = f"{e['loss_first']:.3f} -> " if "loss_first" in e else ""
+        lines.append(f"| {e['round']} | {e['kind']} | {e['beta']:.2f} | {e['new_frames']} | {e['frames']} | "
+                     f"{lf}{e['loss']:.3f} | {_num(e.get('val_sr'))} | {_num(e.get('val_spl'))} | "
+                     f"{_num(e.get('collect_s'), 1)} | {_num(e.get('fit_s'), 1)} |")
+    return "\n".join(lines) + "\n"
+
+
+def card_markdown(card: dict) -> str:
+    """navcore/models/<name>/model_card.md, from its JSON."""
+    c, ev = card["config"], card.get("evaluation") or {}
+    val = next((e.get("val_split") for e in card["curve"] if e.get("val_split")), "none")
+    return f"""# {card['name']}: the learned {card['task']} baseline
+
+Generated from model_card.json by `python -m benchmarks.baselines.cards docs`; do not edit.
+
+- **File:** `{card['file']}`, sha256 `{card['sha256']}` (checked on load). {card['parameters']:,} parameters.
+- **Licence:** {card['licence']}. Trained on NavArena's own generated scenes (Apache-2.0), no third-party data.
+- **Network:** depth ({c['spec']['depth_w']} x {c['spec']['depth_h']}, clipped at {c['spec']['max_depth']} m,
+  area-pooled from any render size), the goal as (log(1 + distance), cos, sin of the bearing) and the previous
+  action; a 4-layer CNN, a GRU of {c['spec']['hidden']}, logits of STOP / FORWARD / LEFT / RIGHT; argmax.
+- **Data:** data root `{card['data']['root']}`: {len(card['data']['train_scenes'])} training scenes (split
+  `{card['data']['split']}`), {card['frames']:,} labelled frames over {len(card['curve'])} rounds, rendered at
+  {c['width']} x {c['height']}; closed-loop check after each round on `{val}`.
+- **Training:** round 0 behaviour cloning on the expert's rollouts, then DAgger (the learner drives, the expert's
+  action executed with probability beta^round, every visited state labelled by the geodesic oracle);
+  {c['episodes_per_round']} episodes and {c['grad_steps']} gradient steps of {c['batch_episodes']} whole episodes a
+  round, AdamW lr {c['lr']}, seed {card['seed']}. On {card['trained_on']} ({card.get('workers', 0)} collection
+  workers): {card['train_seconds']} s of collection and fitting.
+
+## Training curve
+
+{curve_table(card)}
+## Closed-loop evaluation
+
+{ev.get('conditions', '')}
+
+{results_table(card)}
+Reproduce: `{ev.get('command', '')}`
+
+## Limitations
+
+Trained and measured on generated scenes only: the gap to real captures is not measured yet. It is the
+interim baseline of its track (see docs/evaluation.md, "Baselines", for what is still missing).
+"""
+
+
+def docs_section(all_cards: dict[str, dict]) -> str:
+    parts = [BEGIN]
+    for name, card in all_cards.items():
+        ev = card.get("evaluation") or {}
+        parts.append(f"""
+### `{name}` ({card['task']})
+
+{ev.get('conditions', '')}
+
+{results_table(card)}
+Training ({card['trained_on']}, {card['train_seconds']} s; model card: `navcore/models/{name}/model_card.md`):
+
+{curve_table(card)}""")
+    parts.append(END)
+    return "\n".join(parts) + "\n"
+
+
+def write_docs(check: bool = False, models: Path = MODELS, docs: Path = DOCS) -> list[str]:
+    """Regenerate every card's .md and the docs section; with check, write nothing and return the
+    files that differ."""
+    stale = []
+    all_cards = cards(models)
+    for name, card in all_cards.items():
+        f = models / name / "model_card.md"
+        text = card_markdown(card)
+        if not f.is_file() or f.read_text() != text:
+            stale.append(str(f))
+            if not check:
+                f.write_text(text)
+    doc = docs.read_text()
+    if BEGIN not in doc or END not in doc:
+        raise SystemExit(f"{docs}: the Baselines section's markers are missing ({BEGIN} ... {END})")
+    new = doc[:doc.index(BEGIN)] + docs_section(all_cards).rstrip("\n") + doc[doc.index(END) + len(END):]
+    if new != doc:
+        stale.append(str(docs))
+        if not check:
+            docs.write_text(new)
+    return stale
 
 
 def main(argv=None) -> int:
@@ -58,11 +175,20 @@ def main(argv=None) -> int:
     e = sub.add_parser("evaluation")
     e.add_argument("name")
     e.add_argument("summaries", nargs="+", type=Path)
+    e.add_argument("--conditions", required=True, help="what the figures were measured under (one paragraph)")
+    e.add_argument("--command", required=True, help="the command that reproduces them")
+    d = sub.add_parser("docs")
+    d.add_argument("--check", action="store_true", help="exit 1 when a card's .md or the docs section is stale")
     a = ap.parse_args(argv)
     if a.cmd == "ship":
         print(ship(a.run, a.name))
     elif a.cmd == "evaluation":
-        add_evaluation(a.name, a.summaries)
+        add_evaluation(a.name, a.summaries, a.conditions, a.command)
+    elif a.cmd == "docs":
+        stale = write_docs(check=a.check)
+        if a.check and stale:
+            print("stale (python -m benchmarks.baselines.cards docs):", *stale, sep="\n  ")
+            return 1
     return 0
 
 

@@ -1,0 +1,188 @@
+"""The learned baselines: navarena train (loss falls, one seed -> one checkpoint), checkpoints
+(round trip; damaged, unsafe or foreign files refused), the shipped pointnav_bc (sha256-checked,
+in-process and behind the agent server, better than depth_reactive), the model cards and docs."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from navcore.baselines.checkpoint import CheckpointError, load_checkpoint, save_checkpoint, sha256_of
+from navcore.baselines.model import PointNavNet, PointNavSpec, depth_input, goal_input
+
+TINY = ["--rounds", "2", "--episodes-per-round", "6", "--grad-steps", "12", "--batch-episodes", "4", "--slots", "6",
+        "--width", "32", "--height", "24", "--val-episodes", "0", "--renderer", "cpu", "--max-learner-steps", "40",
+        "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def trained(episode_run, tmp_path_factory):
+    """Two tiny training runs with one seed on the session's data root (CPU renderer)."""
+    from navarena.train import main
+
+    root = episode_run[0]
+    outs = [tmp_path_factory.mktemp(f"train{i}") for i in range(2)]
+    for out in outs:
+        assert main([str(root), "--out", str(out), *TINY]) == 0
+    return outs
+
+
+def test_tiny_training_loss_falls_and_one_seed_gives_one_checkpoint(trained):
+    a, b = trained
+    card = json.loads((a / "model_card.json").read_text())
+    bc, dagger = card["curve"]
+    assert (bc["kind"], dagger["kind"], dagger["beta"]) == ("bc", "dagger", 0.5)
+    assert bc["loss"] < bc["loss_first"], bc  # behaviour cloning learns
+    assert dagger["frames"] == bc["frames"] + dagger["new_frames"] > bc["frames"]  # DAgger aggregates
+    assert (a / "model.pt").read_bytes() == (b / "model.pt").read_bytes()
+    assert card["sha256"] == sha256_of(a / "model.pt")
+    for r in ("round_0.npz", "round_1.npz"):
+        assert (a / "rounds" / r).read_bytes() == (b / "rounds" / r).read_bytes()
+    ck = load_checkpoint(a / "model.pt", kind="pointnav")
+    assert ck["meta"]["seed"] == 0 and ck["meta"]["config"]["rounds"] == 2
+    assert "collect_s" not in ck["meta"]["curve"][0]  # timings live in the card only
+
+
+def test_resume_after_the_last_round_changes_nothing(trained, episode_run, tmp_path):
+    import shutil
+
+    from navarena.train import main
+
+    out = tmp_path / "resumed"
+    shutil.copytree(trained[0], out)
+    before = (out / "model.pt").read_bytes()
+    assert main([str(episode_run[0]), "--out", str(out), "--resume", *TINY]) == 0
+    assert (out / "model.pt").read_bytes() == before
+
+
+def test_checkpoint_round_trip_and_refusals(tmp_path):
+    torch.manual_seed(0)
+    net = PointNavNet(PointNavSpec(hidden=16, embed=16))
+    f = tmp_path / "p.pt"
+    digest = save_checkpoint(f, "pointnav", net.spec.to_dict(), net.state_dict(), {"seed": 3})
+    assert digest == sha256_of(f)
+    ck = load_checkpoint(f, kind="pointnav", sha256=digest)
+    again = PointNavNet(PointNavSpec(**ck["spec"]))
+    again.load_state_dict(ck["state_dict"])
+    for (k, v), w in zip(net.state_dict().items(), again.state_dict().values()):
+        assert torch.equal(v, w), k
+    with pytest.raises(CheckpointError, match="a 'pointnav' policy, not 'imagenav'"):
+        load_checkpoint(f, kind="imagenav")
+    with pytest.raises(CheckpointError, match="sha256 .* differs"):
+        load_checkpoint(f, sha256="0" * 64)
+    damaged = tmp_path / "damaged.pt"
+    data = bytearray(f.read_bytes())
+    damaged.write_bytes(bytes(data[: len(data) // 2]))
+    with pytest.raises(CheckpointError, match=r"damaged\.pt: is damaged or not a torch file"):
+        load_checkpoint(damaged)
+
+    class Payload:  # pickled code: weights_only refuses it
+        def __reduce__(self):
+            return (print, ("this must never run",))
+
+    unsafe = tmp_path / "unsafe.pt"
+    torch.save({"format": "navarena-policy/1", "kind": "pointnav", "spec": {}, "state_dict": {}, "x": Payload()}, unsafe)
+    with pytest.raises(CheckpointError, match="holds objects other than plain data"):
+        load_checkpoint(unsafe)
+    foreign = tmp_path / "foreign.pt"
+    torch.save({"weights": torch.zeros(2)}, foreign)
+    with pytest.raises(CheckpointError, match="not a NavArena policy checkpoint"):
+        load_checkpoint(foreign)
+    with pytest.raises(FileNotFoundError):
+        load_checkpoint(tmp_path / "missing.pt")
+
+
+def test_inputs_are_resolution_independent():
+    spec = PointNavSpec()
+    rng = np.random.default_rng(0)
+    coarse = rng.uniform(0.3, 8.0, (48, 64)).astype(np.float32)
+    coarse[0, :5] = 0.0  # nothing hit reads as the far limit
+    fine = np.kron(coarse, np.ones((10, 10), np.float32))  # the same scene at 640 x 480
+    a, b = depth_input(coarse, spec), depth_input(fine, spec)
+    assert a.shape == b.shape == (1, 1, 48, 64)
+    assert torch.allclose(a, b, atol=1e-6)
+    assert float(a.max()) == 1.0 and float(a[0, 0, 0, 0]) == 1.0
+    g = goal_input([[2.0, np.pi / 2]])
+    assert torch.allclose(g, torch.tensor([[np.log1p(2.0), 0.0, 1.0]]), atol=1e-6)
+
+
+def test_shipped_baseline_is_checked_and_registered():
+    from navcore.baselines.agent import shipped
+    from navcore.eval.agents import AGENTS, agent_for
+
+    path, digest = shipped("pointnav_bc")
+    assert sha256_of(path) == digest
+    assert "pointnav_bc" in AGENTS
+    agent = agent_for("pointnav_bc", device="cpu")
+    agent.reset({"task_type": "pointnav"})
+    obs = {"depth": np.full((120, 160), 3.0, np.float32), "pointgoal": np.array([2.0, 0.0], np.float32)}
+    a = agent.act(obs)
+    assert a in (0, 1, 2, 3)
+    with pytest.raises(ValueError, match="needs depth and pointgoal"):
+        agent.act({"pointgoal": obs["pointgoal"]})
+
+
+def test_shipped_pointnav_baseline_beats_depth_reactive(episode_run):
+    """Fixed PointNav episodes of the session's generated scene, CPU renderer: the learned policy
+    reaches more goals than the hand-written depth_reactive (the same budget for both)."""
+    from navarena.dataset import NavDataset
+    from navcore.eval.agents import agent_for
+    from navcore.eval.loop import InProcessBatch, run_episodes_batched
+
+    ds = NavDataset(episode_run[0])
+    sid = ds.scene_ids("pointnav")[0]
+    eps = ds.episodes(sid, "pointnav")[:8]
+    for e in eps:
+        e.max_steps = min(e.max_steps, 100)
+    ctx = ds.scene_context(sid, renderer="cpu")
+    cfg = ds.env_config(width=96, height=72)
+    wins = {}
+    for name in ("pointnav_bc", "depth_reactive"):
+        rows = run_episodes_batched(ctx, eps, InProcessBatch(lambda name=name: agent_for(name, device="cpu")),
+                                    len(eps), cfg)
+        wins[name] = sum(r["sr"] for r in rows)
+    assert wins["pointnav_bc"] > wins["depth_reactive"], wins
+
+
+def test_model_cards_and_docs_are_generated_from_the_cards():
+    from benchmarks.baselines.cards import cards, write_docs
+
+    assert "pointnav_bc" in cards()
+    assert write_docs(check=True) == [], "run python -m benchmarks.baselines.cards docs"
+
+
+def test_shipped_baseline_behind_the_agent_server_acts_as_in_process(episode_run, tmp_path):
+    """navarena serve-agent --agent pointnav_bc, evaluated over ws:// by navarena eval: the same
+    episodes end the same way as with the agent in process (the policy is deterministic)."""
+    import subprocess
+    import sys
+    import time
+
+    import pandas as pd
+
+    from navarena.evaluate import main as evaluate
+
+    root = episode_run[0]
+    common = ["--tasks", "pointnav", "--difficulty", "easy", "--episodes-per-scene", "2", "--renderer", "cpu",
+              "--width", "64", "--height", "48", "--quiet"]
+    assert evaluate([str(root), "--agent", "pointnav_bc", *common, "--out", str(tmp_path / "local")]) == 0
+    port_file = tmp_path / "port"
+    server = subprocess.Popen([sys.executable, "-m", "navarena", "serve-agent", "--agent", "pointnav_bc", "--port", "0",
+                               "--port-file", str(port_file)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.time() + 120
+        while not port_file.exists() or not port_file.read_text().strip():
+            assert server.poll() is None and time.time() < deadline, server.stdout.read()[-2000:]
+            time.sleep(0.2)
+        url = f"ws://127.0.0.1:{int(port_file.read_text())}"
+        assert evaluate([str(root), "--agent", url, *common, "--out", str(tmp_path / "remote")]) == 0
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+    cols = ["episode_id", "sr", "steps", "end_reason", "error"]
+    local = pd.read_parquet(tmp_path / "local" / "results.parquet")[cols].sort_values("episode_id", ignore_index=True)
+    remote = pd.read_parquet(tmp_path / "remote" / "results.parquet")[cols].sort_values("episode_id", ignore_index=True)
+    assert len(local) == 2 and (local["error"] == "").all()
+    pd.testing.assert_frame_equal(local, remote)
