@@ -22,6 +22,16 @@ from navarena.dataset import TASKS, NavDataset
 from navcore.eval.agents import agent_for
 
 
+def agent_arg(text: str) -> tuple[str, object]:
+    """KEY=VALUE of --agent-arg, the value read as YAML (numbers, booleans, lists; else a string)."""
+    import yaml
+
+    key, sep, value = text.partition("=")
+    if not sep or not key.isidentifier():
+        raise argparse.ArgumentTypeError(f"--agent-arg takes KEY=VALUE, got {text!r}")
+    return key, yaml.safe_load(value)
+
+
 def chosen_episodes(ds: NavDataset, args) -> dict[str, list]:
     """scene id -> the episodes to run, every task of args.tasks; the zero-shot set of a data
     root by its listing (a release ships it as its own split)."""
@@ -111,8 +121,9 @@ def evaluate(args) -> tuple[list[dict], bool]:
                 seed = stream_seed(args.seed, sid, "evaluate") % 2**31
                 if args.batch_slots > 1:
                     remote = args.agent.startswith(("ws://", "wss://"))
+                    kw = dict(args.agent_arg)
                     client = agent_for(args.agent, seed, args.timeout, batch=True) if remote else \
-                        InProcessBatch(lambda seed=seed: agent_for(args.agent, seed, args.timeout))
+                        InProcessBatch(lambda seed=seed: agent_for(args.agent, seed, args.timeout, **kw))
 
                     def done(row):
                         rows.append(row)
@@ -121,7 +132,7 @@ def evaluate(args) -> tuple[list[dict], bool]:
 
                     run_episodes_batched(ctx, eps, client, args.batch_slots, cfg, on_result=done)
                 else:
-                    env, client = NavEnv(ctx, cfg), agent_for(args.agent, seed, args.timeout)
+                    env, client = NavEnv(ctx, cfg), agent_for(args.agent, seed, args.timeout, **dict(args.agent_arg))
                     for ep in eps:
                         rows.append(run_episode(env, client, ep))
                         progress.advance(frames=int(rows[-1]["steps"]))
@@ -138,6 +149,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("root", help="a release folder (with release.json) or a data root")
     ap.add_argument("--agent", default="oracle", help="a registered agent (oracle, random, depth_reactive, ...), "
                     "package.module:Class, or ws://host:port (an agent server)")
+    ap.add_argument("--agent-arg", action="append", default=[], metavar="KEY=VALUE", type=agent_arg,
+                    help="an argument of the agent's constructor, repeatable (a YAML value), e.g. "
+                         "--agent-arg checkpoint=runs/pn/model.pt")
     ap.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS)
     ap.add_argument("--split", default=None, help="only this split (train, val_seen, val_unseen, test, eval_zeroshot)")
     ap.add_argument("--difficulty", default=None, choices=("easy", "medium", "hard"))
@@ -164,7 +178,8 @@ def main(argv: list[str] | None = None) -> int:
     except (FileNotFoundError, KeyError, ValueError) as e:
         print(f"navarena eval: {e}", file=sys.stderr)
         return 2
-    meta = {"root": str(Path(args.root).resolve()), "agent": args.agent, "protocol": args.protocol,
+    meta = {"root": str(Path(args.root).resolve()), "agent": args.agent, "agent_args": dict(args.agent_arg),
+            "protocol": args.protocol,
             "split": args.split, "difficulty": args.difficulty, "episodes_per_scene": args.episodes_per_scene,
             "seed": args.seed, "render": None if args.no_render else
             {"width": args.width, "height": args.height, "renderer": args.renderer},

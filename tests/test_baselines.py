@@ -105,7 +105,7 @@ def test_inputs_are_resolution_independent():
     assert torch.allclose(a, b, atol=1e-6)
     assert float(a.max()) == 1.0 and float(a[0, 0, 0, 0]) == 1.0
     g = goal_input([[2.0, np.pi / 2]])
-    assert torch.allclose(g, torch.tensor([[np.log1p(2.0), 0.0, 1.0]]), atol=1e-6)
+    assert torch.allclose(g, torch.tensor([[np.log1p(2.0), 0.0, 1.0]], dtype=torch.float32), atol=1e-6)
 
 
 def test_shipped_baseline_is_checked_and_registered():

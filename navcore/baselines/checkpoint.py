@@ -2,8 +2,12 @@
 dicts), read with torch.load(weights_only=True), so a file cannot run code when loaded. A
 damaged, truncated or unsafe file is refused with an error naming it.
 
-    {"format": "navarena-policy/1", "kind": "pointnav", "spec": {...}, "state_dict": {...},
-     "meta": {...}}           # meta: what the training recorded (data, config, seed, curve)
+    {"format": "navarena-policy/1", "kind": "pointnav", "spec": "{...}", "state_dict": {...},
+     "meta": "{...}"}         # meta: what the training recorded (data, config, seed, curve)
+
+spec and meta are stored as JSON text (sorted keys), so the bytes depend on their values only,
+never on which Python objects held them (pickle shares repeated objects by identity).
+load_checkpoint returns them as dicts.
 
 The shipped baselines (navcore/models/<name>/) are checked against their published sha256 first.
 """
@@ -11,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import json
 import os
 from pathlib import Path
 
@@ -36,9 +41,9 @@ def save_checkpoint(path, kind: str, spec: dict, state_dict: dict, meta: dict | 
     are saved contiguous and on the CPU, so the bytes do not depend on the device trained on."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    payload = {"format": FORMAT, "kind": kind, "spec": dict(spec),
+    payload = {"format": FORMAT, "kind": kind, "spec": json.dumps(dict(spec), sort_keys=True),
                "state_dict": {k: v.detach().cpu().contiguous().clone() for k, v in state_dict.items()},
-               "meta": meta or {}}
+               "meta": json.dumps(meta or {}, sort_keys=True, default=str)}
     buf = io.BytesIO()
     torch.save(payload, buf)
     tmp = path.with_name(path.name + ".tmp")
@@ -71,4 +76,9 @@ def load_checkpoint(path, kind: str | None = None, sha256: str | None = None) ->
             raise CheckpointError(f"{path}: the checkpoint has no {key!r}")
     if kind is not None and payload["kind"] != kind:
         raise CheckpointError(f"{path}: a {payload['kind']!r} policy, not {kind!r}")
+    try:
+        payload["spec"] = json.loads(payload["spec"])
+        payload["meta"] = json.loads(payload.get("meta") or "{}")
+    except (TypeError, ValueError) as e:
+        raise CheckpointError(f"{path}: its spec or meta is not JSON text: {e}") from None
     return payload
