@@ -171,6 +171,12 @@ def test_installed_wheel_verifies_evaluates_and_serves(wheel, small_release, tmp
             main(["run"])
         except SystemExit as e:
             assert e.code == 2
+        # the shipped learned baseline: package data, checked by sha256 as it loads
+        import numpy as np
+        agent = navarena.make_agent("pointnav_bc", device="cpu")
+        agent.reset({{}})
+        assert agent.act({{"depth": np.full((48, 64), 2.0, np.float32),
+                           "pointgoal": np.array([3.0, 0.0], np.float32)}}) in (0, 1, 2, 3)
         print("API OK", navarena.__version__)
     """)
     assert p.returncode == 0 and "API OK 0.1.0" in p.stdout, p.stdout[-2000:] + p.stderr[-3000:]
