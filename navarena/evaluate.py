@@ -149,21 +149,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("root", help="a release folder (with release.json) or a data root")
     ap.add_argument("--agent", default="oracle", help="a registered agent (oracle, random, depth_reactive, ...), "
                     "package.module:Class, or ws://host:port (an agent server)")
-    ap.add_argument("--agent-arg", action="append", default=[], metavar="KEY=VALUE", type=agent_arg,
-                    help="an argument of the agent's constructor, repeatable (a YAML value), e.g. "
-                         "--agent-arg checkpoint=runs/pn/model.pt")
+    ap.add_argument("--agent-arg", action="append", default=[], metavar="K=V", type=agent_arg,
+                    help="an argument of the agent (a YAML value; repeatable), e.g. checkpoint=run/model.pt")
     ap.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS)
     ap.add_argument("--split", default=None, help="only this split (train, val_seen, val_unseen, test, eval_zeroshot)")
     ap.add_argument("--difficulty", default=None, choices=("easy", "medium", "hard"))
-    ap.add_argument("--episodes-per-scene", type=int, default=None, help="at most this many per scene and task")
-    ap.add_argument("--scenes", nargs="*", default=None, help="scene ids (default: all)")
+    ap.add_argument("--episodes-per-scene", type=int, default=None, metavar="N", help="at most this many per scene and task")
+    ap.add_argument("--scenes", nargs="*", default=None, metavar="ID", help="scene ids (default: all)")
     ap.add_argument("--protocol", default="distance", choices=("distance", "explicit_stop"))
     ap.add_argument("--renderer", default="auto", choices=("auto", "cpu", "gsplat"))
     ap.add_argument("--no-render", action="store_true", help="no RGB-D (agents that need only the task and pose)")
     ap.add_argument("--width", type=int, default=None, help="image width (default: the embodiment's)")
     ap.add_argument("--height", type=int, default=None)
-    ap.add_argument("--batch-slots", type=int, default=1, help="episodes stepped together (one render call per step)")
-    ap.add_argument("--embodiment", default=None, help="the costmap of this embodiment (data roots with several)")
+    ap.add_argument("--batch-slots", type=int, default=1, metavar="N", help="episodes stepped together (one render call per step)")
+    ap.add_argument("--embodiment", default=None, metavar="NAME", help="the costmap of this embodiment (data roots with several)")
     ap.add_argument("--seed", type=int, default=0, help="seed of stochastic agents")
     ap.add_argument("--timeout", type=float, default=30.0, help="agent servers: seconds to wait for each action")
     ap.add_argument("--out", default=None, help="output folder (default: navarena_eval/{agent}_{protocol})")

@@ -54,7 +54,7 @@ class TrainConfig:
     task: str = "pointnav"
     rounds: int = 4
     """Round 0 is behaviour cloning; rounds 1.. are DAgger."""
-    episodes_per_round: int = 1024
+    episodes_per_round: int = 3072
     """Training episodes collected per round (drawn over the training scenes)."""
     beta: float = 0.5
     """DAgger: probability beta^round of executing the expert's action instead of the learner's."""
@@ -62,14 +62,14 @@ class TrainConfig:
     """A learner-driven episode is cut after this many steps (its labels are kept)."""
     grad_steps: int = 1500
     """Gradient steps after each round's collection."""
-    batch_episodes: int = 16
+    batch_episodes: int = 32
     """Episodes (whole sequences) per gradient step."""
     lr: float = 5e-4
     weight_decay: float = 1e-5
     slots: int = 64
     """Episodes stepped together per scene (one render call per step)."""
-    width: int = 128
-    height: int = 96
+    width: int = 160
+    height: int = 120
     """Render size of the training frames (the network pools them to its own input size)."""
     train_split: str = "train"
     val_split: str | None = None
@@ -437,19 +437,24 @@ def train_seconds(curve: list[dict]) -> float:
 
 
 def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
-    ap = ap or argparse.ArgumentParser(prog="navarena train", description=__doc__,
-                                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = ap or argparse.ArgumentParser(prog="navarena train", description=__doc__.split("\n\n")[0] + " "
+                                       "Writes model.pt and model_card.json in --out; see docs/library.md.")
     ap.add_argument("root", help="a data root (make dataset) or a release folder")
     ap.add_argument("--out", required=True, help="the run folder (model.pt, model_card.json, rounds/)")
     ap.add_argument("--resume", action="store_true", help="go on after the last finished round in --out")
     d = TrainConfig()
-    for name in ("rounds", "episodes_per_round", "grad_steps", "batch_episodes", "slots", "width", "height",
-                 "val_episodes", "scenes", "seed", "max_learner_steps", "workers"):
-        ap.add_argument("--" + name.replace("_", "-"), type=int, default=getattr(d, name))
-    for name in ("beta", "lr", "weight_decay"):
-        ap.add_argument("--" + name.replace("_", "-"), type=float, default=getattr(d, name))
-    for name in ("train_split", "val_split", "renderer", "device"):
-        ap.add_argument("--" + name.replace("_", "-"), default=getattr(d, name))
+    helps = {"rounds": "0: behaviour cloning, then DAgger", "episodes_per_round": None, "grad_steps": None,
+             "batch_episodes": None, "slots": "episodes stepped together", "width": "render size", "height": None,
+             "val_episodes": "held-out check", "scenes": "first N train scenes", "seed": None,
+             "max_learner_steps": None, "workers": "collection processes", "beta": "DAgger mixing",
+             "lr": None, "weight_decay": None, "train_split": None, "val_split": None,
+             "renderer": "auto|cpu|gsplat", "device": "auto|cpu|cuda"}
+    for name, text in helps.items():
+        default = getattr(d, name)
+        kind = {int: int, float: float}.get(type(default), int if name == "scenes" else str)
+        ap.add_argument("--" + name.replace("_", "-"), type=kind, default=default,
+                        metavar={int: "N", float: "X"}.get(kind, "S"),
+                        help=f"{text + ' ' if text else ''}({default})")
     ap.add_argument("--quiet", action="store_true")
     return ap
 

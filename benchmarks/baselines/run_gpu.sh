@@ -19,9 +19,8 @@ case "${1:-}" in
   data)
     $PY -m pipeline $DATA stages=[episodes] executor.n_workers=${WORKERS:-60} ;;
   train)
-    $PY -m navarena train "$ROOT" --out "$RUN" --resume --rounds "${2:-4}" --workers "${TRAIN_WORKERS:-16}" \
-      --episodes-per-round "${EPISODES:-3072}" --grad-steps "${GRAD_STEPS:-1500}" --batch-episodes 32 \
-      --width 160 --height 120 --val-episodes 64 ;;
+    # navarena train's defaults are the reference run's settings
+    $PY -m navarena train "$ROOT" --out "$RUN" --resume --rounds "${2:-4}" --workers "${TRAIN_WORKERS:-16}" ;;
   eval)
     # the zero-shot set is drawn by the evaluate stage (from the test split's held-out scenes)
     $PY -m pipeline $DATA stages=[evaluate] evaluate.split=eval_zeroshot evaluate.tasks=[pointnav] \
