@@ -3,6 +3,7 @@ Baselines section of docs/evaluation.md, generated from one source: the card's J
 
     python -m benchmarks.baselines.cards ship RUN NAME            # a navarena train run folder -> navcore/models/NAME
     python -m benchmarks.baselines.cards evaluation NAME SUMMARY.json ...   # closed-loop figures into the card
+    python -m benchmarks.baselines.cards cost NAME                # CPU ms per step into the card
     python -m benchmarks.baselines.cards docs [--check]           # the cards' .md and docs/evaluation.md's section
 """
 from __future__ import annotations
@@ -53,6 +54,39 @@ def add_evaluation(name: str, summaries: list[Path], conditions: str, command: s
     f.write_text(json.dumps(card, indent=1) + "\n")
 
 
+def cpu_cost(name: str, repeats: int = 300, models: Path = MODELS) -> dict:
+    """Median milliseconds of one act() of the shipped policy on this machine's CPU (rendering
+    excluded), at 640 x 480 and 160 x 120 depth, recorded in the card."""
+    import os
+    import platform
+    import time
+
+    import numpy as np
+    import torch
+
+    from navcore.eval.agents import agent_for
+
+    agent = agent_for(name, device="cpu")
+    agent.reset({})
+    out = {"machine": f"{platform.machine()} CPU, {os.cpu_count()} cores, torch threads {torch.get_num_threads()}"}
+    for w, h in ((640, 480), (160, 120)):
+        obs = {"depth": np.random.default_rng(0).uniform(0.5, 4.0, (h, w)).astype(np.float32),
+               "pointgoal": np.array([3.0, 0.3], np.float32)}
+        for _ in range(20):
+            agent.act(obs)
+        times = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            agent.act(obs)
+            times.append(time.perf_counter() - t)
+        out[f"{w}x{h}"] = round(1000 * float(np.median(times)), 2)
+    f = models / name / "model_card.json"
+    card = json.loads(f.read_text())
+    card["cpu_ms_per_step"] = out
+    f.write_text(json.dumps(card, indent=1) + "\n")
+    return out
+
+
 COLUMNS = [("SR", "sr"), ("SPL", "spl"), ("NE m", "ne"), ("CR", "collision_rate"), ("AvgSteps", "steps"),
            ("Stop SR", "stop_sr")]
 
@@ -87,6 +121,14 @@ def curve_table(card: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _cost(card: dict) -> str:
+    c = card.get("cpu_ms_per_step")
+    if not c:
+        return "not measured yet (`python -m benchmarks.baselines.cards cost NAME`)."
+    return (f"{c['640x480']} ms a step at 640 x 480 depth, {c['160x120']} ms at 160 x 120 (median, rendering "
+            f"excluded; {c['machine']}; `python -m benchmarks.baselines.cards cost {card['name']}`).")
+
+
 def card_markdown(card: dict) -> str:
     """navcore/models/<name>/model_card.md, from its JSON."""
     c, ev = card["config"], card.get("evaluation") or {}
@@ -108,6 +150,7 @@ Generated from model_card.json by `python -m benchmarks.baselines.cards docs`; d
   {c['episodes_per_round']} episodes and {c['grad_steps']} gradient steps of {c['batch_episodes']} whole episodes a
   round, AdamW lr {c['lr']}, seed {card['seed']}. On {card['trained_on']} ({card.get('workers', 0)} collection
   workers): {card['train_seconds']} s of collection and fitting.
+- **Running it on a CPU:** {_cost(card)}
 
 ## Training curve
 
@@ -136,6 +179,8 @@ def docs_section(all_cards: dict[str, dict]) -> str:
 {ev.get('conditions', '')}
 
 {results_table(card)}
+CPU cost: {_cost(card)}
+
 Training ({card['trained_on']}, {card['train_seconds']} s; model card: `navcore/models/{name}/model_card.md`):
 
 {curve_table(card)}""")
@@ -177,6 +222,8 @@ def main(argv=None) -> int:
     e.add_argument("summaries", nargs="+", type=Path)
     e.add_argument("--conditions", required=True, help="what the figures were measured under (one paragraph)")
     e.add_argument("--command", required=True, help="the command that reproduces them")
+    c = sub.add_parser("cost")
+    c.add_argument("name")
     d = sub.add_parser("docs")
     d.add_argument("--check", action="store_true", help="exit 1 when a card's .md or the docs section is stale")
     a = ap.parse_args(argv)
@@ -184,6 +231,8 @@ def main(argv=None) -> int:
         print(ship(a.run, a.name))
     elif a.cmd == "evaluation":
         add_evaluation(a.name, a.summaries, a.conditions, a.command)
+    elif a.cmd == "cost":
+        print(cpu_cost(a.name))
     elif a.cmd == "docs":
         stale = write_docs(check=a.check)
         if a.check and stale:

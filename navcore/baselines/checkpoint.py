@@ -17,6 +17,7 @@ import hashlib
 import io
 import json
 import os
+import pickle
 from pathlib import Path
 
 import torch
@@ -65,7 +66,7 @@ def load_checkpoint(path, kind: str | None = None, sha256: str | None = None) ->
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # a damaged zip, a pickle of code (refused by weights_only), anything else
         what = "holds objects other than plain data (refused: loading it could run code)" \
-            if isinstance(e, __import__("pickle").UnpicklingError) else "is damaged or not a torch file"
+            if isinstance(e, pickle.UnpicklingError) else "is damaged or not a torch file"
         raise CheckpointError(f"{path}: {what}: {str(e).splitlines()[0][:200]}") from None
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise CheckpointError(f"{path}: not a NavArena policy checkpoint (format "
