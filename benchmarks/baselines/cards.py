@@ -87,6 +87,7 @@ def cpu_cost(name: str, repeats: int = 300, models: Path = MODELS) -> dict:
     return out
 
 
+ORDER = ["overall", "easy", "medium", "hard"]
 COLUMNS = [("SR", "sr"), ("SPL", "spl"), ("NE m", "ne"), ("CR", "collision_rate"), ("AvgSteps", "steps"),
            ("Stop SR", "stop_sr")]
 
@@ -104,7 +105,9 @@ def results_table(card: dict) -> str:
     lines = ["| agent | protocol | group | n | " + " | ".join(c for c, _ in COLUMNS) + " |",
              "|---|---|---|---:|" + "---:|" * len(COLUMNS)]
     for run, summ in runs.items():
-        for group, m in summ["tasks"][card["task"]].items():
+        groups = summ["tasks"][card["task"]]
+        for group in sorted(groups, key=lambda g: ORDER.index(g) if g in ORDER else len(ORDER)):
+            m = groups[group]
             cells = [_num(m.get(k), 0 if k == "steps" else 2 if k == "ne" else 3) for _, k in COLUMNS]
             lines.append(f"| {summ['agent']} | {summ['protocol']} | {group} | {m['episodes']} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
