@@ -77,6 +77,7 @@ def write_outputs(rows: list[dict], out: Path, meta: dict) -> dict:
     import pyarrow.parquet as pq
 
     from navcore.eval.metrics import aggregate
+    from navcore.io.atomic import atomic_path, write_text_atomic
 
     out.mkdir(parents=True, exist_ok=True)
     plain = [{k: v for k, v in r.items() if k != "trajectory"} for r in rows]
@@ -85,16 +86,13 @@ def write_outputs(rows: list[dict], out: Path, meta: dict) -> dict:
         traj = [np.asarray(r["trajectory"], np.float32) for r in rows]
         table = table.append_column("trajectory_x", pa.array([t[:, 0].tolist() for t in traj], pa.list_(pa.float32())))
         table = table.append_column("trajectory_y", pa.array([t[:, 1].tolist() for t in traj], pa.list_(pa.float32())))
-    tmp = out / "results.parquet.tmp"
-    pq.write_table(table, tmp)
-    tmp.replace(out / "results.parquet")
+    with atomic_path(out / "results.parquet") as tmp:
+        pq.write_table(table, tmp)
     tasks = sorted({r["task"] for r in rows}, key=lambda t: TASKS.index(t) if t in TASKS else 99)
     summary = {**meta, "episodes": len(rows),
                "tasks": {t: aggregate([r for r in rows if r["task"] == t]) for t in tasks}}
     clean = json.loads(json.dumps(summary, default=float).replace("NaN", "null"))
-    tmp = out / "summary.json.tmp"
-    tmp.write_text(json.dumps(clean, indent=1) + "\n")
-    tmp.replace(out / "summary.json")
+    write_text_atomic(out / "summary.json", json.dumps(clean, indent=1) + "\n")
     return clean
 
 

@@ -40,8 +40,10 @@ import torch
 from torch import nn
 
 from navarena.dataset import NavDataset
+from navcore.baselines.agent import default_device
 from navcore.baselines.checkpoint import load_checkpoint, save_checkpoint, sha256_of
 from navcore.baselines.model import NO_ACTION, PointNavNet, PointNavSpec, depth_input, goal_input, parameter_count
+from navcore.io.atomic import atomic_path, write_text_atomic
 from navcore.nav.actions import STOP
 from navcore.nav.oracle import DiscreteOracle
 from navcore.seeds import stream_seed
@@ -100,10 +102,9 @@ class Steps:
                    np.concatenate([p.lengths for p in parts]))
 
     def save(self, path: Path) -> None:
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(tmp, depth=self.depth, goal=self.goal, prev=self.prev, label=self.label,
-                            lengths=self.lengths)
-        tmp.replace(path)
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
+            np.savez_compressed(f, depth=self.depth, goal=self.goal, prev=self.prev, label=self.label,
+                                lengths=self.lengths)
 
     @classmethod
     def load(cls, path: Path) -> "Steps":
@@ -114,14 +115,10 @@ class Steps:
         return int(self.lengths.sum())
 
 
-def resolve_device(device: str) -> str:
-    return ("cuda" if torch.cuda.is_available() else "cpu") if device == "auto" else device
-
-
 class Trainer:
     def __init__(self, root, out, cfg: TrainConfig, quiet: bool = False):
         self.ds, self.out, self.cfg, self.quiet = NavDataset(root), Path(out), cfg, quiet
-        self.device = resolve_device(cfg.device)
+        self.device = default_device(cfg.device)
         torch.manual_seed(cfg.seed)
         self.net = PointNavNet(cfg.spec).to(self.device)
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
@@ -136,7 +133,6 @@ class Trainer:
         self.pool = None                                     # too when workers = 0)
         self.curve: list[dict] = []
         self.frames = 0
-        self.render_seconds = 0.0
 
     def log(self, msg: str) -> None:
         if not self.quiet:
@@ -162,21 +158,20 @@ class Trainer:
         per_scene = np.bincount(rng.integers(0, len(self.train_scenes), cfg.episodes_per_round),
                                 minlength=len(self.train_scenes))
         jobs = [(sid, int(k), rnd, str(model) if rnd else None, sha) for sid, k in zip(self.train_scenes, per_scene) if k]
-        parts, t0, n_eps = [], time.perf_counter(), 0
+        parts, t0, n_eps, steps = [], time.perf_counter(), 0, 0
         results = self.pool.imap(_collect_job, jobs) if self.pool is not None else map(self.collector.job, jobs)
         for (sid, k, *_), part in zip(jobs, results):
             parts.append(part)
-            n_eps += k
-            steps = sum(len(p) for p in parts)
+            n_eps, steps = n_eps + k, steps + len(part)
             dt = time.perf_counter() - t0
             left = dt / n_eps * (cfg.episodes_per_round - n_eps)
             self.log(f"  round {rnd} collect: {n_eps}/{cfg.episodes_per_round} episodes, {steps} frames, "
                      f"{steps / dt:.0f} frames/s, {left:.0f} s left")
-        self.frames += sum(len(p) for p in parts)
+        self.frames += steps
         return Steps.concat(parts)
 
     # ------------------------------------------------------------------ training
-    def fit(self, data: Steps, rnd: int) -> float:
+    def fit(self, data: Steps, rnd: int) -> tuple[float, float]:
         cfg, dev = self.cfg, self.device
         rng = np.random.default_rng(stream_seed(cfg.seed, "train-fit", str(rnd)) % 2**32)
         self.net.train()
@@ -281,9 +276,9 @@ class Trainer:
                               "val_sr": round(m["sr"], 4), "val_spl": round(m["spl"], 4)})
             self.curve.append(entry)
             self.log(f"round {rnd} ({entry['kind']}): {entry}")
-            torch.save({"net": self.net.state_dict(), "opt": self.opt.state_dict(), "round": rnd,
-                        "torch_rng": torch.get_rng_state(), "curve": self.curve, "frames": self.frames},
-                       out / "checkpoint.pt")
+            with atomic_path(out / "checkpoint.pt") as tmp:  # a run killed while writing keeps the last one
+                torch.save({"net": self.net.state_dict(), "opt": self.opt.state_dict(), "round": rnd,
+                            "torch_rng": torch.get_rng_state(), "curve": self.curve, "frames": self.frames}, tmp)
         sha = self.save_model(final=True)
         return {"model": str(out / "model.pt"), "sha256": sha, "curve": self.curve}
 
@@ -310,7 +305,7 @@ class Trainer:
             card = {"name": self.out.name, "file": "model.pt", "sha256": sha, "licence": "Apache-2.0", **meta,
                     "curve": self.curve, "trained_on": dev, "workers": self.cfg.workers,
                     "train_seconds": train_seconds(self.curve)}
-            (self.out / "model_card.json").write_text(json.dumps(card, indent=1, default=str) + "\n")
+            write_text_atomic(self.out / "model_card.json", json.dumps(card, indent=1, default=str) + "\n")
         return sha
 
 
@@ -467,10 +462,6 @@ def main(argv: list[str] | None = None) -> int:
     print(f"wrote {res['model']} (sha256 {res['sha256'][:12]}...)")
     return 0
 
-
-def read_policy(path) -> dict:
-    """A trained policy's checkpoint payload (see navcore.baselines.checkpoint)."""
-    return load_checkpoint(path)
 
 
 if __name__ == "__main__":

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from navcore.baselines.checkpoint import load_checkpoint
+from navcore.baselines.checkpoint import CheckpointError, load_checkpoint
 from navcore.baselines.model import NO_ACTION, PointNavNet, PointNavSpec, depth_input, goal_input
 
 MODELS = Path(str(resources.files("navcore") / "models"))
@@ -45,8 +45,6 @@ def _load_net(path: str, sha256: str | None, device: str) -> PointNavNet:
     try:
         net.load_state_dict(ck["state_dict"])
     except RuntimeError as e:
-        from navcore.baselines.checkpoint import CheckpointError
-
         raise CheckpointError(f"{path}: its weights do not fit the PointNav network: {str(e).splitlines()[0]}") from None
     return net.to(device).eval()
 

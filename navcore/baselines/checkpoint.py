@@ -16,11 +16,12 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import os
 import pickle
 from pathlib import Path
 
 import torch
+
+from navcore.io.atomic import atomic_path
 
 FORMAT = "navarena-policy/1"
 
@@ -38,18 +39,15 @@ def sha256_of(path: Path) -> str:
 
 
 def save_checkpoint(path, kind: str, spec: dict, state_dict: dict, meta: dict | None = None) -> str:
-    """Write atomically (a temporary file renamed into place); returns the file's sha256. Tensors
+    """Write atomically (navcore.io.atomic); returns the file's sha256. Tensors
     are saved contiguous and on the CPU, so the bytes do not depend on the device trained on."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     payload = {"format": FORMAT, "kind": kind, "spec": json.dumps(dict(spec), sort_keys=True),
                "state_dict": {k: v.detach().cpu().contiguous().clone() for k, v in state_dict.items()},
                "meta": json.dumps(meta or {}, sort_keys=True, default=str)}
     buf = io.BytesIO()
     torch.save(payload, buf)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(buf.getvalue())
-    os.replace(tmp, path)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(buf.getvalue())
     return hashlib.sha256(buf.getvalue()).hexdigest()
 
 

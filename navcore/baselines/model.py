@@ -11,7 +11,6 @@ renders runs on the evaluation's 640 x 480.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -105,7 +104,3 @@ class PointNavNet(nn.Module):
 
 def parameter_count(net: nn.Module) -> int:
     return sum(p.numel() for p in net.parameters())
-
-
-def bearing_wrap(a: float) -> float:
-    return math.atan2(math.sin(a), math.cos(a))
