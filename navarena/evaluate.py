@@ -74,20 +74,28 @@ def write_outputs(rows: list[dict], out: Path, meta: dict) -> dict:
     """results.parquet and summary.json under `out` (each written whole, then renamed)."""
     import numpy as np
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
-    from navcore.eval.metrics import aggregate
-    from navcore.io.atomic import atomic_path, write_text_atomic
-
-    out.mkdir(parents=True, exist_ok=True)
     plain = [{k: v for k, v in r.items() if k != "trajectory"} for r in rows]
     table = pa.Table.from_pylist(plain) if plain else pa.table({})
     if rows:
         traj = [np.asarray(r["trajectory"], np.float32) for r in rows]
         table = table.append_column("trajectory_x", pa.array([t[:, 0].tolist() for t in traj], pa.list_(pa.float32())))
         table = table.append_column("trajectory_y", pa.array([t[:, 1].tolist() for t in traj], pa.list_(pa.float32())))
+    return write_results(table, out, meta)
+
+
+def write_results(table, out: Path, meta: dict) -> dict:
+    """A results table (one row per episode, as results.parquet holds it) -> out/results.parquet and
+    out/summary.json (meta plus the metrics per task, overall and per difficulty); the summary."""
+    import pyarrow.parquet as pq
+
+    from navcore.eval.metrics import aggregate
+    from navcore.io.atomic import atomic_path, write_text_atomic
+
+    out.mkdir(parents=True, exist_ok=True)
     with atomic_path(out / "results.parquet") as tmp:
         pq.write_table(table, tmp)
+    rows = table.drop_columns([c for c in ("trajectory_x", "trajectory_y") if c in table.column_names]).to_pylist()
     tasks = sorted({r["task"] for r in rows}, key=lambda t: TASKS.index(t) if t in TASKS else 99)
     summary = {**meta, "episodes": len(rows),
                "tasks": {t: aggregate([r for r in rows if r["task"] == t]) for t in tasks}}

@@ -1,7 +1,7 @@
 """navarena train: a learned PointNav baseline from a data root or a release, by behaviour cloning
 and DAgger.
 
-    navarena train data --out runs/pointnav_bc                  # defaults: 1 BC round + 3 DAgger rounds
+    navarena train data --out runs/pointnav_bc                  # defaults: 1 BC round + 4 DAgger rounds
     navarena train data --out runs/pn --rounds 1                # behaviour cloning only
     navarena train data --out runs/pn --resume                  # go on from the last finished round
 
@@ -54,7 +54,7 @@ class TrainConfig:
     """Every setting of a training run (recorded in the model card)."""
 
     task: str = "pointnav"
-    rounds: int = 4
+    rounds: int = 5
     """Round 0 is behaviour cloning; rounds 1.. are DAgger."""
     episodes_per_round: int = 3072
     """Training episodes collected per round (drawn over the training scenes)."""
@@ -62,7 +62,7 @@ class TrainConfig:
     """DAgger: probability beta^round of executing the expert's action instead of the learner's."""
     max_learner_steps: int = 400
     """A learner-driven episode is cut after this many steps (its labels are kept)."""
-    grad_steps: int = 1500
+    grad_steps: int = 2000
     """Gradient steps after each round's collection."""
     batch_episodes: int = 32
     """Episodes (whole sequences) per gradient step."""
@@ -322,6 +322,8 @@ class Collector:
 
     def ctx(self, sid: str):
         if sid not in self._ctx:
+            if len(self._ctx) >= 8:  # a worker meets many scenes over the rounds: keep the last few
+                self._ctx.pop(next(iter(self._ctx)))
             self._ctx[sid] = self.ds.scene_context(sid, renderer=self.cfg.renderer)
         return self._ctx[sid]
 

@@ -1,0 +1,275 @@
+"""The learned baselines' reference run on a GPU machine (docs/evaluation.md, "Baselines"), as
+phases that each skip what is already done, so that a run cut by a time limit goes on where it
+stopped when started again:
+
+    python -m benchmarks.baselines.reference all --deadline 560     # every phase, stopping in time
+    python -m benchmarks.baselines.reference data | train | scaling | eval | pack OUT
+
+- data:    SCENES (160) generated PointNav scenes, 10 % held out for test (the zero-shot set), 5 %
+           for val_unseen; then the zero-shot set is drawn (the evaluate stage, oracle, unrendered).
+- train:   the reference PointNav run (navarena train's defaults, ROUNDS rounds), resumable.
+- scaling: the same recipe on the first 8, 32 and 128 training scenes and on all of them, with the
+           same episodes and gradient steps (SCALE_ROUNDS rounds), each checked on the test split.
+           Runs alongside train: the GPUs are shared round-robin, the CPU workers split between runs.
+- eval:    ships the reference run as pointnav_bc, then the zero-shot set at 640 x 480 (gsplat) for
+           pointnav_bc (distance and explicit_stop) and depth_reactive, one navarena eval per scene
+           and agent, several per GPU; random and the oracle unrendered (they read no image). The
+           parts are merged into one results.parquet and summary.json per agent and protocol, with
+           the steps per second of each part.
+- pack:    the cards, the shipped model and the summaries into OUT/baselines.tgz (the device's
+           $OUT).
+
+make setup-gpu first (WHEELS=dir offline). Paths: ROOT (data/baselines), RUNS (data/runs), EVAL
+(data/baseline_eval); WORKERS (CPU cores - 2).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import tarfile
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+ROOT = Path(os.environ.get("ROOT", "data/baselines"))
+RUNS = Path(os.environ.get("RUNS", "data/runs"))
+EVAL = Path(os.environ.get("EVAL", "data/baseline_eval"))
+SCENES = int(os.environ.get("SCENES", "160"))
+ROUNDS = int(os.environ.get("ROUNDS", "0")) or None  # None: navarena train's default (the reference run's)
+SCALE_ROUNDS = int(os.environ.get("SCALE_ROUNDS", "2"))
+SCALE_SIZES = [int(s) for s in os.environ.get("SCALE_SIZES", "8,32,128,0").split(",")]  # 0: every training scene
+WORKERS = int(os.environ.get("WORKERS", str(max(1, (os.cpu_count() or 2) - 2))))
+TRAIN_ARGS = os.environ.get("TRAIN_ARGS", "").split()  # more navarena train options (a quick trial's smaller sizes)
+EVAL_ARGS = os.environ.get("EVAL_ARGS", "").split()  # more navarena eval options
+PY = sys.executable
+DATA = [f"data_root={ROOT}", f"scenes.count={SCENES}", "task=[pointnav]", "semantics.enabled=false",
+        "episodes.scene_splits.test=0.1", "executor.dashboard=false"]
+RENDERED = [("pointnav_bc", "distance"), ("pointnav_bc", "explicit_stop"), ("depth_reactive", "distance")]
+UNRENDERED = [("random", "distance"), ("oracle", "distance")]
+
+
+class Deadline:
+    def __init__(self, seconds: float | None):
+        self.end = time.monotonic() + seconds if seconds else None
+
+    def left(self) -> float | None:
+        return None if self.end is None else max(0.0, self.end - time.monotonic())
+
+    def over(self) -> bool:
+        return self.end is not None and self.left() < 5
+
+
+def run(cmd: list[str], deadline: Deadline, log: Path | None = None, env: dict | None = None) -> int:
+    """A command in its own process group, killed (the whole group) at the deadline; its output
+    to `log` or ours. 124 when cut."""
+    print("$", " ".join(cmd), flush=True)
+    out = open(log, "w") if log else None
+    p = subprocess.Popen(cmd, stdout=out or None, stderr=subprocess.STDOUT if out else None,
+                         env={**os.environ, **(env or {})}, start_new_session=True)
+    try:
+        return p.wait(timeout=deadline.left())
+    except subprocess.TimeoutExpired:
+        os.killpg(p.pid, signal.SIGTERM)
+        try:
+            p.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+        return 124
+    finally:
+        if out:
+            out.close()
+
+
+def gpus() -> int:
+    try:
+        import torch
+
+        return max(1, torch.cuda.device_count())
+    except ImportError:
+        return 1
+
+
+def rotated(i: int, n: int) -> str:
+    """CUDA_VISIBLE_DEVICES starting at GPU i (the process's cuda:0 is GPU i; workers go round)."""
+    return ",".join(str((i + k) % n) for k in range(n))
+
+
+def data(deadline: Deadline) -> int:
+    done = ROOT / ".reference_data_done"
+    if done.is_file():
+        return 0
+    rc = run([PY, "-m", "pipeline", *DATA, "stages=[episodes]", f"executor.n_workers={WORKERS}"], deadline)
+    if rc == 0:  # the zero-shot set: drawn by the evaluate stage from the test split's scenes
+        rc = run([PY, "-m", "pipeline", *DATA, "stages=[evaluate]", "evaluate.split=eval_zeroshot",
+                  "evaluate.tasks=[pointnav]", "evaluate.agent=oracle", "evaluate.render=false"], deadline,
+                 log=ROOT.parent / "reference_draw.log")
+    if rc == 0:
+        done.write_text("done\n")
+    return rc
+
+
+def finished(run_dir: Path, rounds: int) -> bool:
+    card = run_dir / "model_card.json"
+    return card.is_file() and len(json.loads(card.read_text())["curve"]) >= rounds
+
+
+def train_jobs(which: str) -> list[tuple[Path, list[str], int]]:
+    """(run folder, navarena train arguments, rounds) of the reference run and/or the scaling runs."""
+    jobs = []
+    if which in ("train", "all"):
+        from navarena.train import TrainConfig
+
+        jobs.append((RUNS / "pointnav_bc", [], ROUNDS or TrainConfig().rounds))
+    if which in ("scaling", "all"):
+        for n in SCALE_SIZES:
+            extra = ["--val-split", "test", "--val-episodes", "160"] + (["--scenes", str(n)] if n else [])
+            jobs.append((RUNS / f"scale_{n or 'all'}", extra, SCALE_ROUNDS))
+    return [j for j in jobs if not finished(j[0], j[2])]
+
+
+def train(deadline: Deadline, which: str) -> int:
+    """The training runs side by side: the CPU workers split by rounds still to do, GPUs rotated."""
+    jobs = train_jobs(which)
+    if not jobs:
+        return 0
+    n_gpu, weights = gpus(), [r for _, _, r in jobs]
+    RUNS.mkdir(parents=True, exist_ok=True)
+
+    def one(i):
+        out, extra, rounds = jobs[i]
+        workers = max(2, WORKERS * weights[i] // sum(weights))
+        return run([PY, "-m", "navarena", "train", str(ROOT), "--out", str(out), "--resume", "--rounds", str(rounds),
+                    "--workers", str(workers), *extra, *TRAIN_ARGS], deadline, log=out.with_suffix(".log"),
+                   env={"CUDA_VISIBLE_DEVICES": rotated(i, n_gpu)})
+
+    with ThreadPoolExecutor(len(jobs)) as pool:
+        rcs = list(pool.map(one, range(len(jobs))))
+    for (out, _, _), rc in zip(jobs, rcs):
+        print(f"{out.name}: rc {rc}; " + "".join(open(out.with_suffix('.log')).readlines()[-1:]).strip(), flush=True)
+    return max(rcs)
+
+
+def test_scenes() -> list[str]:
+    from navarena.dataset import NavDataset
+
+    return sorted(set(NavDataset(ROOT).eval_set("eval_zeroshot")["scene_id"]))
+
+
+def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
+    """The zero-shot set for every agent (see the module docstring), merged per agent and protocol."""
+    from benchmarks.baselines.cards import ship
+    from navarena.train import TrainConfig
+
+    if not finished(RUNS / "pointnav_bc", ROUNDS or TrainConfig().rounds):
+        print("eval: the reference run has not finished its rounds", flush=True)
+        return 1
+    ship(RUNS / "pointnav_bc", "pointnav_bc")
+    scenes, n_gpu = test_scenes(), gpus()
+    common = ["--split", "eval_zeroshot", "--tasks", "pointnav", "--quiet"]
+    parts = []
+    for agent, proto in RENDERED:
+        for sid in scenes:
+            parts.append((agent, proto, sid, ["--scenes", sid, "--width", "640", "--height", "480", "--renderer",
+                                               "gsplat", "--batch-slots", "64"]))
+    for agent, proto in UNRENDERED:
+        parts.append((agent, proto, None, ["--no-render", "--batch-slots", "64"]))
+    parts.sort(key=lambda p: p[0] != "depth_reactive")  # the longest first
+    todo = [p for p in parts if not (EVAL / "parts" / f"{p[0]}_{p[1]}" / (p[2] or "all") / "summary.json").is_file()]
+    timing: dict = json.loads((EVAL / "timing.json").read_text()) if (EVAL / "timing.json").is_file() else {}
+
+    def one(k):
+        agent, proto, sid, extra = todo[k]
+        out = EVAL / "parts" / f"{agent}_{proto}" / (sid or "all")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        t = time.perf_counter()
+        rc = run([PY, "-m", "navarena", "eval", str(ROOT), "--agent", agent, "--protocol", proto, *common, *extra, *EVAL_ARGS,
+                  "--out", str(out)], deadline, log=out.with_suffix(".log"),
+                 env={"CUDA_VISIBLE_DEVICES": str(k % n_gpu)})
+        return k, rc, time.perf_counter() - t
+
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(max(1, per_gpu * n_gpu)) as pool:
+        results = list(pool.map(one, range(len(todo))))
+    if todo:
+        timing.setdefault("phases", []).append({"parts": len(todo), "processes": per_gpu * n_gpu, "gpus": n_gpu,
+                                                "seconds": round(time.perf_counter() - t0, 1)})
+    for k, rc, secs in results:
+        agent, proto, sid, _ = todo[k]
+        if rc == 0:
+            timing[f"{agent}_{proto}/{sid or 'all'}"] = round(secs, 1)
+    (EVAL / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
+    merge(timing)
+    return max([rc for _, rc, _ in results] or [0])
+
+
+def merge(timing: dict) -> None:
+    """Each agent and protocol's parts -> EVAL/<agent>_<protocol>/{results.parquet, summary.json},
+    with its steps and steps per second (a part's wall time includes its process start)."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from navarena.evaluate import write_results
+
+    for agent, proto in RENDERED + UNRENDERED:
+        files = sorted((EVAL / "parts" / f"{agent}_{proto}").glob("*/results.parquet"))
+        if not files:
+            continue
+        table = pa.concat_tables([pq.read_table(f) for f in files]).sort_by([("scene_id", "ascending"),
+                                                                           ("episode_id", "ascending")])
+        first = json.loads((files[0].parent / "summary.json").read_text())
+        secs = sum(timing.get(f"{agent}_{proto}/{f.parent.name}", 0.0) for f in files)  # parts' wall seconds
+        steps = int(sum(table["steps"].to_pylist()))
+        meta = {k: first[k] for k in ("root", "agent", "agent_args", "protocol", "split", "difficulty",
+                                      "episodes_per_scene", "seed", "render")}
+        meta.update({"interrupted": False, "parts": len(files), "steps_total": steps, "part_seconds": round(secs, 1),
+                     "steps_per_s_per_process": round(steps / secs, 1) if secs else None})
+        write_results(table, EVAL / f"{agent}_{proto}", meta)
+        print(f"{agent}_{proto}: {table.num_rows} episodes from {len(files)} parts", flush=True)
+
+
+def pack(out: Path) -> Path:
+    out.mkdir(parents=True, exist_ok=True)
+    f = out / "baselines.tgz"
+    with tarfile.open(f, "w:gz") as tar:
+        for p in sorted(RUNS.glob("*/model_card.json")) + sorted(RUNS.glob("*.log")):
+            tar.add(p, arcname=str(p.relative_to(RUNS.parent)))
+        if (RUNS / "pointnav_bc" / "model.pt").is_file():
+            tar.add(RUNS / "pointnav_bc" / "model.pt", arcname="runs/pointnav_bc/model.pt")
+        for p in sorted(EVAL.glob("*/summary.json")) + sorted(EVAL.glob("*/results.parquet")) + \
+                sorted(EVAL.glob("timing.json")):
+            tar.add(p, arcname=str(p.relative_to(EVAL.parent)))
+        for p in sorted(EVAL.glob("parts/*/*.log")):
+            tar.add(p, arcname=str(p.relative_to(EVAL.parent)))
+    return f
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("phase", choices=("all", "data", "train", "scaling", "eval", "pack"))
+    ap.add_argument("out", nargs="?", type=Path, default=None, help="pack: the folder of baselines.tgz")
+    ap.add_argument("--deadline", type=float, default=None, help="seconds from now: phases stop (and resume later)")
+    a = ap.parse_args(argv)
+    deadline = Deadline(a.deadline)
+    t0 = time.perf_counter()
+    rc = 0
+    if a.phase in ("all", "data"):
+        rc = data(deadline)
+        print(f"[{time.perf_counter() - t0:.0f} s] data: rc {rc}", flush=True)
+    if rc == 0 and a.phase in ("all", "train", "scaling") and not deadline.over():
+        rc = train(deadline, a.phase)
+        print(f"[{time.perf_counter() - t0:.0f} s] {a.phase}: rc {rc}", flush=True)
+    if rc == 0 and a.phase in ("all", "eval") and not deadline.over():
+        rc = evaluate(deadline)
+        print(f"[{time.perf_counter() - t0:.0f} s] eval: rc {rc}", flush=True)
+    if a.phase == "pack" or (a.phase == "all" and a.out):
+        print(pack(a.out or Path(os.environ.get("OUT", "."))))
+    return rc
+
+
+if __name__ == "__main__":
+    sys.exit(main())
