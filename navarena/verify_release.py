@@ -2,8 +2,9 @@
 
     navarena verify-release releases/navarena-v1.0.0 [--sample 200] [--workers 8] [--json report.json]
 
-1. Files: every file of MANIFEST.tsv present with its bytes and sha256 (hashed on several threads,
-   with a progress display), no file the manifest does not list.
+1. Files: the manifest's own digest (MANIFEST.tsv.sha256), every file of MANIFEST.tsv present with
+   its bytes and sha256 (hashed on several threads, with a progress display), no file the manifest
+   does not list. The content checks below skip the files found damaged here.
 2. Tables: every episodes / trajectories Parquet file has the schema release.json records, its hive
    partition agrees with its rows (task_type, split), and the row counts per task and split equal
    the card's (README.md front matter) and release.json's.
@@ -13,7 +14,8 @@
    valid, the stored geodesic distance within tolerance of a recomputation on the map, the expert
    trajectory collision-free.
 
-Exit 0 only when everything holds; otherwise the report names every file and problem (exit 1).
+Exit 0 only when everything holds; otherwise the report names every file and problem (exit 1). A
+file that cannot be read is a problem of that file, never a crash.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ import os
 import sys
 from collections import defaultdict
 from concurrent.futures import ThreadPoolExecutor, as_completed
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -31,9 +34,11 @@ import numpy as np
 from navcore.io.release import (
     CARD,
     MANIFEST,
+    MANIFEST_DIGEST,
     RELEASE_JSON,
     read_card_front_matter,
     read_manifest,
+    read_manifest_digest,
     schema_fields,
     sha256_file,
     walk_files,
@@ -51,26 +56,53 @@ class Report:
     def __init__(self):
         self.problems: list[dict] = []
         self.checked: dict[str, int] = defaultdict(int)
+        self.damaged: set[str] = set()
+        """Files whose bytes differ from the manifest: the content checks skip them."""
 
     def bad(self, kind: str, path: str, what: str) -> None:
         self.problems.append({"check": kind, "file": path, "problem": what})
+
+    @contextmanager
+    def reading(self, kind: str, path: str):
+        """A check of one file: whatever reading it raises is a problem of that file."""
+        try:
+            yield
+        except Exception as e:  # noqa: BLE001 - a damaged file is a finding to report, never a crash
+            self.bad(kind, path, f"unreadable ({type(e).__name__}: {str(e).splitlines()[0][:200] if str(e) else ''})")
 
     @property
     def ok(self) -> bool:
         return not self.problems
 
 
+def check_manifest_digest(root: Path, report: Report) -> bool:
+    """Whether MANIFEST.tsv matches MANIFEST.tsv.sha256 (releases made before the digest have none:
+    True). A digest that cannot be read is reported here."""
+    if not (root / MANIFEST_DIGEST).is_file():
+        return True
+    try:
+        want = read_manifest_digest(root / MANIFEST_DIGEST)
+    except (OSError, ValueError) as e:
+        report.bad("files", MANIFEST_DIGEST, f"cannot be read: {e}")
+        return True
+    report.checked["files"] += 1
+    return sha256_file(root / MANIFEST) == want
+
+
 def check_files(root: Path, report: Report, workers: int, quiet: bool) -> dict[str, tuple[int, str]]:
     from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TimeRemainingColumn, TransferSpeedColumn
 
+    digest_ok = check_manifest_digest(root, report)
     try:
         manifest = read_manifest(root / MANIFEST)
     except (OSError, ValueError) as e:
         report.bad("files", MANIFEST, f"cannot be read: {e}")
+        report.damaged.add(MANIFEST)
         return {}
-    on_disk = set(walk_files(root)) - {MANIFEST}
+    on_disk = set(walk_files(root)) - {MANIFEST, MANIFEST_DIGEST}
     for rel in sorted(set(manifest) - on_disk):
         report.bad("files", rel, "missing (listed in MANIFEST.tsv)")
+        report.damaged.add(rel)
     for rel in sorted(on_disk - set(manifest)):
         report.bad("files", rel, "unexpected (not in MANIFEST.tsv)")
     todo = []
@@ -78,6 +110,7 @@ def check_files(root: Path, report: Report, workers: int, quiet: bool) -> dict[s
         size = (root / rel).stat().st_size
         if size != manifest[rel][0]:
             report.bad("files", rel, f"{size} bytes, the manifest says {manifest[rel][0]} (truncated or replaced)")
+            report.damaged.add(rel)
         else:
             todo.append(rel)
     total = sum(manifest[r][0] for r in todo)
@@ -88,10 +121,23 @@ def check_files(root: Path, report: Report, workers: int, quiet: bool) -> dict[s
             futures = {pool.submit(sha256_file, root / rel): rel for rel in todo}
             for fut in as_completed(futures):
                 rel = futures[fut]
-                if fut.result() != manifest[rel][1]:
-                    report.bad("files", rel, "sha256 differs from the manifest (the bytes changed)")
+                try:
+                    digest = fut.result()
+                except OSError as e:
+                    report.bad("files", rel, f"cannot be read: {e}")
+                    digest = None
+                if digest != manifest[rel][1]:
+                    if digest is not None:
+                        report.bad("files", rel, "sha256 differs from the manifest (the bytes changed)")
+                    report.damaged.add(rel)
                 progress.advance(bar, manifest[rel][0])
-    report.checked["files"] = len(manifest)
+    if not digest_ok:  # every file agreeing with the manifest points at the digest file
+        files_ok = not any(p["check"] == "files" for p in report.problems)
+        report.bad("files", MANIFEST_DIGEST if files_ok else MANIFEST,
+                   f"{MANIFEST}'s sha256 differs from {MANIFEST_DIGEST}: " +
+                   ("every file matches the manifest, so the digest file is the damaged one" if files_ok else
+                    "the manifest is damaged (or replaced), so the findings above may name good files"))
+    report.checked["files"] += len(manifest)
     return manifest
 
 
@@ -99,48 +145,61 @@ def _partitions(rel: str) -> dict[str, str]:
     return dict(p.split("=", 1) for p in Path(rel).parent.parts if "=" in p)
 
 
-def check_tables(root: Path, info: dict, report: Report) -> dict[tuple[str, str], list[str]]:
-    """Schemas, partitions and counts; returns {(task, split): episode files}."""
+def _check_table(path: Path, name: str, kind: str, expected: dict, report: Report, counts: dict, files: dict) -> None:
     import pyarrow.parquet as pq
 
-    expected = {k: [tuple(f) for f in v] for k, v in info["schemas"].items()}
+    part = _partitions(name)
+    schema = pq.read_schema(path)
+    meta = pq.read_metadata(path)
+    got = [tuple(f) for f in schema_fields(schema)]
+    if got != expected.get(kind):
+        diff = sorted(set(got) ^ set(expected.get(kind, [])))[:4]
+        report.bad("tables", name, f"schema differs from release.json's {kind} schema (e.g. {diff})")
+        return
+    report.checked[f"{kind} files"] += 1
+    if kind == "episodes":
+        t = pq.read_table(path, columns=["task_type", "split"])
+        if set(t["split"].to_pylist()) - {part.get("split")}:
+            report.bad("tables", name, f"rows of split(s) {sorted(set(t['split'].to_pylist()))} in the "
+                                       f"split={part.get('split')} partition")
+        if set(t["task_type"].to_pylist()) - {part.get("task")}:
+            report.bad("tables", name, f"rows of task(s) {sorted(set(t['task_type'].to_pylist()))} in the "
+                                       f"task={part.get('task')} partition")
+        counts[(part.get("task"), part.get("split"))] += meta.num_rows
+        files[(part.get("task"), part.get("split"))].append(name)
+
+
+def check_tables(root: Path, info: dict, report: Report) -> dict[tuple[str, str], list[str]]:
+    """Schemas, partitions and counts; returns {(task, split): episode files}."""
+
+    try:
+        expected = {k: [tuple(f) for f in v] for k, v in info["schemas"].items()}
+    except (KeyError, TypeError, AttributeError) as e:
+        report.bad("tables", RELEASE_JSON, f"no table schemas ({type(e).__name__}: {e})")
+        return {}
     counts: dict[tuple[str, str], int] = defaultdict(int)
     files: dict[tuple[str, str], list[str]] = defaultdict(list)
     for kind in ("episodes", "trajectories"):
         folder = root / kind
         for rel in (walk_files(folder) if folder.is_dir() else []):
-            path = folder / rel
             name = f"{kind}/{rel}"
-            part = _partitions(name)
-            try:
-                schema = pq.read_schema(path)
-                meta = pq.read_metadata(path)
-            except Exception as e:  # noqa: BLE001 - any unreadable file is a problem to report, not a crash
-                report.bad("tables", name, f"not a readable Parquet file ({type(e).__name__}: {e})")
+            if name in report.damaged:
                 continue
-            got = [tuple(f) for f in schema_fields(schema)]
-            if got != expected[kind]:
-                diff = sorted(set(got) ^ set(expected[kind]))[:4]
-                report.bad("tables", name, f"schema differs from release.json's {kind} schema (e.g. {diff})")
-                continue
-            report.checked[f"{kind} files"] += 1
-            if kind == "episodes":
-                t = pq.read_table(path, columns=["task_type", "split"])
-                if set(t["split"].to_pylist()) - {part.get("split")}:
-                    report.bad("tables", name, f"rows of split(s) {sorted(set(t['split'].to_pylist()))} in the "
-                                               f"split={part.get('split')} partition")
-                if set(t["task_type"].to_pylist()) - {part.get("task")}:
-                    report.bad("tables", name, f"rows of task(s) {sorted(set(t['task_type'].to_pylist()))} in the "
-                                               f"task={part.get('task')} partition")
-                counts[(part.get("task"), part.get("split"))] += meta.num_rows
-                files[(part.get("task"), part.get("split"))].append(name)
+            with report.reading("tables", name):
+                _check_table(folder / rel, name, kind, expected, report, counts, files)
+    card = {}
+    if CARD not in report.damaged:
+        try:
+            fm = read_card_front_matter(root / CARD)
+            card = {(c["config_name"], s["name"]): s["num_examples"] for c in fm.get("dataset_info", [])
+                    for s in c["splits"]}
+        except Exception as e:  # noqa: BLE001 - YAML, types, keys: a damaged card is a finding
+            report.bad("tables", CARD, f"front matter unreadable ({type(e).__name__}: {e})")
     try:
-        fm = read_card_front_matter(root / CARD)
-        card = {(c["config_name"], s["name"]): s["num_examples"] for c in fm.get("dataset_info", []) for s in c["splits"]}
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        report.bad("tables", CARD, f"front matter unreadable: {e}")
-        card = {}
-    recorded = {(t, sp): n for t, s in info.get("counts", {}).items() for sp, n in s.items()}
+        recorded = {(t, sp): n for t, s in info.get("counts", {}).items() for sp, n in s.items()}
+    except (AttributeError, TypeError):
+        report.bad("tables", RELEASE_JSON, "its counts are not {task: {split: n}}")
+        recorded = {}
     for key in sorted(set(counts) | set(card) | set(recorded), key=str):
         n, c, r = counts.get(key, 0), card.get(key), recorded.get(key)
         if c != n or r != n:
@@ -155,7 +214,10 @@ def check_assets(root: Path, files: dict, report: Report) -> None:
     seen = set()
     for names in files.values():
         for name in names:
-            for sp in set(pq.read_table(root / name, columns=["scene_path"])["scene_path"].to_pylist()):
+            scene_paths = []
+            with report.reading("scenes", name):
+                scene_paths = set(pq.read_table(root / name, columns=["scene_path"])["scene_path"].to_pylist())
+            for sp in scene_paths:
                 if sp in seen:
                     continue
                 seen.add(sp)
@@ -247,7 +309,8 @@ def goal_points(row: dict) -> list:
 
 
 def check_episodes(root: Path, files: dict, sample: int, seed: int, report: Report) -> None:
-    """Re-check `sample` episodes (0 = all), drawn evenly over the episode files."""
+    """Re-check `sample` episodes (0 = all), drawn evenly over the episode files; files and scene
+    maps already found damaged are skipped (their damage is reported)."""
     import pyarrow as pa
     import pyarrow.compute as pc
     import pyarrow.parquet as pq
@@ -255,51 +318,67 @@ def check_episodes(root: Path, files: dict, sample: int, seed: int, report: Repo
     names = sorted(n for ns in files.values() for n in ns)
     rows = []
     for name in names:
-        t = pq.read_table(root / name, columns=["episode_id"])
-        rows += [(name, e) for e in t["episode_id"].to_pylist()]
+        with report.reading("episodes", name):
+            rows += [(name, e) for e in pq.read_table(root / name, columns=["episode_id"])["episode_id"].to_pylist()]
     if sample and len(rows) > sample:
         pick = np.random.default_rng(seed).choice(len(rows), sample, replace=False)
         rows = [rows[k] for k in sorted(pick)]
     by_file: dict[str, list[str]] = defaultdict(list)
     for name, e in rows:
         by_file[name].append(e)
-    maps: dict[str, SceneMap] = {}
+    maps: dict[str, SceneMap | None] = {}
     for name, ids in by_file.items():
-        ep = pq.read_table(root / name)
-        ep = ep.filter(pc.is_in(ep["episode_id"], value_set=pa.array(ids))).to_pylist()
+        ep, tr = [], None
+        with report.reading("episodes", name):
+            t = pq.read_table(root / name)
+            ep = t.filter(pc.is_in(t["episode_id"], value_set=pa.array(ids))).to_pylist()
         tr_name = name.replace("episodes/", "trajectories/", 1)
-        tr = pq.read_table(root / tr_name, columns=["episode_id", "position_x", "position_y"]) \
-            if (root / tr_name).is_file() else None
+        if tr_name not in report.damaged and (root / tr_name).is_file():
+            with report.reading("episodes", tr_name):
+                tr = pq.read_table(root / tr_name, columns=["episode_id", "position_x", "position_y"])
         for row in ep:
             where = f"{name} episode {row['episode_id']}"
-            try:
-                sm = maps.setdefault(row["scene_path"], SceneMap(root / "assets" / row["scene_path"]))
-            except (OSError, ValueError, KeyError) as e:
-                report.bad("episodes", where, f"scene map unreadable: {e}")
+            sp = row["scene_path"]
+            if sp not in maps:
+                maps[sp] = None
+                asset = f"assets/{sp}"
+                if not any(d.startswith(asset + "/") for d in report.damaged):  # else reported already
+                    with report.reading("episodes", f"{asset}/nav_map.*"):
+                        maps[sp] = SceneMap(root / "assets" / sp)
+            if maps[sp] is None:
                 continue
-            start = np.array([[row["start_position_x"], row["start_position_y"]]])
-            goals = goal_points(row)
-            if not corners_free(sm.occ, sm.origin, sm.res, start)[0]:
-                report.bad("episodes", where, f"start ({start[0][0]:.3f}, {start[0][1]:.3f}) lies in an obstacle of the map")
-            if not goals or not corners_free(sm.occ, sm.origin, sm.res, np.asarray(goals, float)).any():
-                report.bad("episodes", where, "no goal position lies in free space of the map")
-            geo = sm.geodesic(start[0], goals)
-            stored = float(row["geodesic_distance"])
-            tol = GEODESIC_TOLERANCE * stored + GEODESIC_CELLS * sm.res
-            if not abs(geo - stored) <= tol:
-                report.bad("episodes", where, f"stored geodesic {stored:.3f} m, recomputed on the map {geo:.3f} m "
-                                              f"(tolerance {tol:.3f} m)")
-            if tr is None:
-                report.bad("episodes", where, f"no trajectory file {tr_name}")
-            else:
-                mine = tr.filter(pc.equal(tr["episode_id"], row["episode_id"]))
-                xy = np.stack([mine["position_x"].to_numpy(), mine["position_y"].to_numpy()], 1).astype(float)
-                if len(xy) != row["num_steps"]:
-                    report.bad("episodes", where, f"{len(xy)} trajectory rows, num_steps says {row['num_steps']}")
-                bad = np.flatnonzero(~corners_free(sm.occ, sm.origin, sm.res, xy)) if len(xy) else []
-                if len(bad):
-                    report.bad("episodes", where, f"expert trajectory in collision at {len(bad)} step(s), first at step {bad[0]}")
-            report.checked["episodes re-checked"] += 1
+            with report.reading("episodes", where):
+                _check_episode(row, maps[sp], tr, tr_name, name in report.damaged or tr_name in report.damaged,
+                               where, report)
+
+
+def _check_episode(row: dict, sm: "SceneMap", tr, tr_name: str, tr_damaged: bool, where: str, report: Report) -> None:
+    import pyarrow.compute as pc
+
+    start = np.array([[row["start_position_x"], row["start_position_y"]]])
+    goals = goal_points(row)
+    if not corners_free(sm.occ, sm.origin, sm.res, start)[0]:
+        report.bad("episodes", where, f"start ({start[0][0]:.3f}, {start[0][1]:.3f}) lies in an obstacle of the map")
+    if not goals or not corners_free(sm.occ, sm.origin, sm.res, np.asarray(goals, float)).any():
+        report.bad("episodes", where, "no goal position lies in free space of the map")
+    geo = sm.geodesic(start[0], goals)
+    stored = float(row["geodesic_distance"])
+    tol = GEODESIC_TOLERANCE * stored + GEODESIC_CELLS * sm.res
+    if not abs(geo - stored) <= tol:
+        report.bad("episodes", where, f"stored geodesic {stored:.3f} m, recomputed on the map {geo:.3f} m "
+                                      f"(tolerance {tol:.3f} m)")
+    if tr is None:
+        if not tr_damaged:
+            report.bad("episodes", where, f"no trajectory file {tr_name}")
+    else:
+        mine = tr.filter(pc.equal(tr["episode_id"], row["episode_id"]))
+        xy = np.stack([mine["position_x"].to_numpy(), mine["position_y"].to_numpy()], 1).astype(float)
+        if len(xy) != row["num_steps"]:
+            report.bad("episodes", where, f"{len(xy)} trajectory rows, num_steps says {row['num_steps']}")
+        bad = np.flatnonzero(~corners_free(sm.occ, sm.origin, sm.res, xy)) if len(xy) else []
+        if len(bad):
+            report.bad("episodes", where, f"expert trajectory in collision at {len(bad)} step(s), first at step {bad[0]}")
+    report.checked["episodes re-checked"] += 1
 
 
 def verify(root: Path, sample: int = 200, workers: int = 0, seed: int = 0, quiet: bool = False) -> Report:
@@ -311,11 +390,17 @@ def verify(root: Path, sample: int = 200, workers: int = 0, seed: int = 0, quiet
     if not report.ok:
         return report
     check_files(root, report, workers or os.cpu_count() or 2, quiet)
+    if RELEASE_JSON in report.damaged or MANIFEST in report.damaged:
+        return report  # its schemas and counts cannot be trusted: the file checks said what is wrong
     try:
         info = json.loads((root / RELEASE_JSON).read_text())
+        if not isinstance(info, dict):
+            raise ValueError("not a JSON object")
     except (OSError, ValueError) as e:
         report.bad("files", RELEASE_JSON, f"unreadable: {e}")
         return report
+    if info.get("manifest_digest") and not (root / MANIFEST_DIGEST).is_file():
+        report.bad("files", MANIFEST_DIGEST, "missing (release.json says the release has it)")
     files = check_tables(root, info, report)
     check_assets(root, files, report)
     check_episodes(root, files, sample, seed, report)

@@ -260,6 +260,53 @@ def test_verify_release_names_every_damaged_file(release, tmp_path, damage):
     assert any(pr["file"].startswith(rel) and want in pr["problem"] for pr in report.problems), report.problems
 
 
+FUZZ_KINDS = {"parquet": lambda f: f.endswith(".parquet"), "json": lambda f: f.endswith(".json"),
+              "pgm": lambda f: f.endswith(".pgm"), "png": lambda f: f.endswith(".png"),
+              "yaml": lambda f: f.endswith(".yaml"), "card": lambda f: f == "README.md",
+              "manifest": lambda f: f == MANIFEST, "manifest digest": lambda f: f == MANIFEST + ".sha256"}
+
+
+def test_verify_release_fuzz_never_crashes_and_names_the_file(release, tmp_path, capsys):
+    """Bytes flipped at random offsets of every kind of file a release holds, truncations and
+    deletions: every case exits 1, names the damaged file, and raises nothing."""
+    from navarena.verify_release import main
+
+    out, _ = release
+    d = _damaged_copy(out, tmp_path / "copy")
+    files = sorted(str(p.relative_to(d)) for p in d.rglob("*") if p.is_file())
+    rng = np.random.default_rng(0)
+    cases = 0
+    for kind, match in FUZZ_KINDS.items():
+        pool = [f for f in files if match(f)]
+        assert pool, f"the release holds no {kind} file"
+        for rel in [pool[k] for k in rng.choice(len(pool), min(2, len(pool)), replace=False)]:
+            p = d / rel
+            original = p.read_bytes()
+            damages = [("flip", int(rng.integers(0, len(original)))) for _ in range(3)]
+            damages += [("truncate", int(rng.integers(0, len(original)))), ("delete", 0)]
+            for how, at in damages:
+                if how == "flip":
+                    b = bytearray(original)
+                    b[at] ^= int(rng.integers(1, 256))
+                    p.write_bytes(bytes(b))
+                elif how == "truncate":
+                    p.write_bytes(original[:at])
+                else:
+                    p.unlink()
+                try:
+                    rc = main([str(d), "--sample", "3", "--quiet"])
+                finally:
+                    p.write_bytes(original)
+                err = capsys.readouterr().err
+                assert rc == 1, (rel, how, at)
+                assert f"] {rel}" in err, (rel, how, at, err)
+                assert "Traceback" not in err
+                cases += 1
+    assert main([str(d), "--sample", "3", "--quiet"]) == 0  # restored: clean again
+    print(f"verify-release fuzz: {cases} cases")
+    assert cases >= 40
+
+
 def test_verify_release_cli_exit_codes(release, tmp_path, capsys):
     from navarena.verify_release import main
 

@@ -178,7 +178,7 @@ def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
                                                "gsplat", "--batch-slots", "64"]))
     for agent, proto in UNRENDERED:
         parts.append((agent, proto, None, ["--no-render", "--batch-slots", "64"]))
-    parts.sort(key=lambda p: p[0] != "depth_reactive")  # the longest first
+    parts.sort(key=lambda p: (p[2] is not None, p[2] or ""))  # unrendered first, then scene by scene (a cut keeps whole scenes)
     todo = [p for p in parts if not (EVAL / "parts" / f"{p[0]}_{p[1]}" / (p[2] or "all") / "summary.json").is_file()]
     timing: dict = json.loads((EVAL / "timing.json").read_text()) if (EVAL / "timing.json").is_file() else {}
 

@@ -3,6 +3,7 @@
 
     README.md                      dataset card (YAML front matter: licence, configs, split sizes)
     MANIFEST.tsv                   path, bytes, sha256 of every other file
+    MANIFEST.tsv.sha256            the manifest's own sha256 (`sha256sum -c MANIFEST.tsv.sha256`)
     release.json                   version, code, resolved config and hashes, catalog, seeds, counts, schemas
     croissant.json                 MLCommons Croissant metadata
     LICENSE                        the project's licence
@@ -27,6 +28,8 @@ from pathlib import Path
 
 CARD = "README.md"
 MANIFEST = "MANIFEST.tsv"
+MANIFEST_DIGEST = "MANIFEST.tsv.sha256"
+"""The manifest's own digest, in sha256sum's format: damage to the manifest is named as such."""
 RELEASE_JSON = "release.json"
 CROISSANT = "croissant.json"
 NOTES = "RELEASE_NOTES.md"
@@ -76,9 +79,21 @@ def sha256_file(path: str | Path, chunk: int = 1 << 22) -> str:
 
 
 def write_manifest(path: Path, rows: dict[str, tuple[int, str]]) -> None:
-    """MANIFEST.tsv: a header, then one line per file (relative POSIX path, bytes, sha256), sorted."""
+    """MANIFEST.tsv: a header, then one line per file (relative POSIX path, bytes, sha256), sorted;
+    and beside it MANIFEST.tsv.sha256, the manifest's own digest."""
+    path = Path(path)
     lines = [MANIFEST_HEADER] + [f"{p}\t{b}\t{h}" for p, (b, h) in sorted(rows.items())]
-    Path(path).write_text("\n".join(lines) + "\n")
+    path.write_text("\n".join(lines) + "\n")
+    path.with_name(path.name + ".sha256").write_text(f"{sha256_file(path)}  {path.name}\n")
+
+
+def read_manifest_digest(path: Path) -> str:
+    """The sha256 recorded in MANIFEST.tsv.sha256; ValueError when it is not one."""
+    text = Path(path).read_text(errors="replace").strip()
+    m = re.fullmatch(r"([0-9a-f]{64})  " + re.escape(MANIFEST), text)
+    if not m:
+        raise ValueError(f"{path}: not '<sha256>  {MANIFEST}'")
+    return m.group(1)
 
 
 def read_manifest(path: Path) -> dict[str, tuple[int, str]]:

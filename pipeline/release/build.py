@@ -5,7 +5,7 @@ statistics kept as sums and fixed-bin histograms): episodes and trajectories par
 split and scene (a scene's file is hard linked when it holds one split, else split into one file a
 split), the zero-shot evaluation set as its own split, ObjectNav instance tables, ImageNav goal
 images, the V1 scene assets and the NavArena navigation layout (hard links). Then the scene table,
-plots, release.json, the dataset card, croissant.json, and last MANIFEST.tsv with every file's
+plots, release.json, the dataset card, croissant.json, and last MANIFEST.tsv (and its own digest) with every file's
 sha256 (hashed on several threads). The folder is written under a temporary name and renamed when
 complete: a killed build leaves no half release.
 """
@@ -33,6 +33,7 @@ from navcore.io.licences import PROJECT_LICENSE, redistributable
 from navcore.io.release import (
     CARD,
     MANIFEST,
+    MANIFEST_DIGEST,
     NOTES,
     RELEASE_JSON,
     SCENES,
@@ -339,6 +340,7 @@ def build_release(cfg, out: Path | None = None, console=None) -> dict:
             "schemas": {"episodes": schema_fields(EPISODE_SCHEMA), "trajectories": schema_fields(TRAJECTORY_SCHEMA)},
             "previous": None,
             "licence": PROJECT_LICENSE,
+            "manifest_digest": MANIFEST_DIGEST,
             "licenses": sorted({s.license for s, _ in included if s.license and " " not in s.license} | {PROJECT_LICENSE}),
         }
         release_notes = None
@@ -354,7 +356,7 @@ def build_release(cfg, out: Path | None = None, console=None) -> dict:
         reused = b.reuse_previous(manifest)
         write_manifest(tmp / MANIFEST, manifest)
         summary = {"folder": str(out), "version": rcfg.version, "scenes": len(included), "excluded": len(excluded),
-                   "files": len(manifest) + 1, "bytes": sum(v[0] for v in manifest.values()),
+                   "files": len(manifest) + 2, "bytes": sum(v[0] for v in manifest.values()),
                    "hard_links": b.links["link"], "copies": b.links["copy"], "written": b.links["written"],
                    "reused_from_previous": reused, "episodes": b.stats.total_episodes(),
                    "seconds": round((dt.datetime.now(dt.timezone.utc) - t0).total_seconds(), 2)}

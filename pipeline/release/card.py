@@ -90,8 +90,9 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
     total = stats.total_episodes()
     L += [f"Goal-directed navigation episodes (PointNav, ImageNav, ObjectNav) with expert trajectories, generated "
           f"by NavArena from frozen 3D Gaussian Splatting scenes: {total:,} episodes in {len(scene_rows)} scene(s), "
-          f"created {info['created']}. Every file is listed with its sha256 in `MANIFEST.tsv`; "
-          "`navarena verify-release <folder>` checks a downloaded copy.", "",
+          f"created {info['created']}. Every file is listed with its sha256 in `MANIFEST.tsv` "
+          "(whose own digest is `MANIFEST.tsv.sha256`); `navarena verify-release <folder>` checks a downloaded copy "
+          "and names every damaged file.", "",
           "## Loading", "", "```python",
           "import datasets",
           "episodes = datasets.load_dataset(\"<this folder>\", \"pointnav\", split=\"train\")",
