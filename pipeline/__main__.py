@@ -6,7 +6,7 @@ import sys
 
 import hydra
 
-from pipeline.config import CONF_DIR, register_configs
+from pipeline.config import CONF_DIR, register_configs, unknown_keys_message, unknown_override_keys
 
 register_configs()
 
@@ -25,6 +25,13 @@ def main(argv: list[str] | None = None) -> None:
     """Run the pipeline with Hydra overrides (``navarena run ARGS`` and ``python -m pipeline ARGS``)."""
     if argv is not None:
         sys.argv = [sys.argv[0], *argv]
+    unknown = unknown_override_keys(sys.argv[1:])
+    if unknown:  # before Hydra, whose refusal ("use +key") names no close key and exits 1
+        from rich.console import Console
+        from rich.markup import escape
+
+        Console(stderr=True).print(f"[red]navarena[/]: {escape(unknown_keys_message(unknown))}")
+        sys.exit(2)
     _app()
 
 

@@ -203,6 +203,32 @@ def register_configs() -> None:
     cs.store(name="navarena_schema", node=NavArenaConfig)
 
 
+def unknown_keys_message(unknown: list[str]) -> str:
+    return (f"unknown configuration key(s): {'; '.join(unknown)}. Every key: docs/configuration.md "
+            f"(navarena run --cfg job prints the resolved config)")
+
+
+def unknown_override_keys(overrides: list[str]) -> list[str]:
+    """The keys of plain `key=value` command-line overrides that the schema does not know, with
+    suggestions (see unknown_keys); checked before Hydra, whose own refusal names no close key.
+    Group choices (`scenes=real_indoor`), `+`/`~` forms (checked after composition) and hydra.*
+    keys pass."""
+    tree: dict = {}
+    for o in overrides:
+        key, sep, _ = o.partition("=")
+        if not sep or o.startswith(("-", "+", "~")) or key.startswith("hydra.") or "/" in key or "@" in key:
+            continue
+        node = tree
+        parts = key.split(".")
+        for part in parts[:-1]:
+            node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                break
+        else:
+            node.setdefault(parts[-1], None)
+    return unknown_keys(tree)
+
+
 def unknown_keys(cfg) -> list[str]:
     """Keys of a composed config that the schema does not know (`+evaluate.agnet=oracle` adds one
     Hydra accepts), each with the closest known key as a suggestion: ["evaluate.agnet (did you mean

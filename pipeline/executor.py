@@ -19,7 +19,7 @@ from navcore.io.atomic import sweep_stale_temporaries
 from navcore.io.catalog import open_catalog
 from pipeline import sources
 from pipeline.backends import run_on_dask
-from pipeline.config import unknown_keys
+from pipeline.config import unknown_keys, unknown_keys_message
 from pipeline.config_guard import config_changes, describe, refusal
 from pipeline.episode_progress import EpisodeWatcher, rate_column
 from pipeline.graph import closure, config_hashes, scene_hash
@@ -34,8 +34,7 @@ def execute(cfg, console: Console | None = None) -> dict:
     console = console or Console()
     unknown = unknown_keys(cfg)
     if unknown:  # a misspelt key added with `+` would otherwise be accepted and ignored
-        raise UnknownKeysError(f"unknown configuration key(s): {'; '.join(unknown)}. Every key: docs/configuration.md "
-                               f"(navarena run --cfg job prints the resolved config)")
+        raise UnknownKeysError(unknown_keys_message(unknown))
     catalog, scenes, cat_file = open_catalog(cfg, PROJECT_ROOT)
     root = catalog.root
     stages = closure(list(cfg.stages))

@@ -332,6 +332,22 @@ def test_changed_settings_of_a_stage_the_run_does_not_name_are_refused(tmp_path,
     assert main_cfg(make_cfg(tmp_path, "+evaluate.agnet=oracle")) == 2
 
 
+def test_a_plain_misspelt_key_gets_the_friendly_refusal(capsys):
+    """`navarena run costmap.resolutoin=0.02` (no `+`): the closest key and exit 2, before Hydra."""
+    from pipeline.__main__ import main
+    from pipeline.config import unknown_override_keys
+
+    assert unknown_override_keys(["costmap.resolutoin=0.02", "scenes=real_indoor", "hydra.run.dir=x",
+                                  "task.pointnav.episodes_per_scene=3", "+x.y=1", "--cfg", "job"]) == \
+        ["costmap.resolutoin (did you mean costmap.resolution?)"]
+    assert unknown_override_keys(["costmap.resolution=0.02", "stages=[costmap]", "data_root=d"]) == []
+    with pytest.raises(SystemExit) as e:
+        main(["costmap.resolutoin=0.02", "stages=[costmap]"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.replace("\n", " ")
+    assert "did you mean" in err and "costmap.resolution?" in err and "Traceback" not in err
+
+
 def test_same_config_same_bytes_whatever_the_workers(tmp_path, make_cfg, costmap_root):
     """Sync and a 2-process Dask LocalCluster produce byte-identical stores."""
     costmap_root(tmp_path / "a")  # execute(make_cfg(tmp_path / "a", "stages=[costmap]")), sync
