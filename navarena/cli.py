@@ -92,6 +92,16 @@ def main(argv: list[str] | None = None) -> None:
     if args[0] in ("-V", "--version"):
         print(version())
         return
+    try:
+        code = _dispatch(args)
+    except KeyboardInterrupt:  # Ctrl-C outside a command's own handling (imports, loading): no traceback
+        print(f"\nnavarena {args[0]}: interrupted", file=sys.stderr)
+        sys.exit(130)
+    if isinstance(code, int) and code:  # the commands that report failure by their exit status
+        sys.exit(code)
+
+
+def _dispatch(args: list[str]):
     if args[0] in CONSUMER:
         code = importlib.import_module(CONSUMER[args[0]][0]).main(args[1:])
     else:
@@ -105,8 +115,7 @@ def main(argv: list[str] | None = None) -> None:
             print(GET_PIPELINE.format(cmd=name), file=sys.stderr)
             sys.exit(2)
         code = module.main(rest)
-    if isinstance(code, int) and code:  # the commands that report failure by their exit status
-        sys.exit(code)
+    return code
 
 
 if __name__ == "__main__":

@@ -87,17 +87,23 @@ def execute(cfg, console: Console | None = None) -> dict:
         run = run_name(OmegaConf.to_object(cfg.evaluate))
         watch = EpisodeWatcher(progress, catalog.path("eval_progress", run=run, scene_id="x").parent,
                                started.timestamp())
-    with progress, watch, sources.one_listing_a_run():  # a folder source's files listed once a run
-        bar = progress.add_task("tasks", total=len(scenes) * len(stages))
-        run = new_run()
-        if cfg.executor.kind == "sync" and not cfg.executor.address:
-            def run_now(st, scene, h, force, ups):
-                r = run_task(st.name, scene, cfg, catalog, h, force, *ups, run=run)
-                record(r)
-                return r
-            chain(run_now)
-        else:
-            run_on_dask(cfg, catalog, chain, record, console, run)
+    interrupted = False
+    try:
+        with progress, watch, sources.one_listing_a_run():  # a folder source's files listed once a run
+            bar = progress.add_task("tasks", total=len(scenes) * len(stages))
+            run = new_run()
+            if cfg.executor.kind == "sync" and not cfg.executor.address:
+                def run_now(st, scene, h, force, ups):
+                    r = run_task(st.name, scene, cfg, catalog, h, force, *ups, run=run)
+                    record(r)
+                    return r
+                chain(run_now)
+            else:
+                run_on_dask(cfg, catalog, chain, record, console, run)
+    except KeyboardInterrupt:  # Ctrl-C: keep what finished (every output is written whole), summarise it
+        interrupted = True
+        console.print(f"[yellow]interrupted[/]: {len(results)} of {len(scenes) * len(stages)} (stage, scene) tasks "
+                      "finished and are kept; run the same command again to go on")
     order = {s.name: i for i, s in enumerate(stages)}
     results.sort(key=lambda r: (r["scene_id"], order[r["stage"]]))
     if any(r["status"] in ("done", "failed") for r in results) and root.exists():
@@ -106,8 +112,10 @@ def execute(cfg, console: Console | None = None) -> dict:
             console.print(f"removed a killed writer's partial output: {p}")
     # dataset-level steps of the stages that have one and computed at least one scene in this run
     # (a fully cached stage leaves its dataset-level files as they are)
-    results += [run_finalize(st, cfg, catalog) for st in stages if finalize_due(st, results, catalog)]
+    if not interrupted:
+        results += [run_finalize(st, cfg, catalog) for st in stages if finalize_due(st, results, catalog)]
     summary = build_summary(results, started, cat_file, [cfg.scenes.shard, cfg.scenes.num_shards], stages, hashes)
+    summary["interrupted"] = interrupted
     if changes:
         summary["config_changes"] = {k: v | {"keys": [list(x) for x in v["keys"]]} for k, v in changes.items()}
     summary["allow_failures"] = bool(cfg.get("allow_failures", False))
@@ -130,10 +138,13 @@ class UnknownKeysError(ValueError):
 
 def main_cfg(cfg) -> int:
     """The exit status of a run: 1 when a (stage, scene) failed or the run was refused, unless
-    allow_failures=true; 2 for a config with unknown keys (nothing runs)."""
+    allow_failures=true; 2 for a config with unknown keys (nothing runs); 130 when Ctrl-C stopped it
+    (what finished is kept and summarised)."""
     try:
         summary = execute(cfg)
     except UnknownKeysError as e:
         Console(stderr=True).print(f"[red]navarena[/]: {escape(str(e))}")
         return 2
+    if summary.get("interrupted"):
+        return 130
     return 1 if (summary["failures"] and not cfg.allow_failures) else 0

@@ -75,3 +75,18 @@ def test_doctor_reports_the_core_of_this_machine():
     assert {"python", "packages", "torch", "gpu", "gsplat", "ompl", "detector weights"} <= set(checks)
     assert all(c["detail"] for c in checks.values())
     assert checks["detector weights"]["ok"] and checks["packages"]["ok"]
+
+
+def test_ctrl_c_in_any_command_exits_130_without_a_traceback(monkeypatch, capsys):
+    import navarena.doctor
+    from navarena import cli
+
+    def interrupted(argv):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(navarena.doctor, "main", interrupted)
+    with pytest.raises(SystemExit) as e:
+        cli.main(["doctor"])
+    assert e.value.code == 130
+    err = capsys.readouterr().err
+    assert "navarena doctor: interrupted" in err and "Traceback" not in err

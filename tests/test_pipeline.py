@@ -819,3 +819,34 @@ def test_an_older_runs_task_never_overwrites_a_newer_runs_output(tmp_path, make_
     assert json.loads(before)["run"]["started_ns"] > older["started_ns"]
     r = run_task("align", scene, stale, cat, h, False, run=new_run())  # a newer run recomputes
     assert r["status"] == "done" and json.loads(marker.read_text())["config_hash"] == h
+
+
+def test_ctrl_c_keeps_the_finished_work_and_summarises_it(tmp_path, make_cfg, monkeypatch):
+    """Ctrl-C mid-run: the finished (stage, scene) tasks are kept and summarised, exit 130, and the
+    same command goes on from there."""
+    import json
+
+    import pipeline.executor as ex
+
+    real, calls = ex.run_task, []
+
+    def interrupted_at(n):
+        def run(*a, **k):
+            calls.append(a[0])
+            if len(calls) == n:
+                raise KeyboardInterrupt
+            return real(*a, **k)
+        return run
+
+    monkeypatch.setattr(ex, "run_task", interrupted_at(2))
+    s = ex.execute(make_cfg(tmp_path, "stages=[ingest]"))
+    assert s["interrupted"] and [r["stage"] for r in s["results"]] == ["synthesize"]
+    assert s["results"][0]["status"] == "done"
+    assert json.loads((tmp_path / "_runs" / "latest.json").read_text())["interrupted"] is True
+    calls.clear()
+    monkeypatch.setattr(ex, "run_task", interrupted_at(1))
+    assert ex.main_cfg(make_cfg(tmp_path, "stages=[ingest]")) == 130
+    monkeypatch.setattr(ex, "run_task", real)
+    again = ex.execute(make_cfg(tmp_path, "stages=[ingest]"))
+    assert not again["interrupted"] and {r["stage"]: r["status"] for r in again["results"]} == \
+        {"synthesize": "cached", "ingest": "done"}
