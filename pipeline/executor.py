@@ -37,6 +37,11 @@ def execute(cfg, console: Console | None = None) -> dict:
         raise UnknownKeysError(unknown_keys_message(unknown))
     catalog, scenes, cat_file = open_catalog(cfg, PROJECT_ROOT)
     root = catalog.root
+    missing = [sc for sc in scenes if not sc.synthetic and sc.path and not Path(sc.path).exists()]
+    for sc in missing:  # before any worker starts: each named, the other scenes still run
+        console.print(f"[red]missing source[/]: scene {escape(sc.name)} ({sc.scene_id}): {escape(sc.path)} does not "
+                      f"exist (catalog {escape(str(cat_file))}); its stages are skipped")
+    scenes = [sc for sc in scenes if sc not in missing]
     stages = closure(list(cfg.stages))
     hashes = config_hashes(cfg)
     selected = set(cfg.stages)
@@ -92,7 +97,9 @@ def execute(cfg, console: Console | None = None) -> dict:
         with progress, watch, sources.one_listing_a_run():  # a folder source's files listed once a run
             bar = progress.add_task("tasks", total=len(scenes) * len(stages))
             run = new_run()
-            if cfg.executor.kind == "sync" and not cfg.executor.address:
+            if not scenes:
+                pass  # nothing to run (every source missing): no workers started
+            elif cfg.executor.kind == "sync" and not cfg.executor.address:
                 def run_now(st, scene, h, force, ups):
                     r = run_task(st.name, scene, cfg, catalog, h, force, *ups, run=run)
                     record(r)
@@ -116,6 +123,8 @@ def execute(cfg, console: Console | None = None) -> dict:
         results += [run_finalize(st, cfg, catalog) for st in stages if finalize_due(st, results, catalog)]
     summary = build_summary(results, started, cat_file, [cfg.scenes.shard, cfg.scenes.num_shards], stages, hashes)
     summary["interrupted"] = interrupted
+    summary["failures"] += [{"stage": "ingest", "scene_id": sc.scene_id, "scene": sc.name, "status": "failed",
+                             "error": f"source {sc.path} does not exist (catalog {cat_file})"} for sc in missing]
     if changes:
         summary["config_changes"] = {k: v | {"keys": [list(x) for x in v["keys"]]} for k, v in changes.items()}
     summary["allow_failures"] = bool(cfg.get("allow_failures", False))

@@ -850,3 +850,17 @@ def test_ctrl_c_keeps_the_finished_work_and_summarises_it(tmp_path, make_cfg, mo
     again = ex.execute(make_cfg(tmp_path, "stages=[ingest]"))
     assert not again["interrupted"] and {r["stage"]: r["status"] for r in again["results"]} == \
         {"synthesize": "cached", "ingest": "done"}
+
+
+def test_missing_sources_are_named_before_any_worker_starts(tmp_path, make_cfg, monkeypatch, capsys):
+    import pipeline.executor as ex
+
+    cat = tmp_path / "cat.yaml"
+    cat.write_text("scenes:\n  - {name: gone, path: /nonexistent/scene.ply, format: inria_ply}\n"
+                   "  - {name: also_gone, path: missing.splat, format: splat}\n")
+    monkeypatch.setattr(ex, "run_on_dask", lambda *a, **k: pytest.fail("workers started for no scene"))
+    s = ex.execute(make_cfg(tmp_path, f"scenes.catalog={cat}", "executor=local", "stages=[ingest]"))
+    assert sorted(f["scene"] for f in s["failures"]) == ["also_gone", "gone"] and not s["results"]
+    assert any("/nonexistent/scene.ply does not exist" in f["error"] for f in s["failures"])
+    out = capsys.readouterr().out.replace("\n", " ")
+    assert "missing source" in out and "also_gone" in out
