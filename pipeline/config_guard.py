@@ -12,7 +12,7 @@ stage computes and is never refused.
 """
 from __future__ import annotations
 
-from pipeline.graph import BY_NAME, scene_hash, stage_config, stage_storage
+from pipeline.graph import BY_NAME, STAGES, scene_hash, stage_config, stage_storage
 from pipeline.markers import read_marker
 
 
@@ -63,9 +63,34 @@ def config_changes(cfg, catalog, scenes, stages, hashes) -> dict[str, dict]:
                 row["keys"] = sorted(set(row["keys"]) | {(k, _show(a), _show(b)) for k, a, b in d})
             else:
                 ups = [n for n in BY_NAME[st.name].needs if n in out]
-                row["cause"] = row["cause"] or (f"its upstream {', '.join(ups)} changed" if ups
-                                                else "the stage's code version or the scene's catalog options changed")
+                newer = [] if ups else recomputed_since(m, st.name, scene, catalog)
+                row["cause"] = row["cause"] or (
+                    f"its upstream {', '.join(ups)} changed" if ups else
+                    f"it was made from an older {', '.join(newer)}: {'they were' if len(newer) > 1 else 'that stage was'}"
+                    f" recomputed since, with the settings of this run, and {st.name} was not" if newer else
+                    "the stage's code version or the scene's catalog options changed")
+                if newer:
+                    row["stale_after"] = sorted(set(row.get("stale_after", [])) | set(newer))
     return out
+
+
+def recomputed_since(marker: dict, stage: str, scene, catalog) -> list[str]:
+    """The stages upstream of `stage` whose outputs for the scene were made by a later run than
+    its own (a one-stage run with an override leaves the later stages made from the old output)."""
+    when = (marker.get("run") or {}).get("started_ns")
+    if when is None:
+        return []
+    out, todo, seen = [], list(BY_NAME[stage].needs), set()
+    while todo:
+        n = todo.pop()
+        if n in seen:
+            continue
+        seen.add(n)
+        todo += BY_NAME[n].needs
+        up = read_marker(catalog.path("markers", scene, stage=n))
+        if up and (up.get("run") or {}).get("started_ns", 0) > when:
+            out.append(n)
+    return sorted(out, key=lambda n: [s.name for s in STAGES].index(n))
 
 
 def _show(v) -> str:
@@ -81,13 +106,22 @@ def describe(changes: dict[str, dict]) -> list[str]:
     return lines
 
 
-def refusal(changes: dict[str, dict], blocked: list[str]) -> str:
-    """The message of a run that would overwrite outputs of stages it does not name."""
+def refusal(changes: dict[str, dict], blocked: list[str], overrides: list[str] | None = None) -> str:
+    """The message of a run that would overwrite outputs of stages it does not name; `overrides`
+    (this run's command-line settings) complete the exact commands it suggests."""
     keep = sorted({f"{k}={a}" for s in blocked for k, a, _ in changes[s]["keys"] if a != "(unset)" and "(inputs)" not in k})
     named = ",".join(blocked)
+    stale = sorted({u for s in blocked for u in changes[s].get("stale_after", [])})
+    given = " ".join(o for o in (overrides or []) if not o.startswith("stages="))
     msg = ["this run would recompute outputs made with other settings, of stages it does not name:",
-           *(f"  {line}" for line in describe({s: changes[s] for s in blocked})),
-           "Nothing was changed. To keep those outputs, repeat the settings they were made with"
-           + (f": {' '.join(keep)}" if keep else "") + ".",
-           f"To recompute them, name the stages (stages=[{named},...]) or add force=true."]
+           *(f"  {line}" for line in describe({s: changes[s] for s in blocked}))]
+    if stale and not keep:  # made before an upstream was recomputed: no setting of this run brings them back
+        msg += [f"Nothing was changed. {', '.join(blocked)} still hold(s) what the older {', '.join(stale)} gave. To make "
+                "the data root consistent with the settings of this run, recompute them once:",
+                f"  navarena run stages=[{named}] {given}".rstrip(),
+                "or add force=true to this command."]
+    else:
+        msg += ["Nothing was changed. To keep those outputs, repeat the settings they were made with"
+                + (f": {' '.join(keep)}" if keep else "") + ".",
+                f"To recompute them, name the stages (stages=[{named},...]) or add force=true."]
     return "\n".join(msg)

@@ -52,7 +52,7 @@ def execute(cfg, console: Console | None = None) -> dict:
     changes = config_changes(cfg, catalog, scenes, stages, hashes)
     blocked = [] if cfg.force else [s for s, c in changes.items() if s not in selected and not c["storage_only"]]
     if blocked:  # outputs of stages the run does not name would be overwritten: refuse, touch nothing
-        msg = refusal(changes, blocked)
+        msg = refusal(changes, blocked, command_overrides())
         console.print(f"[red]refused[/]: {escape(msg)}")
         summary = build_summary([], started, cat_file, [cfg.scenes.shard, cfg.scenes.num_shards], stages, hashes)
         summary["refused"] = msg
@@ -139,6 +139,16 @@ def execute(cfg, console: Console | None = None) -> dict:
                                     "error": f"the run summary could not be written: {e}"})
         console.print(f"[red]the run summary could not be written[/]: {e}")
     return summary
+
+
+def command_overrides() -> list[str] | None:
+    """This run's command-line overrides (None outside a Hydra app, e.g. a composed config)."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        return list(HydraConfig.get().overrides.task)
+    except (ImportError, ValueError):
+        return None
 
 
 class UnknownKeysError(ValueError):

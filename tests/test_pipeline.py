@@ -864,3 +864,20 @@ def test_missing_sources_are_named_before_any_worker_starts(tmp_path, make_cfg, 
     assert any("/nonexistent/scene.ply does not exist" in f["error"] for f in s["failures"])
     out = capsys.readouterr().out.replace("\n", " ")
     assert "missing source" in out and "also_gone" in out
+
+
+def test_a_stage_made_from_an_older_upstream_is_refused_with_the_true_cause(tmp_path, make_cfg, costmap_root):
+    """The tour's trap: stages=[costmap] with another resolution leaves the screening made from the
+    old costmaps. A later run with that resolution is refused for screen, naming the upstream that
+    was recomputed since (not "the code version changed") and the exact command."""
+    from pipeline.config_guard import refusal
+
+    costmap_root(tmp_path)
+    assert not execute(make_cfg(tmp_path, "stages=[screen]"))["failures"]
+    assert not execute(make_cfg(tmp_path, "stages=[costmap]", "costmap.resolution=0.1"))["failures"]
+    refused = execute(make_cfg(tmp_path, "stages=[episodes]", "costmap.resolution=0.1", "task=[pointnav]"))
+    msg = refused["refused"]
+    assert "made from an older costmap" in msg and "code version" not in msg, msg
+    assert "navarena run stages=[screen" in msg
+    changes = {"screen": {"scenes": ["x"], "keys": [], "cause": "c", "storage_only": False, "stale_after": ["costmap"]}}
+    assert "  navarena run stages=[screen] costmap.resolution=0.1" in refusal(changes, ["screen"], ["costmap.resolution=0.1"])
