@@ -82,12 +82,15 @@ def export_lerobot(root, out, split: str | None = "train", tasks=("pointnav", "i
                    fps: int = 5, width: int = 160, height: int = 120, depth: bool = True,
                    episodes_per_scene: int | None = None, scenes=None, renderer: str = "auto",
                    embodiment: Embodiment | None = None, episodes_per_file: int = 100, crf: int = 18,
-                   batch_size: int = 64, robot_type: str | None = None, quiet: bool = False) -> dict:
+                   batch_size: int = 64, robot_type: str | None = None, quiet: bool = False,
+                   episodes: int | None = None) -> dict:
     """Write the LeRobot dataset of `split` of the data root `root` to `out` (replaced whole:
-    written beside it and renamed in place). Returns a summary (episodes, frames, bytes). A progress
-    display (episodes, frames, frames/s, time left) unless quiet."""
+    written beside it and renamed in place): every episode, or the first `episodes_per_scene` of
+    each scene and task, or `episodes` in total taken round robin over the scenes and tasks.
+    Returns a summary (episodes, frames, bytes). A progress display (episodes, frames, frames/s,
+    time left; plain lines without a terminal) unless quiet."""
     from navcore.optional import require
-    from navcore.render.frames import SceneFrames, chosen_episodes
+    from navcore.render.frames import SceneFrames, chosen_episodes, round_robin
 
     require("datasets", "the LeRobot export")  # before any frame is rendered
     if TRAJECTORY_HZ % fps:
@@ -104,15 +107,17 @@ def export_lerobot(root, out, split: str | None = "train", tasks=("pointnav", "i
     episodes_meta, data_rows, frames_total = [], [], 0
     stats_acc = {"observation.state": [], "observation.goal": [], "action": [], "action.waypoint": []}
     rgb_sum, rgb_sq, rgb_min, rgb_max, depth_acc = np.zeros(3), np.zeros(3), np.full(3, 255.0), np.zeros(3), []
-    total = sum(len(chosen_episodes(cat, cat.scene(sid), task, split, episodes_per_scene, ["episode_id", "split"]))
-                for sid in src.scene_ids for task in tasks)  # the progress display's total
+    sizes = {(sid, task): len(chosen_episodes(cat, cat.scene(sid), task, split, episodes_per_scene,
+                                              ["episode_id", "split"])) for sid in src.scene_ids for task in tasks}
+    quota = round_robin(sizes, episodes) if episodes is not None else sizes
+    total = sum(quota.values())  # the progress display's total
     with atomic_path(out) as tmp, ToolProgress("export-lerobot", total, quiet) as bar:
         tmp.mkdir(parents=True)
         ep_index = 0
         for sid in src.scene_ids:
             scene = cat.scene(sid)
             for task in tasks:
-                eps = chosen_episodes(cat, scene, task, split, episodes_per_scene)
+                eps = chosen_episodes(cat, scene, task, split, episodes_per_scene).head(quota.get((sid, task), 0))
                 if not len(eps):
                     continue
                 tr_all = cat.dataset("trajectories", scene, task=task).load().to_pandas()
@@ -300,12 +305,15 @@ def main(argv=None) -> dict:
     ap.add_argument("--fps", type=int, default=5, help="frames a second (divides 20)")
     ap.add_argument("--size", default="160x120", help="WIDTHxHEIGHT")
     ap.add_argument("--no-depth", action="store_true")
-    ap.add_argument("--episodes-per-scene", type=int, default=None)
+    ap.add_argument("--episodes-per-scene", type=int, default=None, metavar="N", help="the first N of every scene and task")
+    ap.add_argument("--episodes", type=int, default=None, metavar="N",
+                    help="N episodes in total, round robin over scenes and tasks (a first try: seconds each on a CPU)")
     ap.add_argument("--renderer", default="auto", choices=["auto", "cpu", "gsplat"])
     ap.add_argument("--quiet", action="store_true", help="no progress display")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.lower().split("x"))
     res = export_lerobot(args.root, args.out, args.split or None, args.tasks.split(","), args.fps, w, h,
-                         not args.no_depth, args.episodes_per_scene, renderer=args.renderer, quiet=args.quiet)
+                         not args.no_depth, args.episodes_per_scene, renderer=args.renderer, quiet=args.quiet,
+                         episodes=args.episodes)
     print(json.dumps(res))
     return res

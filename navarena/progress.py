@@ -1,18 +1,24 @@
 """Progress of the long user commands (export-lerobot, render-episodes, the observation index), in
 the pipeline's style (rich): items done of the total, frames done and their rate, time elapsed and
-left; nothing with quiet."""
+left; nothing with quiet. Without a terminal (a log file, a batch job) the bar cannot redraw: a
+plain line is printed instead at most every `log_every` seconds, and at the end."""
 from __future__ import annotations
 
+import sys
 import time
 
 
 class ToolProgress:
     """with ToolProgress("export-lerobot", total_episodes, quiet) as p: p.advance(frames=n) per item."""
 
-    def __init__(self, what: str, total: int, quiet: bool = False, unit: str = "episodes"):
+    def __init__(self, what: str, total: int, quiet: bool = False, unit: str = "episodes", log_every: float = 10.0):
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
         self.frames, self.t0 = 0, time.perf_counter()
+        self.what, self.unit, self.total, self.done = what, unit, total, 0
+        self.plain = not quiet and not sys.stderr.isatty()
+        self.log_every, self.logged = log_every, self.t0
+        quiet = quiet or self.plain
         self.progress = Progress(TextColumn(f"{what} {unit}"), BarColumn(), MofNCompleteColumn(),
                                  TextColumn("{task.fields[frames]:,} frames, {task.fields[rate]:.1f} frames/s"),
                                  TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn(), disable=quiet)
@@ -23,11 +29,31 @@ class ToolProgress:
         return self
 
     def __exit__(self, *exc) -> None:
+        if self.plain:
+            self.line(final=True)
         done = self.progress.tasks[0].completed
         self.progress.update(self.task, total=done)  # a total given as a bound ends full
         self.progress.stop()
 
     def advance(self, items: int = 1, frames: int = 0) -> None:
         self.frames += frames
-        rate = self.frames / max(time.perf_counter() - self.t0, 1e-9)
+        self.done += items
+        now = time.perf_counter()
+        rate = self.frames / max(now - self.t0, 1e-9)
         self.progress.update(self.task, advance=items, frames=self.frames, rate=rate)
+        if self.plain and now - self.logged >= self.log_every:
+            self.line()
+
+    def line(self, final: bool = False) -> None:
+        """One plain progress line on stderr: done of total, frames and their rate, elapsed, left."""
+        now = time.perf_counter()
+        self.logged = now
+        dt = now - self.t0
+        left = "" if final or not self.done else f", about {_duration(dt / self.done * max(0, self.total - self.done))} left"
+        print(f"{self.what}: {self.done}/{self.total if not final else self.done} {self.unit}, {self.frames:,} frames "
+              f"({self.frames / max(dt, 1e-9):.1f}/s), {_duration(dt)} elapsed{left}{' (done)' if final else ''}",
+              file=sys.stderr, flush=True)
+
+
+def _duration(s: float) -> str:
+    return f"{s:.0f} s" if s < 120 else f"{s / 60:.1f} min" if s < 7200 else f"{s / 3600:.1f} h"

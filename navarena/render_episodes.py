@@ -1,7 +1,10 @@
 """`navarena render-episodes`: videos of chosen episodes and a per-scene HTML report.
 
     navarena render-episodes --root data --scene 35bf402a --task pointnav --count 3 --out reports/episodes
-    navarena render-episodes --root data --run oracle_distance --count 2 --report --out reports/episodes
+    navarena render-episodes --root data --run oracle_distance --count 6 --out reports/episodes
+    navarena render-episodes --root data --per-scene-task 2 --out reports/episodes   # 2 of every scene and task
+
+--count is the number of videos in total (round robin over scenes and tasks).
 
 Each video (H.264 MP4, which browsers play) shows, side by side, the egocentric RGB, the depth
 (turbo colour map, near = red... far = blue, black = nothing hit) and a top-down map inset: the
@@ -9,9 +12,10 @@ costmap (black: obstacles; grey: too close for the robot's footprint; white: fre
 so far, the robot's pose and the goal's success region. Along the expert trajectory by default,
 along an evaluation run's executed trajectory with --run.
 
---report writes {out}/{scene_id}/index.html: the costmap, start and goal density over it, the
-difficulty histogram per task, geodesic distances, and the videos with their episode table. It
-references its files relatively, so the folder can be copied or served as it is.
+The report (unless --no-report) is {out}/index.html, linking every scene and video, and per scene
+{out}/{scene_id}/index.html: the costmap, start and goal density over it, the difficulty histogram
+per task, geodesic distances, and the videos with their episode table. It references its files
+relatively, so the folder can be copied or served as it is.
 """
 from __future__ import annotations
 
@@ -146,21 +150,23 @@ def _goals(e: dict) -> np.ndarray:
 
 
 def render_episodes(root, out, scenes=None, tasks=("pointnav", "imagenav", "objectnav"), episodes=None,
-                    count: int = 2, run: str | None = None, width: int = 320, height: int = 240, fps: int = 10,
+                    count: int = 6, run: str | None = None, width: int = 320, height: int = 240, fps: int = 10,
                     stride: int = 2, renderer: str = "auto", embodiment: Embodiment | None = None,
-                    report: bool = True, quiet: bool = False) -> dict:
-    """Videos of chosen episodes (ids, else the first `count` per scene and task) and, with
-    `report`, each scene's index.html. Expert trajectories at 20 Hz / `stride`, or an evaluation
-    run's executed positions (`run`, headings from their motion)."""
+                    report: bool = True, quiet: bool = False, per_scene_task: int | None = None) -> dict:
+    """Videos of chosen episodes and, with `report`, each scene's index.html plus {out}/index.html
+    linking every scene and video. The episodes: `episodes` (ids), else `count` in total taken
+    round robin over the scenes and tasks (each pair's first episodes by id), else with
+    `per_scene_task` that many of every scene and task. Expert trajectories at 20 Hz / `stride`, or
+    an evaluation run's executed positions (`run`, headings from their motion)."""
     from navcore.render.frames import SceneFrames
 
     emb = embodiment or Embodiment()
     src = SceneFrames(root, tasks=tasks, scenes=scenes, width=width, height=height, embodiment=emb, renderer=renderer)
     cat = src.catalog
     out = Path(out)
+    plan = choose_episodes(cat, src.scene_ids, tasks, episodes, count, per_scene_task, run)
     made: dict[str, list[dict]] = {}
-    total = (len(src.scene_ids) * len(tasks) * (len(episodes) if episodes else count))  # an upper bound
-    with ToolProgress("render-episodes", total, quiet, unit="videos") as bar:
+    with ToolProgress("render-episodes", sum(len(c) for c in plan.values()), quiet, unit="videos") as bar:
         for sid in src.scene_ids:
             cm = cat.dataset("costmaps", cat.scene(sid)).load(emb.name)
             results = None
@@ -169,14 +175,8 @@ def render_episodes(root, out, scenes=None, tasks=("pointnav", "imagenav", "obje
                 results = ds.load().to_pandas() if ds.exists() else pd.DataFrame()
             vids = []
             for task in tasks:
-                eps = _episodes(cat, sid, task)
-                if not len(eps):
-                    continue
-                eps = eps.sort_values("episode_id")
-                chosen = eps[eps["episode_id"].isin(episodes)] if episodes else eps.head(count)
-                if results is not None:
-                    chosen = chosen[chosen["episode_id"].isin(set(results[results["task"] == task]["episode_id"]))]
-                if not len(chosen):
+                chosen = plan.get((sid, task))
+                if chosen is None or not len(chosen):
                     continue
                 tr = cat.dataset("trajectories", cat.scene(sid), task=task).load(
                     ["episode_id", "step", "position_x", "position_y", "yaw"]).to_pandas()
@@ -199,10 +199,65 @@ def render_episodes(root, out, scenes=None, tasks=("pointnav", "imagenav", "obje
                     vids.append({"file": f"videos/{name}", "task": task, "episode_id": e["episode_id"],
                                  "difficulty": e["difficulty"], "geodesic": float(e["geodesic_distance"]),
                                  "trajectory": kind, "outcome": outcome, **facts})
-            made[sid] = vids
+            if vids or report:
+                made[sid] = vids
             if report:
                 write_report(cat, sid, out / sid, vids, emb)
-    return {"scenes": len(made), "videos": sum(len(v) for v in made.values()), "out": str(out)}
+    if report:
+        write_index(out, made)
+    return {"scenes": len(made), "videos": sum(len(v) for v in made.values()), "out": str(out),
+            "index": str(out / "index.html") if report else None}
+
+
+def choose_episodes(cat: Catalog, scene_ids: list[str], tasks, episodes, count: int, per_scene_task: int | None,
+                    run: str | None) -> dict[tuple[str, str], pd.DataFrame]:
+    """(scene, task) -> the episodes to render (see render_episodes); with `run`, only episodes the
+    run evaluated."""
+    pools: dict[tuple[str, str], pd.DataFrame] = {}
+    for sid in scene_ids:
+        evaluated = None
+        if run:
+            ds = cat.dataset("eval_results", cat.scene(sid), run=run)
+            evaluated = ds.load(["task", "episode_id"]).to_pandas() if ds.exists() else pd.DataFrame(
+                {"task": [], "episode_id": []})
+        for task in tasks:
+            eps = _episodes(cat, sid, task)
+            if not len(eps):
+                continue
+            eps = eps.sort_values("episode_id")
+            if episodes:
+                eps = eps[eps["episode_id"].isin(episodes)]
+            if evaluated is not None:
+                eps = eps[eps["episode_id"].isin(set(evaluated[evaluated["task"] == task]["episode_id"]))]
+            if len(eps):
+                pools[(sid, task)] = eps
+    if episodes:
+        return pools
+    if per_scene_task is not None:
+        return {k: v.head(per_scene_task) for k, v in pools.items()}
+    from navcore.render.frames import round_robin
+
+    return {k: pools[k].head(n) for k, n in round_robin({k: len(v) for k, v in pools.items()}, count).items()}
+
+
+def write_index(out: Path, made: dict[str, list[dict]]) -> Path:
+    """{out}/index.html: every scene's report and every video, one page."""
+    from navcore.io.atomic import write_text_atomic
+
+    rows = "".join(f"<tr><td><a href='{html.escape(sid)}/index.html'>{html.escape(sid)}</a></td><td>{len(v)}</td><td>"
+                   + " ".join(f"<a href='{html.escape(sid)}/{html.escape(x['file'])}'>{html.escape(x['task'])} "
+                              f"{html.escape(str(x['episode_id']))}</a>" for x in v) + "</td></tr>"
+                   for sid, v in made.items())
+    doc = f"""<!doctype html><html><head><meta charset="utf-8"><title>NavArena episodes</title>
+<style>body{{font-family:sans-serif;margin:2em}} td,th{{padding:4px 8px;border-bottom:1px solid #ddd}}</style></head>
+<body><h1>NavArena episodes</h1><p>{sum(len(v) for v in made.values())} videos in {len(made)} scene(s); each scene's
+page has its costmap, start and goal density, difficulty histogram and the videos with their episode table.</p>
+<table><tr><th>scene</th><th>videos</th><th>episodes</th></tr>{rows}</table></body></html>
+"""
+    page = out / "index.html"
+    out.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(page, doc)
+    return page
 
 
 def _density(cm, xy: np.ndarray, cell: float = 0.5) -> np.ndarray:
@@ -324,7 +379,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--scene", action="append", help="scene id (repeat; default: every scene)")
     ap.add_argument("--task", action="append", help="task (repeat; default: all three)")
     ap.add_argument("--episodes", default=None, help="comma-separated episode ids")
-    ap.add_argument("--count", type=int, default=2, help="episodes per scene and task when no ids are given")
+    ap.add_argument("--count", type=int, default=6, help="videos in total, taken round robin over the scenes and tasks "
+                    "(when no --episodes are given); each takes seconds to minutes on a CPU (see the progress line)")
+    ap.add_argument("--per-scene-task", type=int, default=None, metavar="N",
+                    help="instead of --count: N videos of every scene and task")
     ap.add_argument("--run", default=None, help="an evaluation run: its executed trajectories")
     ap.add_argument("--size", default="320x240", help="WIDTHxHEIGHT of each pane")
     ap.add_argument("--fps", type=int, default=10)
@@ -335,6 +393,7 @@ def main(argv=None) -> dict:
     w, h = (int(v) for v in args.size.lower().split("x"))
     res = render_episodes(args.root, args.out, args.scene, args.task or ("pointnav", "imagenav", "objectnav"),
                           args.episodes.split(",") if args.episodes else None, args.count, args.run, w, h, args.fps,
-                          renderer=args.renderer, report=not args.no_report, quiet=args.quiet)
+                          renderer=args.renderer, report=not args.no_report, quiet=args.quiet,
+                          per_scene_task=args.per_scene_task)
     print(json.dumps(res))
     return res

@@ -117,6 +117,19 @@ def test_lerobot_export_is_deterministic(exported, tmp_path):
     assert not (tmp_path / "y").exists()
 
 
+def test_episodes_in_total_round_robin(exported, tmp_path):
+    """--episodes N: N in total over the scenes and tasks (a first try of a big split)."""
+    from navarena.lerobot import export_lerobot
+    from navcore.render.frames import round_robin
+
+    assert round_robin({"a": 5, "b": 1, "c": 0}, 4) == {"a": 3, "b": 1}
+    assert round_robin({"a": 2, "b": 1}, 10) == {"a": 2, "b": 1}
+    root, _, _ = exported
+    res = export_lerobot(root, tmp_path / "three", split="train", tasks=["pointnav", "objectnav"], fps=5, width=48,
+                         height=36, renderer="cpu", episodes=3)
+    assert res["episodes"] == 3
+
+
 # A process that compiles the CPU renderer cold (an empty numba cache) and then encodes the frames.
 _ENCODE_AFTER_COLD_COMPILE = """
 import sys

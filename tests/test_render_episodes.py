@@ -15,9 +15,39 @@ def rendered(episode_run, tmp_path_factory):
 
     root, _, _ = episode_run
     out = tmp_path_factory.mktemp("render")
-    res = render_episodes(root, out, tasks=("pointnav",), count=1, width=64, height=48, fps=10, stride=8,
+    res = render_episodes(root, out, tasks=("pointnav",), per_scene_task=1, width=64, height=48, fps=10, stride=8,
                           renderer="cpu")
     return root, out, res
+
+
+def test_count_is_the_total_round_robin_and_one_index_links_every_video(rendered):
+    from navarena.render_episodes import choose_episodes
+    from navcore.render.frames import SceneFrames
+
+    root, out, res = rendered
+    src = SceneFrames(root, tasks=("pointnav", "imagenav"), width=8, height=8, renderer="cpu")
+    sids, tasks = src.scene_ids, ("pointnav", "imagenav")
+    plan = choose_episodes(src.catalog, sids, tasks, None, 3, None, None)
+    assert sum(len(v) for v in plan.values()) == 3  # in total, not per scene and task
+    order = [(s, t) for s in sids for t in tasks]
+    assert list(plan) == order[:len(plan)] and all(len(v) == 1 for v in plan.values()) or len(order) < 3
+    per = choose_episodes(src.catalog, sids, ("pointnav",), None, 3, 2, None)
+    assert len(per) == len(sids) and all(len(v) == 2 for v in per.values())
+    index = (out / "index.html").read_text()
+    videos = list(out.glob("*/videos/*.mp4"))
+    assert videos and all(f"{v.parent.parent.name}/videos/{v.name}" in index for v in videos)
+    assert res["index"] == str(out / "index.html")
+
+
+def test_progress_prints_plain_lines_without_a_terminal(capsys):
+    from navarena.progress import ToolProgress
+
+    with ToolProgress("render-episodes", 3, unit="videos", log_every=0) as p:
+        p.advance(1, 100)
+        p.advance(1, 100)
+    err = capsys.readouterr().err
+    assert "render-episodes: 1/3 videos, 100 frames" in err and "left" in err
+    assert "render-episodes: 2/2 videos, 200 frames" in err and "(done)" in err
 
 
 def test_videos_show_rgb_depth_and_the_map_with_the_path(rendered):

@@ -33,6 +33,20 @@ def chosen_episodes(catalog: Catalog, scene, task: str, split: str | None = None
     return eps if per_scene is None else eps.head(per_scene)
 
 
+def round_robin(sizes: dict, total: int) -> dict:
+    """How many to take of each key (in the dict's order) for `total` in all, one of each in turn
+    while it has some left: {("s1", "pointnav"): 5, ("s2", "pointnav"): 1}, 4 -> {.. 3, .. 1}.
+    Keys that get none are left out."""
+    taken = dict.fromkeys(sizes, 0)
+    left = total
+    while left > 0 and any(taken[k] < n for k, n in sizes.items()):
+        for k, n in sizes.items():
+            if left and taken[k] < n:
+                taken[k] += 1
+                left -= 1
+    return {k: n for k, n in taken.items() if n}
+
+
 def expert_steps(catalog: Catalog, scene_id: str, tasks, split: str | None = None, stride: int = 1,
                  episodes: int | None = None) -> pd.DataFrame:
     """The expert steps of one scene (every `stride`-th of each episode, its last always kept), with
