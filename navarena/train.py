@@ -1,9 +1,10 @@
-"""navarena train: a learned PointNav baseline from a data root or a release, by behaviour cloning
-and DAgger.
+"""navarena train: a learned baseline (PointNav, ImageNav or ObjectNav) from a data root or a
+release, by behaviour cloning and DAgger.
 
     navarena train data --out runs/pointnav_bc                  # defaults: 1 BC round + 4 DAgger rounds
     navarena train data --out runs/pn --rounds 1                # behaviour cloning only
     navarena train data --out runs/pn --resume                  # go on from the last finished round
+    navarena train data --out runs/objectnav_bc --task objectnav   # RGB-D + the goal category
 
 Round 0 (behaviour cloning): the expert (the costmap's geodesic oracle, navcore.nav.oracle: the
 same one that made the stored action sequences) drives the training episodes in the batched
@@ -32,7 +33,7 @@ import os
 import platform
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +43,7 @@ from torch import nn
 from navarena.dataset import NavDataset
 from navcore.baselines.agent import default_device
 from navcore.baselines.checkpoint import load_checkpoint, save_checkpoint, sha256_of
-from navcore.baselines.model import NO_ACTION, PointNavNet, PointNavSpec, depth_input, goal_input, parameter_count
+from navcore.baselines.model import NO_ACTION, TRACKS, NavNet, NavSpec, observation_input, parameter_count
 from navcore.io.atomic import atomic_path, write_text_atomic
 from navcore.nav.actions import STOP
 from navcore.nav.oracle import DiscreteOracle
@@ -54,6 +55,7 @@ class TrainConfig:
     """Every setting of a training run (recorded in the model card)."""
 
     task: str = "pointnav"
+    """pointnav | imagenav | objectnav: the track (its network's inputs: navcore.baselines.model)."""
     rounds: int = 5
     """Round 0 is behaviour cloning; rounds 1.. are DAgger."""
     episodes_per_round: int = 3072
@@ -84,32 +86,40 @@ class TrainConfig:
     renderer: str = "auto"
     device: str = "auto"
     seed: int = 0
-    spec: PointNavSpec = field(default_factory=PointNavSpec)
+    spec: NavSpec | None = None
+    """The network (None: the task's defaults)."""
+
+    def __post_init__(self):
+        if self.spec is None:
+            self.spec = NavSpec(task=self.task)
+        if self.spec.task != self.task:
+            raise ValueError(f"the network's task {self.spec.task!r} is not the run's {self.task!r}")
 
 
 class Steps:
-    """Labelled sequences of one or more rounds: per step uint8 depth, float goal, prev action,
-    label; `starts` index each sequence."""
+    """Labelled sequences of one or more rounds: per step the frame (uint8 [C, h, w]: depth and/or
+    RGB in [0, 255]), the goal values, the previous action and the label; per sequence its goal
+    image (uint8 [3, h, w]; ImageNav, else no channels); `starts` index each sequence."""
 
-    def __init__(self, depth, goal, prev, label, lengths):
-        self.depth, self.goal, self.prev, self.label = depth, goal, prev, label
+    FIELDS = ("obs", "goal", "prev", "label", "lengths", "seq_goal")
+
+    def __init__(self, obs, goal, prev, label, lengths, seq_goal):
+        self.obs, self.goal, self.prev, self.label, self.seq_goal = obs, goal, prev, label, seq_goal
         self.lengths = np.asarray(lengths, np.int64)
         self.starts = np.concatenate([[0], np.cumsum(self.lengths)[:-1]]).astype(np.int64)
 
     @classmethod
     def concat(cls, parts: list["Steps"]) -> "Steps":
-        return cls(*(np.concatenate([getattr(p, k) for p in parts]) for k in ("depth", "goal", "prev", "label")),
-                   np.concatenate([p.lengths for p in parts]))
+        return cls(*(np.concatenate([getattr(p, k) for p in parts]) for k in cls.FIELDS))
 
     def save(self, path: Path) -> None:
         with atomic_path(path) as tmp, open(tmp, "wb") as f:
-            np.savez_compressed(f, depth=self.depth, goal=self.goal, prev=self.prev, label=self.label,
-                                lengths=self.lengths)
+            np.savez_compressed(f, **{k: getattr(self, k) for k in self.FIELDS})
 
     @classmethod
     def load(cls, path: Path) -> "Steps":
         z = np.load(path)
-        return cls(z["depth"], z["goal"], z["prev"], z["label"], z["lengths"])
+        return cls(*(z[k] for k in cls.FIELDS))
 
     def __len__(self) -> int:
         return int(self.lengths.sum())
@@ -120,7 +130,7 @@ class Trainer:
         self.ds, self.out, self.cfg, self.quiet = NavDataset(root), Path(out), cfg, quiet
         self.device = default_device(cfg.device)
         torch.manual_seed(cfg.seed)
-        self.net = PointNavNet(cfg.spec).to(self.device)
+        self.net = NavNet(cfg.spec).to(self.device)
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
         self.splits = {sid: set(self.ds.episode_table(sid, cfg.task)["split"]) for sid in self.ds.scene_ids(cfg.task)}
         self.train_scenes = self.scenes_of(cfg.train_split)
@@ -183,12 +193,15 @@ class Trainer:
             tidx = np.arange(tmax)[:, None]
             mask = tidx < lens[None]
             rows = np.where(mask, data.starts[pick][None] + np.minimum(tidx, lens[None] - 1), 0)
-            depth = torch.from_numpy(data.depth[rows]).to(dev).float().div_(255)[:, :, None]
+            frames = torch.from_numpy(data.obs[rows]).to(dev).float().div_(255)
+            if data.seq_goal.shape[1]:  # the episode's goal image as more channels of every frame
+                g = torch.from_numpy(data.seq_goal[pick]).to(dev).float().div_(255)
+                frames = torch.cat([frames, g[None].expand(tmax, *g.shape)], 2)
             goal = torch.from_numpy(data.goal[rows]).to(dev)
             prev = torch.from_numpy(data.prev[rows].astype(np.int64)).to(dev)
             label = torch.from_numpy(data.label[rows].astype(np.int64)).to(dev)
             m = torch.from_numpy(mask).to(dev)
-            logits, _ = self.net(depth, goal, prev)
+            logits, _ = self.net(frames, goal, prev)
             loss = (nn.functional.cross_entropy(logits.flatten(0, 1), label.flatten(), reduction="none")
                     * m.flatten()).sum() / m.sum()
             self.opt.zero_grad()
@@ -208,7 +221,7 @@ class Trainer:
     def evaluate(self, model: Path, sha: str, split: str, n: int, width: int | None = None,
                  height: int | None = None) -> dict:
         """Closed-loop SR / SPL of the saved policy on n episodes of `split` (distance protocol)."""
-        from navcore.baselines.agent import LearnedPointNavAgent
+        from navcore.baselines.agent import LearnedNavAgent
         from navcore.eval.loop import InProcessBatch, run_episodes_batched
         from navcore.eval.metrics import aggregate
 
@@ -218,7 +231,7 @@ class Trainer:
         cfg = self.ds.env_config(protocol="distance", width=width or self.cfg.width, height=height or self.cfg.height)
         for sid in scenes:
             eps = self.ds.episodes(sid, self.cfg.task, split)[:per]
-            factory = lambda: LearnedPointNavAgent(checkpoint=str(model), sha256=sha, device=self.device)  # noqa: E731
+            factory = lambda: LearnedNavAgent(checkpoint=str(model), sha256=sha, device=self.device)  # noqa: E731
             rows += run_episodes_batched(self.ctx(sid), eps, InProcessBatch(factory), min(self.cfg.slots, len(eps)), cfg)
         return aggregate(rows)["overall"]
 
@@ -298,7 +311,7 @@ class Trainer:
 
     def save_model(self, final: bool) -> str:
         meta = self.meta()
-        sha = save_checkpoint(self.out / "model.pt", "pointnav", self.cfg.spec.to_dict(), self.net.state_dict(), meta)
+        sha = save_checkpoint(self.out / "model.pt", self.cfg.task, self.cfg.spec.to_dict(), self.net.state_dict(), meta)
         if final:
             dev = torch.cuda.get_device_name() if self.device.startswith("cuda") else \
                 f"{platform.machine()} CPU, {os.cpu_count()} cores"
@@ -315,7 +328,7 @@ class Collector:
 
     def __init__(self, root, cfg: TrainConfig, device: str):
         self.ds, self.cfg, self.device = NavDataset(root), cfg, device
-        self.net = PointNavNet(cfg.spec).to(device).eval()
+        self.net = NavNet(cfg.spec).to(device).eval()
         self._ctx: dict = {}
         self._eps: dict = {}
         self._sha = None
@@ -330,7 +343,7 @@ class Collector:
     def job(self, job) -> Steps:
         sid, k, rnd, model, sha = job
         if model is not None and sha != self._sha:  # this round's learner
-            ck = load_checkpoint(model, kind="pointnav", sha256=sha)
+            ck = load_checkpoint(model, kind=self.cfg.task, sha256=sha)
             self.net.load_state_dict(ck["state_dict"])
             self._sha = sha
         cfg = self.cfg
@@ -363,7 +376,7 @@ class Collector:
             slot_ep[i] = ep
             oracle[i] = DiscreteOracle(ctx.field(ep).grid, ctx.costmap, ep.regions, ep.success_radius, ep.goal_yaw,
                                        ep.heading_tolerance, env_cfg.actions.forward_step, env_cfg.actions.turn)
-            slot_seq[i] = {"depth": [], "goal": [], "prev": [], "label": []}
+            slot_seq[i] = {"obs": [], "goal": [], "prev": [], "label": [], "goal_image": None}
             h[:, i] = 0
             prev[i] = NO_ACTION
             obs[i] = benv.reset_slot(i, ep)
@@ -372,14 +385,14 @@ class Collector:
             start(i)
         while any(e is not None for e in slot_ep):
             live = [i for i in range(n) if slot_ep[i] is not None]
-            d = depth_input(torch.stack([torch.as_tensor(obs[i]["depth"]) for i in live]).to(dev), cfg.spec)
-            g = goal_input(np.stack([obs[i]["pointgoal"] for i in live])).to(dev)
+            frames, g = observation_input([obs[i] for i in live], cfg.spec, dev)
             idx = torch.tensor(live, device=dev)
             if beta < 1.0:
-                logits, hl = self.net.step(d, g, prev[idx], h[:, idx])
+                logits, hl = self.net.step(frames, g, prev[idx], h[:, idx])
                 h[:, idx] = hl
                 learner = logits.argmax(1).tolist()
-            d8 = (d[:, 0] * 255 + 0.5).to(torch.uint8).cpu().numpy()
+            f8 = (frames * 255 + 0.5).to(torch.uint8).cpu().numpy()  # the frame's channels, then the goal image's
+            c = cfg.spec.obs_channels
             gn, pv = g.cpu().numpy(), prev[idx].cpu().numpy()
             actions = [None] * n
             for k, i in enumerate(live):
@@ -387,7 +400,9 @@ class Collector:
                 label = oracle[i].action(s.x, s.y, s.yaw)
                 label = STOP if label < 0 else label  # no progress possible: the oracle agent stops too
                 seq = slot_seq[i]
-                seq["depth"].append(d8[k])
+                seq["obs"].append(f8[k, :c])
+                if seq["goal_image"] is None:
+                    seq["goal_image"] = f8[k, c:]
                 seq["goal"].append(gn[k])
                 seq["prev"].append(pv[k])
                 seq["label"].append(label)
@@ -403,11 +418,11 @@ class Collector:
                     slot_ep[i] = None
                     if queue:
                         start(i)
-        return Steps(np.concatenate([np.stack(s["depth"]) for s in seqs]),
+        return Steps(np.concatenate([np.stack(s["obs"]) for s in seqs]),
                      np.concatenate([np.stack(s["goal"]) for s in seqs]).astype(np.float32),
                      np.concatenate([np.asarray(s["prev"], np.int8) for s in seqs]),
                      np.concatenate([np.asarray(s["label"], np.int8) for s in seqs]),
-                     [len(s["label"]) for s in seqs])
+                     [len(s["label"]) for s in seqs], np.stack([s["goal_image"] for s in seqs]))
 
 
 _WORKER: dict = {}
@@ -440,7 +455,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
     ap.add_argument("--out", required=True, help="the run folder (model.pt, model_card.json, rounds/)")
     ap.add_argument("--resume", action="store_true", help="go on after the last finished round in --out")
     d = TrainConfig()
-    helps = {"rounds": "0: behaviour cloning, then DAgger", "episodes_per_round": None, "grad_steps": None,
+    helps = {"task": "|".join(TRACKS), "rounds": "0: behaviour cloning, then DAgger", "episodes_per_round": None, "grad_steps": None,
              "batch_episodes": None, "slots": "episodes stepped together", "width": "render size", "height": None,
              "val_episodes": "held-out check", "scenes": "first N train scenes", "seed": None,
              "max_learner_steps": None, "workers": "collection processes", "beta": "DAgger mixing",
@@ -448,6 +463,9 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
              "renderer": "auto|cpu|gsplat", "device": "auto|cpu|cuda"}
     for name, text in helps.items():
         default = getattr(d, name)
+        if name == "task":
+            ap.add_argument("--task", default=default, choices=list(TRACKS), help=f"the track ({default})")
+            continue
         kind = {int: int, float: float}.get(type(default), int if name == "scenes" else str)
         ap.add_argument("--" + name.replace("_", "-"), type=kind, default=default,
                         metavar={int: "N", float: "X"}.get(kind, "S"),
@@ -458,7 +476,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
-    fields_ = {k: getattr(a, k) for k in TrainConfig.__dataclass_fields__ if k not in ("spec", "task")}
+    fields_ = {k: getattr(a, k) for k in TrainConfig.__dataclass_fields__ if k != "spec"}
     cfg = TrainConfig(**fields_)
     res = Trainer(a.root, a.out, cfg, quiet=a.quiet).run(resume=a.resume)
     print(f"wrote {res['model']} (sha256 {res['sha256'][:12]}...)")

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from navcore.baselines.checkpoint import CheckpointError, load_checkpoint, save_checkpoint, sha256_of
-from navcore.baselines.model import PointNavNet, PointNavSpec, depth_input, goal_input
+from navcore.baselines.model import NavNet, NavSpec, depth_input, goal_input
 
 TINY = ["--rounds", "2", "--episodes-per-round", "6", "--grad-steps", "12", "--batch-episodes", "4", "--slots", "6",
         "--width", "32", "--height", "24", "--val-episodes", "0", "--renderer", "cpu", "--max-learner-steps", "40",
@@ -45,6 +45,33 @@ def test_tiny_training_loss_falls_and_one_seed_gives_one_checkpoint(trained):
     assert "collect_s" not in ck["meta"]["curve"][0]  # timings live in the card only
 
 
+@pytest.mark.parametrize("task", ["imagenav", "objectnav"])
+def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
+    """ImageNav (RGB + the goal image, one encoder) and ObjectNav (RGB-D + the goal category): the
+    loss falls, the checkpoint is of the track and its agent acts on the track's observations."""
+    from navarena.dataset import NavDataset
+    from navarena.train import main
+    from navcore.baselines.agent import LearnedNavAgent
+    from navcore.eval.loop import InProcessBatch, run_episodes_batched
+
+    root = episode_run[0]
+    assert main([str(root), "--out", str(tmp_path), "--task", task, *TINY]) == 0
+    card = json.loads((tmp_path / "model_card.json").read_text())
+    assert card["task"] == task and card["curve"][0]["loss"] < card["curve"][0]["loss_first"]
+    ck = load_checkpoint(tmp_path / "model.pt", kind=task)
+    assert NavSpec(**ck["spec"]).task == task
+    z = np.load(tmp_path / "rounds" / "round_0.npz")
+    assert z["obs"].shape[1] == (3 if task == "imagenav" else 4) and z["seq_goal"].shape[1] == (3 if task == "imagenav" else 0)
+    ds = NavDataset(root)
+    sid = next(s for s in ds.scene_ids(task) if len(ds.episodes(s, task, None)))
+    eps = ds.episodes(sid, task, None)[:2]
+    cfg = ds.env_config(protocol="explicit_stop", width=32, height=24)
+    ctx = ds.scene_context(sid, renderer="cpu")
+    rows = run_episodes_batched(ctx, eps, InProcessBatch(lambda: LearnedNavAgent(checkpoint=str(tmp_path / "model.pt"),
+                                                                                 device="cpu")), 2, cfg)
+    assert len(rows) == 2 and not any(r["error"] for r in rows), rows
+
+
 def test_resume_after_the_last_round_changes_nothing(trained, episode_run, tmp_path):
     import shutil
 
@@ -59,12 +86,12 @@ def test_resume_after_the_last_round_changes_nothing(trained, episode_run, tmp_p
 
 def test_checkpoint_round_trip_and_refusals(tmp_path):
     torch.manual_seed(0)
-    net = PointNavNet(PointNavSpec(hidden=16, embed=16))
+    net = NavNet(NavSpec(hidden=16, embed=16))
     f = tmp_path / "p.pt"
     digest = save_checkpoint(f, "pointnav", net.spec.to_dict(), net.state_dict(), {"seed": 3})
     assert digest == sha256_of(f)
     ck = load_checkpoint(f, kind="pointnav", sha256=digest)
-    again = PointNavNet(PointNavSpec(**ck["spec"]))
+    again = NavNet(NavSpec(**ck["spec"]))
     again.load_state_dict(ck["state_dict"])
     for (k, v), w in zip(net.state_dict().items(), again.state_dict().values()):
         assert torch.equal(v, w), k
@@ -95,7 +122,7 @@ def test_checkpoint_round_trip_and_refusals(tmp_path):
 
 
 def test_inputs_are_resolution_independent():
-    spec = PointNavSpec()
+    spec = NavSpec()
     rng = np.random.default_rng(0)
     coarse = rng.uniform(0.3, 8.0, (48, 64)).astype(np.float32)
     coarse[0, :5] = 0.0  # nothing hit reads as the far limit
@@ -120,7 +147,7 @@ def test_shipped_baseline_is_checked_and_registered():
     obs = {"depth": np.full((120, 160), 3.0, np.float32), "pointgoal": np.array([2.0, 0.0], np.float32)}
     a = agent.act(obs)
     assert a in (0, 1, 2, 3)
-    with pytest.raises(ValueError, match="needs depth and pointgoal"):
+    with pytest.raises(ValueError, match="needs the observations"):
         agent.act({"pointgoal": obs["pointgoal"]})
 
 

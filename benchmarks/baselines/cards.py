@@ -4,6 +4,9 @@ Baselines section of docs/evaluation.md, generated from one source: the card's J
     python -m benchmarks.baselines.cards ship RUN NAME            # a navarena train run folder -> navcore/models/NAME
     python -m benchmarks.baselines.cards evaluation NAME SUMMARY.json ...   # closed-loop figures into the card
     python -m benchmarks.baselines.cards cost NAME                # CPU ms per step into the card
+    python -m benchmarks.baselines.cards gpu-rate NAME --machine M --setting S AGENT:STEPS:SECONDS ...
+                                                                  # closed-loop steps/s in the batched GPU env
+    python -m benchmarks.baselines.cards note NAME TEXT           # which run this is and why, into the card
     python -m benchmarks.baselines.cards scaling RUN ...          # scene-scaling runs -> benchmarks/baselines/scaling.json
     python -m benchmarks.baselines.cards docs [--check]           # the cards' .md and docs/evaluation.md's section
 """
@@ -91,6 +94,30 @@ def cpu_cost(name: str, repeats: int = 300, models: Path = MODELS) -> dict:
     return out
 
 
+def add_gpu_rate(name: str, machine: str, setting: str, entries: list[str], models: Path = MODELS) -> dict:
+    """Closed-loop evaluation speed in the batched GPU environment into the card: per agent the
+    steps and the wall seconds of one navarena eval process (its start included)."""
+    rate = {"machine": machine, "setting": setting, "agents": {}}
+    for e in entries:
+        agent, steps, secs = e.rsplit(":", 2)
+        rate["agents"][agent] = {"steps": int(steps), "seconds": float(secs),
+                                 "steps_per_s": round(int(steps) / float(secs), 1)}
+    f = models / name / "model_card.json"
+    card = json.loads(f.read_text())
+    card["gpu_eval_rate"] = rate
+    f.write_text(json.dumps(card, indent=1) + "\n")
+    return rate
+
+
+def _gpu_rate(card: dict) -> str:
+    r = card.get("gpu_eval_rate")
+    if not r:
+        return "not measured yet."
+    agents = "; ".join(f"{a}: {v['steps']:,} steps in {v['seconds']} s, {v['steps_per_s']} steps/s"
+                       for a, v in r["agents"].items())
+    return f"{agents} ({r['setting']}; {r['machine']})."
+
+
 def record_scaling(runs: list[Path], note: str, out: Path = SCALING) -> dict:
     """The scene-scaling runs (navarena train --scenes N, one recipe) -> `out`: per run its training
     scenes, recipe and per-round held-out check; a run cut before its last round keeps the rounds
@@ -165,14 +192,17 @@ def results_table(card: dict) -> str:
     runs = ev.get("runs") or {}
     if not runs:
         return "_No closed-loop evaluation recorded yet._\n"
-    lines = ["| agent | protocol | group | n | " + " | ".join(c for c, _ in COLUMNS) + " |",
-             "|---|---|---|---:|" + "---:|" * len(COLUMNS)]
+    lines = ["| agent | protocol | rendered | group | n | " + " | ".join(c for c, _ in COLUMNS) + " |",
+             "|---|---|---|---|---:|" + "---:|" * len(COLUMNS)]
     for run, summ in runs.items():
         groups = summ["tasks"][card["task"]]
+        r = summ.get("render")
+        shown = f"{r['width'] or ''}x{r['height'] or ''} {r['renderer']}" if r else "no"
         for group in sorted(groups, key=lambda g: ORDER.index(g) if g in ORDER else len(ORDER)):
             m = groups[group]
             cells = [_num(m.get(k), 0 if k == "steps" else 2 if k == "ne" else 3) for _, k in COLUMNS]
-            lines.append(f"| {summ['agent']} | {summ['protocol']} | {group} | {m['episodes']} | " + " | ".join(cells) + " |")
+            lines.append(f"| {summ['agent']} | {summ['protocol']} | {shown} | {group} | {m['episodes']} | "
+                         + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -217,6 +247,7 @@ Generated from model_card.json by `python -m benchmarks.baselines.cards docs`; d
   round, AdamW lr {c['lr']}, seed {card['seed']}. On {card['trained_on']} ({card.get('workers', 0)} collection
   workers): {card['train_seconds']} s of collection and fitting.
 - **Running it on a CPU:** {_cost(card)}
+- **Closed-loop speed in the batched GPU environment:** {_gpu_rate(card)}
 
 ## Training curve
 
@@ -230,6 +261,7 @@ Reproduce: `{ev.get('command', '')}`
 
 ## Limitations
 
+{card.get('notes') or ''}
 Trained and measured on generated scenes only: the gap to real captures is not measured yet. It is the
 interim baseline of its track (see docs/evaluation.md, "Baselines", for what is still missing).
 """
@@ -246,6 +278,8 @@ def docs_section(all_cards: dict[str, dict], scaling: dict | None = None) -> str
 
 {results_table(card)}
 CPU cost: {_cost(card)}
+
+Closed-loop speed in the batched GPU environment: {_gpu_rate(card)}
 
 Training ({card['trained_on']}, {card['train_seconds']} s; model card: `navcore/models/{name}/model_card.md`):
 
@@ -308,6 +342,14 @@ def main(argv=None) -> int:
     e.add_argument("--command", required=True, help="the command that reproduces them")
     c = sub.add_parser("cost")
     c.add_argument("name")
+    n = sub.add_parser("note")
+    n.add_argument("name")
+    n.add_argument("text")
+    g = sub.add_parser("gpu-rate")
+    g.add_argument("name")
+    g.add_argument("entries", nargs="+", help="AGENT:STEPS:SECONDS")
+    g.add_argument("--machine", required=True)
+    g.add_argument("--setting", required=True, help="what ran: episodes, render size and renderer, slots")
     sc = sub.add_parser("scaling")
     sc.add_argument("runs", nargs="+", type=Path)
     sc.add_argument("--note", required=True, help="where and how the runs were made, what was cut (one paragraph)")
@@ -320,6 +362,13 @@ def main(argv=None) -> int:
         add_evaluation(a.name, a.summaries, a.conditions, a.command)
     elif a.cmd == "cost":
         print(cpu_cost(a.name))
+    elif a.cmd == "note":
+        f = MODELS / a.name / "model_card.json"
+        card = json.loads(f.read_text())
+        card["notes"] = a.text
+        f.write_text(json.dumps(card, indent=1) + "\n")
+    elif a.cmd == "gpu-rate":
+        print(add_gpu_rate(a.name, a.machine, a.setting, a.entries))
     elif a.cmd == "scaling":
         print(json.dumps(record_scaling(a.runs, a.note), indent=1))
     elif a.cmd == "docs":

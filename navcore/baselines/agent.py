@@ -1,8 +1,8 @@
 """The learned baselines as agents of the evaluator (registry names in navcore.eval.agents:
 `pointnav_bc`, ...), in-process or behind the agent server (navarena serve-agent --agent pointnav_bc).
 
-    agent = LearnedPointNavAgent()                          # the shipped pointnav_bc
-    agent = LearnedPointNavAgent(checkpoint="runs/pn/model.pt", device="cuda")
+    agent = LearnedNavAgent()                               # the shipped pointnav_bc
+    agent = LearnedNavAgent(checkpoint="runs/on/model.pt", device="cuda")   # any track's navarena train run
 
 The policy acts greedily (argmax). Agents of one checkpoint and device share one network; the
 batched evaluator steps all of its slots in one forward pass (act_batch).
@@ -14,11 +14,10 @@ from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from navcore.baselines.checkpoint import CheckpointError, load_checkpoint
-from navcore.baselines.model import NO_ACTION, PointNavNet, PointNavSpec, depth_input, goal_input
+from navcore.baselines.model import NO_ACTION, NavNet, NavSpec, observation_input
 
 MODELS = Path(str(resources.files("navcore") / "models"))
 
@@ -39,18 +38,25 @@ def default_device(device: str | None) -> str:
 
 
 @lru_cache(maxsize=8)
-def _load_net(path: str, sha256: str | None, device: str) -> PointNavNet:
-    ck = load_checkpoint(path, kind="pointnav", sha256=sha256)
-    net = PointNavNet(PointNavSpec(**ck["spec"]))
+def _load_net(path: str, sha256: str | None, device: str) -> NavNet:
+    ck = load_checkpoint(path, sha256=sha256)
+    try:
+        spec = NavSpec(**ck["spec"])
+    except (TypeError, ValueError) as e:
+        raise CheckpointError(f"{path}: not a baseline network's spec: {e}") from None
+    if spec.task != ck["kind"]:
+        raise CheckpointError(f"{path}: a {ck['kind']!r} policy whose network is for {spec.task!r}")
+    net = NavNet(spec)
     try:
         net.load_state_dict(ck["state_dict"])
     except RuntimeError as e:
-        raise CheckpointError(f"{path}: its weights do not fit the PointNav network: {str(e).splitlines()[0]}") from None
+        raise CheckpointError(f"{path}: its weights do not fit the {spec.task} network: {str(e).splitlines()[0]}") from None
     return net.to(device).eval()
 
 
-class LearnedPointNavAgent:
-    """PointNav from depth and the goal vector (navcore.baselines.model.PointNavNet).
+class LearnedNavAgent:
+    """A learned baseline of any track (navcore.baselines.model.NavNet): the checkpoint's spec
+    says which observations it reads.
 
     Args:
         checkpoint: a policy file of navarena train (None: the shipped `name`).
@@ -59,13 +65,12 @@ class LearnedPointNavAgent:
         device: auto (CUDA when there) | cpu | cuda[:i].
     """
 
-    task = "pointnav"
-
     def __init__(self, checkpoint: str | None = None, name: str = "pointnav_bc", device: str | None = "auto",
                  sha256: str | None = None, **_):
         path, digest = (Path(checkpoint), sha256) if checkpoint else shipped(name)
         self.device = default_device(device)
         self.net = _load_net(str(path), digest, self.device)
+        self.task = self.net.spec.task
         self.h = None
         self.prev = NO_ACTION
 
@@ -80,16 +85,10 @@ class LearnedPointNavAgent:
     def act_batch(cls, agents: list, observations: list[dict]) -> list[int]:
         """One forward pass for agents of one network (the batched evaluator's slots)."""
         net, dev = agents[0].net, agents[0].device
-        for o in observations:
-            if "depth" not in o or "pointgoal" not in o:
-                raise ValueError("the PointNav baseline needs depth and pointgoal observations "
-                                 "(rendering on, task pointnav)")
-        depth = torch.stack([torch.as_tensor(o["depth"]).to(dev) for o in observations])
-        d = depth_input(depth, net.spec)
-        g = goal_input(np.stack([o["pointgoal"] for o in observations])).to(dev)
+        frames, goal = observation_input(observations, net.spec, dev)
         prev = torch.tensor([a.prev for a in agents], device=dev)
         h = torch.cat([a.h if a.h is not None else net.initial_state(1, dev) for a in agents], 1)
-        logits, h = net.step(d, g, prev, h)
+        logits, h = net.step(frames, goal, prev, h)
         acts = logits.argmax(1).tolist()
         for i, a in enumerate(agents):
             a.h, a.prev = h[:, i:i + 1], int(acts[i])

@@ -23,7 +23,7 @@ AGENTS = Registry("agent", {
     "noisy_oracle": "navcore.eval.agents:NoisyOracleAgent",
     "depth_reactive": "navcore.eval.agents:DepthReactiveAgent",
     # the learned baselines, trained on NavArena's own episodes (navcore/models/<name>/model_card.md)
-    "pointnav_bc": "navcore.baselines.agent:LearnedPointNavAgent",
+    "pointnav_bc": "navcore.baselines.agent:LearnedNavAgent",
 })
 make_agent = AGENTS.make
 
