@@ -51,7 +51,6 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     loss falls, the checkpoint is of the track and its agent acts on the track's observations."""
     from navarena.dataset import NavDataset
     from navarena.train import main
-    from navcore.baselines.agent import LearnedNavAgent
     from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
     root = episode_run[0]
@@ -67,8 +66,10 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     eps = ds.episodes(sid, task, None)[:2]
     cfg = ds.env_config(protocol="explicit_stop", width=32, height=24)
     ctx = ds.scene_context(sid, renderer="cpu")
-    rows = run_episodes_batched(ctx, eps, InProcessBatch(lambda: LearnedNavAgent(checkpoint=str(tmp_path / "model.pt"),
-                                                                                 device="cpu")), 2, cfg)
+    from navcore.eval.agents import agent_for
+
+    rows = run_episodes_batched(ctx, eps, InProcessBatch(lambda: agent_for("learned", checkpoint=str(tmp_path / "model.pt"),
+                                                                           device="cpu")), 2, cfg)
     assert len(rows) == 2 and not any(r["error"] for r in rows), rows
 
 
