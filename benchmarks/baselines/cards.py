@@ -201,7 +201,7 @@ def results_table(card: dict) -> str:
         for group in sorted(groups, key=lambda g: ORDER.index(g) if g in ORDER else len(ORDER)):
             m = groups[group]
             cells = [_num(m.get(k), 0 if k == "steps" else 2 if k == "ne" else 3) for _, k in COLUMNS]
-            lines.append(f"| {summ['agent']} | {summ['protocol']} | {shown} | {group} | {m['episodes']} | "
+            lines.append(f"| {summ.get('label') or summ['agent']} | {summ['protocol']} | {shown} | {group} | {m['episodes']} | "
                          + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

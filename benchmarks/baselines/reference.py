@@ -5,17 +5,21 @@ stopped when started again:
     python -m benchmarks.baselines.reference all --deadline 560     # every phase, stopping in time
     python -m benchmarks.baselines.reference data | train | scaling | eval | pack OUT
 
-- data:    SCENES (160) generated PointNav scenes, 10 % held out for test (the zero-shot set), 5 %
-           for val_unseen; then the zero-shot set is drawn (the evaluate stage, oracle, unrendered).
-- train:   the reference PointNav run (navarena train's defaults, ROUNDS rounds), resumable.
-- scaling: the same recipe on the first 8, 32 and 128 training scenes and on all of them, with the
-           same episodes and gradient steps (SCALE_ROUNDS rounds), each checked on the test split.
-           Runs alongside train: the GPUs are shared round-robin, the CPU workers split between runs.
-- eval:    ships the reference run as pointnav_bc, then the zero-shot set at 640 x 480 (gsplat) for
-           pointnav_bc (distance and explicit_stop) and depth_reactive, one navarena eval per scene
-           and agent, several per GPU; random and the oracle unrendered (they read no image). The
-           parts are merged into one results.parquet and summary.json per agent and protocol, with
-           the steps per second of each part.
+- data:    SCENES (160) generated scenes with the TASKS' episodes (pointnav,imagenav,objectnav;
+           ObjectNav's goals from the generated scenes' labels), 10 % held out for test (the
+           zero-shot set), 5 % for val_unseen; then the zero-shot set is drawn (the evaluate stage,
+           oracle, unrendered).
+- train:   the reference run of each track, <task>_bc (navarena train's defaults, ROUNDS rounds),
+           resumable.
+- scaling: the PointNav recipe on the first 8, 32 and 128 training scenes and on all of them, with
+           the same episodes and gradient steps (SCALE_ROUNDS rounds), each checked on the test
+           split. Runs alongside train: the GPUs are shared round-robin, the CPU workers split
+           between runs by the rounds each has to do.
+- eval:    ships each finished reference run as <task>_bc, then each track's zero-shot set at
+           640 x 480 (gsplat) for the learned policy (distance and explicit_stop) and
+           depth_reactive, one navarena eval per scene and agent, several per GPU; random and the
+           oracle unrendered (they read no image). The parts are merged into one results.parquet and
+           summary.json per agent, track and protocol, with the steps per second of each part.
 - pack:    the cards, the shipped model and the summaries into OUT/baselines.tgz (the device's
            $OUT).
 
@@ -46,9 +50,11 @@ WORKERS = int(os.environ.get("WORKERS", str(max(1, (os.cpu_count() or 2) - 2))))
 TRAIN_ARGS = os.environ.get("TRAIN_ARGS", "").split()  # more navarena train options (a quick trial's smaller sizes)
 EVAL_ARGS = os.environ.get("EVAL_ARGS", "").split()  # more navarena eval options
 PY = sys.executable
-DATA = [f"data_root={ROOT}", f"scenes.count={SCENES}", "task=[pointnav]", "semantics.enabled=false",
-        "episodes.scene_splits.test=0.1", "executor.dashboard=false"]
-RENDERED = [("pointnav_bc", "distance"), ("pointnav_bc", "explicit_stop"), ("depth_reactive", "distance")]
+TASKS = os.environ.get("TASKS", "pointnav,imagenav,objectnav").split(",")
+DATA = [f"data_root={ROOT}", f"scenes.count={SCENES}", f"task=[{','.join(TASKS)}]",
+        f"semantics.enabled={'true' if 'objectnav' in TASKS else 'false'}", "episodes.scene_splits.test=0.1",
+        "executor.dashboard=false"]
+RENDERED = [("{task}_bc", "distance"), ("{task}_bc", "explicit_stop"), ("depth_reactive", "distance")]
 UNRENDERED = [("random", "distance"), ("oracle", "distance")]
 
 
@@ -106,7 +112,7 @@ def data(deadline: Deadline) -> int:
     rc = run([PY, "-m", "pipeline", *DATA, "stages=[episodes]", f"executor.n_workers={WORKERS}"], deadline)
     if rc == 0:  # the zero-shot set: drawn by the evaluate stage from the test split's scenes
         rc = run([PY, "-m", "pipeline", *DATA, "stages=[evaluate]", "evaluate.split=eval_zeroshot",
-                  "evaluate.tasks=[pointnav]", "evaluate.agent=oracle", "evaluate.render=false"], deadline,
+                  f"evaluate.tasks=[{','.join(TASKS)}]", "evaluate.agent=oracle", "evaluate.render=false"], deadline,
                  log=ROOT.parent / "reference_draw.log")
     if rc == 0:
         done.write_text("done\n")
@@ -124,7 +130,7 @@ def train_jobs(which: str) -> list[tuple[Path, list[str], int]]:
     if which in ("train", "all"):
         from navarena.train import TrainConfig
 
-        jobs.append((RUNS / "pointnav_bc", [], ROUNDS or TrainConfig().rounds))
+        jobs += [(RUNS / f"{task}_bc", ["--task", task], ROUNDS or TrainConfig().rounds) for task in TASKS]
     if which in ("scaling", "all"):
         for n in SCALE_SIZES:
             extra = ["--val-split", "test", "--val-episodes", "160"] + (["--scenes", str(n)] if n else [])
@@ -161,35 +167,43 @@ def test_scenes() -> list[str]:
 
 
 def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
-    """The zero-shot set for every agent (see the module docstring), merged per agent and protocol."""
+    """Each track's zero-shot set for every agent (see the module docstring), merged per agent,
+    track and protocol."""
     from benchmarks.baselines.cards import ship
     from navarena.train import TrainConfig
 
-    if not finished(RUNS / "pointnav_bc", ROUNDS or TrainConfig().rounds):
-        print("eval: the reference run has not finished its rounds", flush=True)
+    tracks = [t for t in TASKS if finished(RUNS / f"{t}_bc", ROUNDS or TrainConfig().rounds)]
+    if not tracks:
+        print("eval: no reference run has finished its rounds", flush=True)
         return 1
-    ship(RUNS / "pointnav_bc", "pointnav_bc")
+    for task in tracks:
+        ship(RUNS / f"{task}_bc", f"{task}_bc")
     scenes, n_gpu = test_scenes(), gpus()
-    common = ["--split", "eval_zeroshot", "--tasks", "pointnav", "--quiet"]
-    parts = []
-    for agent, proto in RENDERED:
-        for sid in scenes:
-            parts.append((agent, proto, sid, ["--scenes", sid, "--width", "640", "--height", "480", "--renderer",
-                                               "gsplat", "--batch-slots", "64"]))
-    for agent, proto in UNRENDERED:
-        parts.append((agent, proto, None, ["--no-render", "--batch-slots", "64"]))
-    parts.sort(key=lambda p: (p[2] is not None, p[2] or ""))  # unrendered first, then scene by scene (a cut keeps whole scenes)
-    todo = [p for p in parts if not (EVAL / "parts" / f"{p[0]}_{p[1]}" / (p[2] or "all") / "summary.json").is_file()]
+    parts = []  # (folder name, agent arguments, task, protocol, scene or None, more arguments)
+    for task in tracks:
+        learned = ["--agent", "learned", "--agent-arg", f"checkpoint=navcore/models/{task}_bc/model.pt"]
+        for agent, proto in RENDERED:
+            name = agent.format(task=task)
+            args = learned if name == f"{task}_bc" else ["--agent", name]
+            for sid in scenes:
+                parts.append((f"{name}_{task}_{proto}", args, task, proto, sid,
+                              ["--scenes", sid, "--width", "640", "--height", "480", "--renderer", "gsplat",
+                               "--batch-slots", "64"]))
+        for agent, proto in UNRENDERED:
+            parts.append((f"{agent}_{task}_{proto}", ["--agent", agent], task, proto, None,
+                          ["--no-render", "--batch-slots", "64"]))
+    parts.sort(key=lambda p: (p[4] is not None, p[4] or ""))  # unrendered first, then scene by scene (a cut keeps whole scenes)
+    todo = [p for p in parts if not (EVAL / "parts" / p[0] / (p[4] or "all") / "summary.json").is_file()]
     timing: dict = json.loads((EVAL / "timing.json").read_text()) if (EVAL / "timing.json").is_file() else {}
 
     def one(k):
-        agent, proto, sid, extra = todo[k]
-        out = EVAL / "parts" / f"{agent}_{proto}" / (sid or "all")
+        name, agent, task, proto, sid, extra = todo[k]
+        out = EVAL / "parts" / name / (sid or "all")
         out.parent.mkdir(parents=True, exist_ok=True)
         t = time.perf_counter()
-        rc = run([PY, "-m", "navarena", "eval", str(ROOT), "--agent", agent, "--protocol", proto, *common, *extra, *EVAL_ARGS,
-                  "--out", str(out)], deadline, log=out.with_suffix(".log"),
-                 env={"CUDA_VISIBLE_DEVICES": str(k % n_gpu)})
+        rc = run([PY, "-m", "navarena", "eval", str(ROOT), *agent, "--protocol", proto, "--split", "eval_zeroshot",
+                  "--tasks", task, "--quiet", *extra, *EVAL_ARGS, "--out", str(out)], deadline,
+                 log=out.with_suffix(".log"), env={"CUDA_VISIBLE_DEVICES": str(k % n_gpu)})
         return k, rc, time.perf_counter() - t
 
     t0 = time.perf_counter()
@@ -199,37 +213,39 @@ def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
         timing.setdefault("phases", []).append({"parts": len(todo), "processes": per_gpu * n_gpu, "gpus": n_gpu,
                                                 "seconds": round(time.perf_counter() - t0, 1)})
     for k, rc, secs in results:
-        agent, proto, sid, _ = todo[k]
         if rc == 0:
-            timing[f"{agent}_{proto}/{sid or 'all'}"] = round(secs, 1)
+            timing[f"{todo[k][0]}/{todo[k][4] or 'all'}"] = round(secs, 1)
     (EVAL / "timing.json").write_text(json.dumps(timing, indent=1) + "\n")
     merge(timing)
     return max([rc for _, rc, _ in results] or [0])
 
 
 def merge(timing: dict) -> None:
-    """Each agent and protocol's parts -> EVAL/<agent>_<protocol>/{results.parquet, summary.json},
-    with its steps and steps per second (a part's wall time includes its process start)."""
+    """Each agent, track and protocol's parts -> EVAL/<agent>_<task>_<protocol>/{results.parquet,
+    summary.json}, with its steps and steps per second (a part's wall time includes its process
+    start)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     from navarena.evaluate import write_results
 
-    for agent, proto in RENDERED + UNRENDERED:
-        files = sorted((EVAL / "parts" / f"{agent}_{proto}").glob("*/results.parquet"))
+    for folder in sorted(p for p in (EVAL / "parts").glob("*") if p.is_dir()):
+        files = sorted(folder.glob("*/results.parquet"))
         if not files:
             continue
         table = pa.concat_tables([pq.read_table(f) for f in files]).sort_by([("scene_id", "ascending"),
                                                                            ("episode_id", "ascending")])
         first = json.loads((files[0].parent / "summary.json").read_text())
-        secs = sum(timing.get(f"{agent}_{proto}/{f.parent.name}", 0.0) for f in files)  # parts' wall seconds
+        secs = sum(timing.get(f"{folder.name}/{f.parent.name}", 0.0) for f in files)  # parts' wall seconds
         steps = int(sum(table["steps"].to_pylist()))
         meta = {k: first[k] for k in ("root", "agent", "agent_args", "protocol", "split", "difficulty",
                                       "episodes_per_scene", "seed", "render")}
+        suffix = f"_{table['task'][0].as_py()}_{first['protocol']}"
+        meta["label"] = folder.name[:-len(suffix)] if folder.name.endswith(suffix) else folder.name
         meta.update({"interrupted": False, "parts": len(files), "steps_total": steps, "part_seconds": round(secs, 1),
                      "steps_per_s_per_process": round(steps / secs, 1) if secs else None})
-        write_results(table, EVAL / f"{agent}_{proto}", meta)
-        print(f"{agent}_{proto}: {table.num_rows} episodes from {len(files)} parts", flush=True)
+        write_results(table, EVAL / folder.name, meta)
+        print(f"{folder.name}: {table.num_rows} episodes from {len(files)} parts", flush=True)
 
 
 def pack(out: Path) -> Path:
@@ -238,8 +254,8 @@ def pack(out: Path) -> Path:
     with tarfile.open(f, "w:gz") as tar:
         for p in sorted(RUNS.glob("*/model_card.json")) + sorted(RUNS.glob("*.log")):
             tar.add(p, arcname=str(p.relative_to(RUNS.parent)))
-        if (RUNS / "pointnav_bc" / "model.pt").is_file():
-            tar.add(RUNS / "pointnav_bc" / "model.pt", arcname="runs/pointnav_bc/model.pt")
+        for p in sorted(RUNS.glob("*/model.pt")):  # a few MB each
+            tar.add(p, arcname=str(p.relative_to(RUNS.parent)))
         for p in sorted(EVAL.glob("*/summary.json")) + sorted(EVAL.glob("*/results.parquet")) + \
                 sorted(EVAL.glob("timing.json")):
             tar.add(p, arcname=str(p.relative_to(EVAL.parent)))
