@@ -1,5 +1,5 @@
-"""navarena train: a learned baseline (PointNav, ImageNav or ObjectNav) from a data root or a
-release, by behaviour cloning and DAgger.
+"""navarena train: a learned PointNav, ImageNav or ObjectNav baseline from a data root or a release
+(behaviour cloning, then DAgger).
 
     navarena train data --out runs/pointnav_bc                  # defaults: 1 BC round + 4 DAgger rounds
     navarena train data --out runs/pn --rounds 1                # behaviour cloning only
@@ -450,12 +450,12 @@ def train_seconds(curve: list[dict]) -> float:
 
 def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
     ap = ap or argparse.ArgumentParser(prog="navarena train", description=__doc__.split("\n\n")[0] + " "
-                                       "Writes model.pt and model_card.json in --out; see docs/library.md.")
+                                       "Writes model.pt and model_card.json in --out.")
     ap.add_argument("root", help="a data root (make dataset) or a release folder")
     ap.add_argument("--out", required=True, help="the run folder (model.pt, model_card.json, rounds/)")
     ap.add_argument("--resume", action="store_true", help="go on after the last finished round in --out")
     d = TrainConfig()
-    helps = {"task": "|".join(TRACKS), "rounds": "0: behaviour cloning, then DAgger", "episodes_per_round": None, "grad_steps": None,
+    helps = {"task": None, "rounds": "0: behaviour cloning, then DAgger", "episodes_per_round": None, "grad_steps": None,
              "batch_episodes": None, "slots": "episodes stepped together", "width": "render size", "height": None,
              "val_episodes": "held-out check", "scenes": "first N train scenes", "seed": None,
              "max_learner_steps": None, "workers": "collection processes", "beta": "DAgger mixing",
@@ -464,7 +464,8 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
     for name, text in helps.items():
         default = getattr(d, name)
         if name == "task":
-            ap.add_argument("--task", default=default, choices=list(TRACKS), help=f"the track ({default})")
+            ap.add_argument("--task", default=default, choices=list(TRACKS), metavar="T",
+                            help=f"{'|'.join(TRACKS)} ({default})")
             continue
         kind = {int: int, float: float}.get(type(default), int if name == "scenes" else str)
         ap.add_argument("--" + name.replace("_", "-"), type=kind, default=default,

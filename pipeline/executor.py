@@ -43,6 +43,7 @@ def execute(cfg, console: Console | None = None) -> dict:
                       f"exist (catalog {escape(str(cat_file))}); its stages are skipped")
     scenes = [sc for sc in scenes if sc not in missing]
     stages = closure(list(cfg.stages))
+    results: list[dict] = [missing_source_result(st, sc) for sc in missing for st in stages]
     hashes = config_hashes(cfg)
     selected = set(cfg.stages)
     started = dt.datetime.now(dt.timezone.utc)
@@ -64,7 +65,6 @@ def execute(cfg, console: Console | None = None) -> dict:
         console.print("[yellow]recomputing because the settings changed[/] (old -> new):")
         for line in describe(changes):
             console.print(f"  {escape(line)}")
-    results: list[dict] = []
     progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                         rate_column(), console=console, transient=False)
 
@@ -123,8 +123,6 @@ def execute(cfg, console: Console | None = None) -> dict:
         results += [run_finalize(st, cfg, catalog) for st in stages if finalize_due(st, results, catalog)]
     summary = build_summary(results, started, cat_file, [cfg.scenes.shard, cfg.scenes.num_shards], stages, hashes)
     summary["interrupted"] = interrupted
-    summary["failures"] += [{"stage": "ingest", "scene_id": sc.scene_id, "scene": sc.name, "status": "failed",
-                             "error": f"source {sc.path} does not exist (catalog {cat_file})"} for sc in missing]
     if changes:
         summary["config_changes"] = {k: v | {"keys": [list(x) for x in v["keys"]]} for k, v in changes.items()}
     summary["allow_failures"] = bool(cfg.get("allow_failures", False))
@@ -139,6 +137,19 @@ def execute(cfg, console: Console | None = None) -> dict:
                                     "error": f"the run summary could not be written: {e}"})
         console.print(f"[red]the run summary could not be written[/]: {e}")
     return summary
+
+
+def missing_source_result(stage, scene) -> dict:
+    """What the run records for a stage of a scene whose source file is missing (checked before
+    any worker starts): ingest failed naming the file, the stages after it skipped."""
+    from navcore.gaussians.errors import SceneFileNotFoundError
+
+    base = {"stage": stage.name, "scene_id": scene.scene_id, "scene": scene.name}
+    if stage.only_synthetic:
+        return {**base, "status": "n/a"}
+    if stage.name == "ingest":
+        return {**base, "status": "failed", "error": f"SceneFileNotFoundError: {SceneFileNotFoundError(scene.path, scene.scene_id)}"}
+    return {**base, "status": "skipped", "error": "upstream ingest failed"}
 
 
 def command_overrides() -> list[str] | None:

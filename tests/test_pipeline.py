@@ -860,8 +860,10 @@ def test_missing_sources_are_named_before_any_worker_starts(tmp_path, make_cfg, 
                    "  - {name: also_gone, path: missing.splat, format: splat}\n")
     monkeypatch.setattr(ex, "run_on_dask", lambda *a, **k: pytest.fail("workers started for no scene"))
     s = ex.execute(make_cfg(tmp_path, f"scenes.catalog={cat}", "executor=local", "stages=[ingest]"))
-    assert sorted(f["scene"] for f in s["failures"]) == ["also_gone", "gone"] and not s["results"]
-    assert any("/nonexistent/scene.ply does not exist" in f["error"] for f in s["failures"])
+    failed = {r["scene"]: r for r in s["results"] if r["status"] == "failed"}
+    assert sorted(failed) == ["also_gone", "gone"] and all(r["stage"] == "ingest" for r in failed.values())
+    assert "file not found" in failed["gone"]["error"] and "/nonexistent/scene.ply" in failed["gone"]["error"]
+    assert sorted(f["scene"] for f in s["failures"]) == ["also_gone", "gone"]
     out = capsys.readouterr().out.replace("\n", " ")
     assert "missing source" in out and "also_gone" in out
 
