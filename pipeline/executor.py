@@ -43,7 +43,7 @@ def execute(cfg, console: Console | None = None) -> dict:
                       f"exist (catalog {escape(str(cat_file))}); its stages are skipped")
     scenes = [sc for sc in scenes if sc not in missing]
     stages = closure(list(cfg.stages))
-    results: list[dict] = [missing_source_result(st, sc) for sc in missing for st in stages]
+    results: list[dict] = [missing_source_result(st, sc, catalog) for sc in missing for st in stages]
     hashes = config_hashes(cfg)
     selected = set(cfg.stages)
     started = dt.datetime.now(dt.timezone.utc)
@@ -139,16 +139,19 @@ def execute(cfg, console: Console | None = None) -> dict:
     return summary
 
 
-def missing_source_result(stage, scene) -> dict:
+def missing_source_result(stage, scene, catalog) -> dict:
     """What the run records for a stage of a scene whose source file is missing (checked before
-    any worker starts): ingest failed naming the file, the stages after it skipped."""
+    any worker starts): ingest failed naming the file, as the stage itself reports it
+    (pipeline.tasks.describe), the stages after it skipped."""
     from navcore.gaussians.errors import SceneFileNotFoundError
+    from pipeline.tasks import describe as describe_error
 
     base = {"stage": stage.name, "scene_id": scene.scene_id, "scene": scene.name}
     if stage.only_synthetic:
         return {**base, "status": "n/a"}
     if stage.name == "ingest":
-        return {**base, "status": "failed", "error": f"SceneFileNotFoundError: {SceneFileNotFoundError(scene.path, scene.scene_id)}"}
+        return {**base, "status": "failed",
+                "error": describe_error(SceneFileNotFoundError(scene.path, scene.scene_id), catalog)}
     return {**base, "status": "skipped", "error": "upstream ingest failed"}
 
 
