@@ -15,7 +15,7 @@ class ToolProgress:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
         self.frames, self.t0 = 0, time.perf_counter()
-        self.what, self.unit, self.total, self.done = what, unit, total, 0
+        self.what, self.unit, self.total = what, unit, total
         self.plain = not quiet and not sys.stderr.isatty()
         self.log_every, self.logged = log_every, self.t0
         quiet = quiet or self.plain
@@ -28,16 +28,18 @@ class ToolProgress:
         self.progress.start()
         return self
 
+    @property
+    def done(self) -> int:
+        return int(self.progress.tasks[0].completed)
+
     def __exit__(self, *exc) -> None:
         if self.plain:
             self.line(final=True)
-        done = self.progress.tasks[0].completed
-        self.progress.update(self.task, total=done)  # a total given as a bound ends full
+        self.progress.update(self.task, total=self.done)  # a total given as a bound ends full
         self.progress.stop()
 
     def advance(self, items: int = 1, frames: int = 0) -> None:
         self.frames += frames
-        self.done += items
         now = time.perf_counter()
         rate = self.frames / max(now - self.t0, 1e-9)
         self.progress.update(self.task, advance=items, frames=self.frames, rate=rate)
