@@ -9,15 +9,16 @@ stopped when started again:
            ObjectNav's goals from the generated scenes' labels), 10 % held out for test (the
            zero-shot set), 5 % for val_unseen; then the zero-shot set is drawn (the evaluate stage,
            oracle, unrendered).
-- train:   the reference run of each track, <task>_bc (navarena train's defaults, ROUNDS rounds),
-           resumable.
+- train:   the reference run of each of the TRAIN_TASKS (default TASKS), <task>_bc (navarena
+           train's defaults, ROUNDS rounds), resumable. A track of TASKS left out of TRAIN_TASKS is
+           evaluated with its shipped model (navcore/models/<task>_bc).
 - scaling: the PointNav recipe on the first 8, 32 and 128 training scenes and on all of them, with
            the same episodes and gradient steps (SCALE_ROUNDS rounds), each checked on the test
            split. Runs alongside train: the GPUs are shared round-robin, the CPU workers split
            between runs by the rounds each has to do.
 - eval:    ships each finished reference run as <task>_bc, then each track's zero-shot set at
-           640 x 480 (gsplat) for the learned policy (distance and explicit_stop) and
-           depth_reactive, one navarena eval per scene and agent, several per GPU; random and the
+           640 x 480 (gsplat) for the learned policy (distance and explicit_stop), then for
+           depth_reactive (last: its failures run the whole step budget), one navarena eval per scene and agent, several per GPU; random and the
            oracle unrendered (they read no image). The parts are merged into one results.parquet and
            summary.json per agent, track and protocol, with the steps per second of each part.
 - pack:    the cards, the shipped model and the summaries into OUT/baselines.tgz (the device's
@@ -45,12 +46,14 @@ EVAL = Path(os.environ.get("EVAL", "data/baseline_eval"))
 SCENES = int(os.environ.get("SCENES", "160"))
 ROUNDS = int(os.environ.get("ROUNDS", "0")) or None  # None: navarena train's default (the reference run's)
 SCALE_ROUNDS = int(os.environ.get("SCALE_ROUNDS", "2"))
-SCALE_SIZES = [int(s) for s in os.environ.get("SCALE_SIZES", "8,32,128,0").split(",")]  # 0: every training scene
+SCALE_SIZES = [int(s) for s in os.environ.get("SCALE_SIZES", "8,32,128,0").split(",") if s]  # 0: every training scene
 WORKERS = int(os.environ.get("WORKERS", str(max(1, (os.cpu_count() or 2) - 2))))
 TRAIN_ARGS = os.environ.get("TRAIN_ARGS", "").split()  # more navarena train options (a quick trial's smaller sizes)
 EVAL_ARGS = os.environ.get("EVAL_ARGS", "").split()  # more navarena eval options
 PY = sys.executable
 TASKS = os.environ.get("TASKS", "pointnav,imagenav,objectnav").split(",")
+# the tracks whose reference run trains here; a track left out is evaluated with its shipped model
+TRAIN_TASKS = os.environ.get("TRAIN_TASKS", ",".join(TASKS)).split(",")
 DATA = [f"data_root={ROOT}", f"scenes.count={SCENES}", f"task=[{','.join(TASKS)}]",
         f"semantics.enabled={'true' if 'objectnav' in TASKS else 'false'}", "episodes.scene_splits.test=0.1",
         "executor.dashboard=false"]
@@ -130,7 +133,7 @@ def train_jobs(which: str) -> list[tuple[Path, list[str], int]]:
     if which in ("train", "all"):
         from navarena.train import TrainConfig
 
-        jobs += [(RUNS / f"{task}_bc", ["--task", task], ROUNDS or TrainConfig().rounds) for task in TASKS]
+        jobs += [(RUNS / f"{task}_bc", ["--task", task], ROUNDS or TrainConfig().rounds) for task in TRAIN_TASKS]
     if which in ("scaling", "all"):
         for n in SCALE_SIZES:
             extra = ["--val-split", "test", "--val-episodes", "160"] + (["--scenes", str(n)] if n else [])
@@ -169,14 +172,15 @@ def test_scenes() -> list[str]:
 def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
     """Each track's zero-shot set for every agent (see the module docstring), merged per agent,
     track and protocol."""
-    from benchmarks.baselines.cards import ship
+    from benchmarks.baselines.cards import MODELS, ship
     from navarena.train import TrainConfig
 
-    tracks = [t for t in TASKS if finished(RUNS / f"{t}_bc", ROUNDS or TrainConfig().rounds)]
+    trained = [t for t in TRAIN_TASKS if finished(RUNS / f"{t}_bc", ROUNDS or TrainConfig().rounds)]
+    tracks = [t for t in TASKS if t in trained or (t not in TRAIN_TASKS and (MODELS / f"{t}_bc").is_dir())]
     if not tracks:
-        print("eval: no reference run has finished its rounds", flush=True)
+        print("eval: no reference run has finished its rounds and no track uses a shipped model", flush=True)
         return 1
-    for task in tracks:
+    for task in trained:
         ship(RUNS / f"{task}_bc", f"{task}_bc")
     scenes, n_gpu = test_scenes(), gpus()
     parts = []  # (folder name, agent arguments, task, protocol, scene or None, more arguments)
@@ -192,7 +196,9 @@ def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
         for agent, proto in UNRENDERED:
             parts.append((f"{agent}_{task}_{proto}", ["--agent", agent], task, proto, None,
                           ["--no-render", "--batch-slots", "64"]))
-    parts.sort(key=lambda p: (p[4] is not None, p[4] or ""))  # unrendered first, then scene by scene (a cut keeps whole scenes)
+    # unrendered first, then the learned policies scene by scene, then depth_reactive (its failures run the whole
+    # budget: the dearest part); a cut keeps whole scenes
+    parts.sort(key=lambda p: (p[4] is not None, p[0].startswith("depth_reactive"), p[4] or ""))
     todo = [p for p in parts if not (EVAL / "parts" / p[0] / (p[4] or "all") / "summary.json").is_file()]
     timing: dict = json.loads((EVAL / "timing.json").read_text()) if (EVAL / "timing.json").is_file() else {}
 
