@@ -155,9 +155,6 @@ class Trainer:
     def _has_split(self, split: str) -> bool:
         return bool(self.scenes_of(split))
 
-    def ctx(self, sid: str):
-        return self.collector.ctx(sid)
-
     # ------------------------------------------------------------------ collection
     def collect(self, rnd: int, model: Path, sha: str | None) -> Steps:
         """The round's labelled episodes: each training scene's share of episodes_per_round, in
@@ -221,19 +218,15 @@ class Trainer:
     def evaluate(self, model: Path, sha: str, split: str, n: int, width: int | None = None,
                  height: int | None = None) -> dict:
         """Closed-loop SR / SPL of the saved policy on n episodes of `split` (distance protocol)."""
-        from navcore.baselines.agent import LearnedNavAgent
-        from navcore.eval.loop import InProcessBatch, run_episodes_batched
         from navcore.eval.metrics import aggregate
 
         scenes = self.scenes_of(split)
         per = max(1, math.ceil(n / max(1, len(scenes))))
-        rows = []
-        cfg = self.ds.env_config(protocol="distance", width=width or self.cfg.width, height=height or self.cfg.height)
-        for sid in scenes:
-            eps = self.ds.episodes(sid, self.cfg.task, split)[:per]
-            factory = lambda: LearnedNavAgent(checkpoint=str(model), sha256=sha, device=self.device)  # noqa: E731
-            rows += run_episodes_batched(self.ctx(sid), eps, InProcessBatch(factory), min(self.cfg.slots, len(eps)), cfg)
-        return aggregate(rows)["overall"]
+        jobs = [(sid, split, per, str(model), sha, width or self.cfg.width, height or self.cfg.height) for sid in scenes]
+        # one scene per collection worker (each single-threaded, on its own GPU): a check in this
+        # process alone is the slowest part of a round
+        results = self.pool.imap(_check_job, jobs) if self.pool is not None else map(self.collector.check, jobs)
+        return aggregate([row for rows in results for row in rows])["overall"]
 
     # ------------------------------------------------------------------ the run
     def run(self, resume: bool = False) -> dict:
@@ -299,13 +292,14 @@ class Trainer:
     """Curve fields that vary run to run (kept in the model card, not in model.pt)."""
 
     def meta(self) -> dict:
-        """What model.pt records: the data, the full config, the seed and the curve (no timings, so
-        one config and seed on one device give the same bytes)."""
+        """What model.pt records: the data, the full config, the seed and the curve (no timings and no
+        worker count, so one config and seed on one device give the same bytes with any workers)."""
         info = self.ds.info()
         return {"task": self.cfg.task, "data": {"root": str(self.ds.path), "kind": info["kind"],
                                                 "release": info.get("version"), "train_scenes": self.train_scenes,
                                                 "split": self.cfg.train_split},
-                "config": {**asdict(self.cfg), "spec": self.cfg.spec.to_dict()}, "seed": self.cfg.seed,
+                "config": {**{k: v for k, v in asdict(self.cfg).items() if k != "workers"}, "spec": self.cfg.spec.to_dict()},
+                "seed": self.cfg.seed,
                 "curve": [{k: v for k, v in e.items() if k not in self.TIMING} for e in self.curve],
                 "parameters": parameter_count(self.net), "frames": self.frames}
 
@@ -339,6 +333,18 @@ class Collector:
                 self._ctx.pop(next(iter(self._ctx)))
             self._ctx[sid] = self.ds.scene_context(sid, renderer=self.cfg.renderer)
         return self._ctx[sid]
+
+    def check(self, job) -> list[dict]:
+        """The result rows of the first `per` episodes of one scene's `split` for the saved policy
+        (distance protocol)."""
+        from navcore.baselines.agent import LearnedNavAgent
+        from navcore.eval.loop import InProcessBatch, run_episodes_batched
+
+        sid, split, per, model, sha, width, height = job
+        eps = self.ds.episodes(sid, self.cfg.task, split)[:per]
+        env_cfg = self.ds.env_config(protocol="distance", width=width, height=height)
+        factory = lambda: LearnedNavAgent(checkpoint=model, sha256=sha, device=self.device)  # noqa: E731
+        return run_episodes_batched(self.ctx(sid), eps, InProcessBatch(factory), min(self.cfg.slots, len(eps)), env_cfg)
 
     def job(self, job) -> Steps:
         sid, k, rnd, model, sha = job
@@ -441,6 +447,10 @@ def _init_worker(root: str, cfg: TrainConfig, device: str, gpus: int) -> None:
 
 def _collect_job(job) -> Steps:
     return _WORKER["c"].job(job)
+
+
+def _check_job(job) -> list[dict]:
+    return _WORKER["c"].check(job)
 
 
 def train_seconds(curve: list[dict]) -> float:

@@ -45,6 +45,25 @@ def test_tiny_training_loss_falls_and_one_seed_gives_one_checkpoint(trained):
     assert "collect_s" not in ck["meta"]["curve"][0]  # timings live in the card only
 
 
+def test_collection_workers_give_the_same_run_and_check(episode_run, tmp_path):
+    """Collection and the held-out check spread over worker processes (one scene each) give the
+    same checkpoint and the same check as this process alone."""
+    from navarena.train import main
+
+    one = ["--rounds", "1", *TINY[2:]]
+    one[one.index("--val-episodes") + 1] = "4"
+    one += ["--val-split", "train"]  # the session root holds no held-out scene
+    runs = []
+    for workers in (0, 2):
+        out = tmp_path / f"w{workers}"
+        assert main([str(episode_run[0]), "--out", str(out), "--workers", str(workers), *one]) == 0
+        runs.append((out / "model.pt").read_bytes())
+        curve = json.loads((out / "model_card.json").read_text())["curve"][0]
+        runs.append({k: curve[k] for k in ("val_split", "val_episodes", "val_sr", "val_spl")})
+    assert runs[1]["val_episodes"] >= 1
+    assert runs[0] == runs[2] and runs[1] == runs[3], runs[1::2]
+
+
 @pytest.mark.parametrize("task", ["imagenav", "objectnav"])
 def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     """ImageNav (RGB + the goal image, one encoder) and ObjectNav (RGB-D + the goal category): the
