@@ -69,7 +69,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("voxelize", voxelize.run, ("ingest",), ("voxelize",), version="3", gpu=True, memory_gb=3.0,
           storage=(("voxelize", "store_opacity", False),)),
     Stage("align", align.run, ("voxelize",), ("align",), version="5"),
-    Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="6",
+    Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="7",
           inputs=costmap.hashed_inputs),
     Stage("screen", screen.run, ("costmap",), ("screen.layer", "embodiment")),
     Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), version="3", gpu=True,

@@ -162,6 +162,97 @@ def test_thick_noisy_floor_is_free_and_what_rises_from_it_is_not():
     assert build_costmap(scene, Embodiment(), old, VoxelizeConfig())[0].raw.sum() > 100
 
 
+def raised_box(centre, size, height, step=0.015):
+    """A box of flat surface Gaussians standing on z = 0: its top (flat, horizontal, as a trained
+    3DGS makes a flat top) and its four sides."""
+    xs = np.arange(-size / 2, size / 2 + 1e-9, step)
+    gx, gy = np.meshgrid(xs, xs)
+    pts = [np.column_stack([gx.ravel() + centre[0], gy.ravel() + centre[1], np.full(gx.size, height)])]
+    for zz in np.arange(0, height + 1e-9, step):
+        for s in xs:
+            pts.append(np.array([[centre[0] + s, centre[1] - size / 2, zz], [centre[0] + s, centre[1] + size / 2, zz],
+                                 [centre[0] - size / 2, centre[1] + s, zz], [centre[0] + size / 2, centre[1] + s, zz]]))
+    pts = np.concatenate(pts)
+    n = len(pts)
+    return GaussianScene.from_colors(pts, np.tile([1.0, 0, 0, 0], (n, 1)), np.tile([0.01, 0.01, 0.002], (n, 1)),
+                                     np.full(n, 0.9), np.full((n, 3), 0.3))
+
+
+@pytest.mark.parametrize("size", [0.3, 0.8, 2.5])
+def test_a_6cm_box_on_a_noisy_floor_blocks_every_cell_the_robot_would_touch_it_from(size):
+    """Known answer: a box 6 cm high (above a body starting at 0.05 m) on a floor of realistic
+    spread blocks every map cell within the robot's radius of its footprint, at 0.05 and 0.02 m.
+    Before issue 62 the 0.8 m box was floor, every cell free: its flat top, in the floor cells it
+    shares with the floor, doubled their spread and thickened the floor layer over it; and the
+    2.5 m one, whole floor cells of it, became floor 6 cm up."""
+    rng = np.random.default_rng(0)
+    scene = concat(flat_floor(rng, 60_000, 0.008), raised_box((2.0, 2.0), size, 0.06))
+    emb = Embodiment()
+    for res in (0.05, 0.02):
+        layers, _ = build_costmap(scene, emb, CostmapConfig(resolution=res, margin_xy=0.0), VoxelizeConfig())
+        ny, nx = layers.shape
+        x, y = np.meshgrid(layers.origin[0] + (np.arange(nx) + 0.5) * res, layers.origin[1] + (np.arange(ny) + 0.5) * res)
+        d = np.hypot(np.maximum(np.abs(x - 2.0) - size / 2, 0), np.maximum(np.abs(y - 2.0) - size / 2, 0))
+        must = d < emb.radius
+        assert must.sum() > 100 and layers.occ[must].all(), (res, int((must & ~layers.occ).sum()))
+        assert not layers.occ[(d > emb.radius + 0.1) & layers.support].any()  # and the floor around stays free
+
+
+def test_floor_mode_keeps_the_floor_and_its_spread_beside_a_raised_top():
+    from stages.costmap.build import floor_mode, reached_by_steps
+
+    rng = np.random.default_rng(1)
+    floor = rng.normal(0.0, 0.01, 2000)
+    mad = np.median(np.abs(floor - np.median(floor)))
+    m, s = floor_mode(floor, 0.025)
+    assert abs(m - np.median(floor)) < 1e-3 and abs(s - mad) < 0.05 * mad  # a plain floor: median and MAD
+    m2, s2 = floor_mode(np.r_[floor, rng.normal(0.06, 0.002, 1400)], 0.025)  # with a box top 6 cm up
+    assert abs(m2) < 2e-3 and abs(s2 - mad) < 0.1 * mad
+    assert floor_mode(np.array([0.0, 0.0, 0.1, 0.1]), 0.025) == (0.05, 0.05)  # two even modes: no NaN
+    # a ramp of 1 cm per cell is reached, a 6 cm step is not, nor what lies beyond it
+    h = np.tile(np.r_[np.arange(5) * 0.01, 0.1, 0.1], (3, 1))
+    assert reached_by_steps(h, np.ones_like(h, bool), 0.025).tolist() == [[True] * 5 + [False] * 2] * 3
+
+
+def test_inflation_blocks_the_exact_disk_around_every_obstacle():
+    """Every pose closer than the robot's radius to an obstacle (the nearest point of any raw
+    obstacle square of the fine map, exact) is invalid, at any position, not only at cell
+    centres; and the blocked poses reach no farther than the radius plus the bilinear margin and
+    one cell."""
+    from scipy.spatial import cKDTree
+
+    from navcore.nav.costmap import Costmap
+    from stages.costmap.build import raw_obstacles_fine, supersample_factor
+
+    rng = np.random.default_rng(2)
+    floor = flat_floor(rng, 30_000, 0.005)
+    k = 300  # two thin posts and a short wall
+    posts = np.column_stack([np.r_[1.3 + 0.02 * rng.standard_normal(k), 2.6 + 0.2 * rng.uniform(-1, 1, k)],
+                             np.r_[1.1 + 0.02 * rng.standard_normal(k), np.full(k, 2.7)], rng.uniform(0, 1, 2 * k)])
+    obst = GaussianScene.from_colors(posts, np.tile([1.0, 0, 0, 0], (2 * k, 1)), np.full((2 * k, 3), 0.01),
+                                     np.full(2 * k, 0.95), np.full((2 * k, 3), 0.2))
+    scene = concat(floor, obst)
+    emb = Embodiment()
+    for res in (0.05, 0.02):
+        cfg = CostmapConfig(resolution=res, margin_xy=0.0)
+        layers, _ = build_costmap(scene, emb, cfg, VoxelizeConfig())
+        s = supersample_factor(res, cfg.raw_resolution)
+        cand, _ = obstacle_candidates(scene, cfg)
+        fine = raw_obstacles_fine(scene.subset(cand), layers.origin, layers.shape, s, emb, cfg, VoxelizeConfig())
+        rf = res / s
+        sq = (np.argwhere(fine)[:, ::-1] + 0.5) * rf + layers.origin  # fine obstacle squares' centres (x, y)
+        xy = rng.uniform([0.5, 0.5], [3.5, 3.5], (40_000, 2))
+        # exact distance to the nearest square: the 9 nearest centres hold it (squares are tiny)
+        _, idx = cKDTree(sq).query(xy, k=9)
+        gap = np.maximum(np.abs(xy[:, None] - sq[idx]) - rf / 2, 0)
+        dist = np.hypot(gap[..., 0], gap[..., 1]).min(1)
+        valid = Costmap.from_layers(layers).are_states_valid(xy)
+        inside = dist < emb.radius
+        assert inside.sum() > 1000 and not valid[inside].any(), (res, int((valid & inside).sum()), np.sort(emb.radius - dist[valid & inside]))
+        far = (dist > emb.radius + layers.margin + res * np.sqrt(2)) & (xy > 0.8).all(1) & (xy < 3.2).all(1)
+        assert valid[far].mean() > 0.99, (res, valid[far].mean())
+
+
 def test_isolated_points_is_the_exact_neighbour_count():
     from scipy.spatial.distance import cdist
 

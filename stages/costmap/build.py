@@ -84,6 +84,13 @@ class CostmapConfig:
     (and their normal is within 20 deg of vertical)."""
     floor_search: float = 0.15
     """Flat horizontal Gaussians within this height of z = 0 define the local floor, metres."""
+    floor_max_step: float = 0.025
+    """Largest height step between two neighbouring floor cells, metres. The local floor is the
+    cells reached from the level floor (|height| <= this) through steps no larger; a flat
+    horizontal surface standing higher (a platform, a low bed base, a sofa's underside where the
+    floor under it is hidden) is not floor, however wide: its cells take the aligned floor's
+    height, so it stays an obstacle. Without it a 0.8 m platform 6 cm high was floor, all its cells
+    free (a 6 cm rise is above a body starting at 0.05 m)."""
     floor_layer_min: float = 0.03
     """Smallest half-thickness of the floor layer, metres. 0.02 held while trained floors came out
     tilted: a 0.67 deg tilt across a 0.5 m floor cell widened each cell's spread. Level (issue 46),
@@ -174,11 +181,14 @@ def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, n
     top under each Gaussian (metres), and a summary.
 
     The local floor height is the median height of the flat, horizontal Gaussians within
-    ``floor_search`` of z = 0 in each ``floor_cell`` (3x3-cell median-filtered; 0 where none),
-    the half-thickness 2.5 x their local robust spread (MAD), clipped to the configured range."""
+    ``floor_search`` of z = 0 in each ``floor_cell`` (their main mode, `floor_mode`), kept where
+    the cell is reached from the level floor through steps of at most ``floor_max_step``
+    (3x3-cell median-filtered; 0 where none or not reached), the half-thickness 2.5 x their local
+    robust spread about that mode, clipped to the configured range."""
     from navcore.gaussians.surfaces import horizontal_surfaces
 
     z = scene.means[:, 2].astype(np.float64)
+    info_off = 0
     near = horizontal_surfaces(scene, cfg.floor_flat_ratio, 20.0) & (np.abs(z) < cfg.floor_search)
     cell = np.floor(scene.means[:, :2] / cfg.floor_cell).astype(np.int64)
     lo = cell.min(0)
@@ -191,11 +201,17 @@ def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, n
         lin_s, z_s = lin[order], z[near][order]
         starts = np.r_[0, np.nonzero(np.diff(lin_s))[0] + 1]
         counts = np.diff(np.r_[starts, len(lin_s)])
-        med = z_s[starts + counts // 2]
-        mad = np.array([np.median(np.abs(z_s[a:a + c] - m)) for a, c, m in zip(starts, counts, med)])
+        # the floor's own mode and spread: an obstacle's flat top in the same cell (a platform, a
+        # sofa's underside 5-8 cm up beside the floor) is a second mode; the plain median and MAD
+        # mixed both, and the layer thickened over that very obstacle
+        med, mad = zip(*(floor_mode(z_s[a:a + c], cfg.floor_max_step) for a, c in zip(starts, counts)))
+        med, mad = np.array(med), np.array(mad)
         ok = counts >= 5
         height.flat[lin_s[starts][ok]] = med[ok]
         spread.flat[lin_s[starts][ok]] = 1.4826 * mad[ok]
+        off = ~reached_by_steps(height, np.isfinite(spread), cfg.floor_max_step)
+        height[off], spread[off] = 0.0, np.nan
+        info_off = int(off.sum())
         height = ndimage.median_filter(height, size=3, mode="nearest")
     typical = float(np.nanmedian(spread)) if np.isfinite(spread).any() else 0.0
     spread = np.where(np.isfinite(spread), spread, typical)
@@ -205,8 +221,45 @@ def floor_layer(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, n
     info = {"floor_gaussians": int((mask & (z >= -cfg.floor_search)).sum()), "below_floor": int((z < -cfg.floor_search).sum()),
             "floor_height_p5_p95_m": np.percentile(height[height != 0], [5, 95]).round(3).tolist()
             if (height != 0).any() else [0.0, 0.0],
-            "floor_half_thickness_median_m": round(float(np.median(half)), 4)}
+            "floor_half_thickness_median_m": round(float(np.median(half)), 4),
+            "raised_cells_not_floor": info_off}
     return mask, top, info
+
+
+def floor_mode(z: np.ndarray, step: float, iterations: int = 4) -> tuple[float, float]:
+    """(mode, MAD) of one floor cell's heights: from the median, the median of the heights within
+    `step` of the last estimate, a few times (mean shift with a flat window, by medians: it goes to
+    the cell's main mode and leaves a second one `step` away alone); the MAD of those within 2
+    `step` of it."""
+    m = float(np.median(z))
+    for _ in range(iterations):
+        near = z[np.abs(z - m) <= step]
+        if not len(near):
+            break
+        m = float(np.median(near))
+    d = np.abs(z - m)
+    near = d[d <= 2.0 * step]
+    return m, float(np.median(near if len(near) else d))  # none near: an even split of two modes
+
+
+def reached_by_steps(height: np.ndarray, known: np.ndarray, max_step: float) -> np.ndarray:
+    """[H, W] bool: the `known` cells reached from the level ones (|height| <= max_step) through
+    8-neighbours whose heights differ by at most max_step (breadth-first)."""
+    from collections import deque
+
+    reached = known & (np.abs(height) <= max_step)
+    queue = deque(map(tuple, np.argwhere(reached)))
+    h, w = height.shape
+    while queue:
+        i, j = queue.popleft()
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                a, b = i + di, j + dj
+                if 0 <= a < h and 0 <= b < w and known[a, b] and not reached[a, b] \
+                        and abs(height[a, b] - height[i, j]) <= max_step:
+                    reached[a, b] = True
+                    queue.append((a, b))
+    return reached
 
 
 def obstacle_candidates(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarray, dict]:
@@ -416,9 +469,10 @@ def build_costmap(scene: GaussianScene, emb: Embodiment, cfg: CostmapConfig, vcf
     else:
         dist_f = np.full(fine.shape, np.inf)
     c = s // 2
-    # distance from a map cell centre to the nearest obstacle fine cell, minus half a fine cell
-    # (the obstacle may reach the near edge of its fine cell)
-    clearance = np.clip(dist_f[c::s, c::s] - 0.5 * res_f, 0.0, 1e3).astype(np.float32)
+    # distance from a map cell centre to the nearest obstacle fine cell's centre, minus half its
+    # diagonal: the obstacle may reach the cell's nearest corner. Half a side (before issue 62) let
+    # poses up to 0.21 fine cells inside the exact disk go free (0.6 mm at 0.02 m, measured)
+    clearance = np.clip(dist_f[c::s, c::s] - res_f / np.sqrt(2.0), 0.0, 1e3).astype(np.float32)
     raw = fine.reshape(shape[0], s, shape[1], s).any(axis=(1, 3))
     sup, sinfo = support if support is not None else support_mask(scene, origin, shape, cfg, vcfg)
     clearance[~sup] = -1.0
