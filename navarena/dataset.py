@@ -179,15 +179,14 @@ class NavDataset:
 
         emb = self.embodiment
         if self.is_release:
-            from navcore.gaussians.formats import read_gaussians
-            from navcore.io.asset_files import aligned_model, read_nav_map
+            from navcore.io.asset_files import load_aligned, read_nav_map
             from navcore.nav.costmap import Costmap
 
             asset = self._asset(scene_id)
             occ, origin, res = read_nav_map(asset)
             cm = Costmap.from_inflated_map(occ, origin, res, emb.radius)
             graph = NavGraph(cm, ~cm.occupancy, self._neighbourhood())
-            gs = read_gaussians(aligned_model(asset)) if render else None
+            gs = load_aligned(asset) if render else None
             return SceneContext(cm, graph, emb, gs, renderer)
         from navcore.gaussians.content import camera_scene
         from navcore.nav.geodesic import eligible_cells

@@ -144,7 +144,12 @@ class AssetConfig:
     24-bit positions at 1/4096 m, ZSTD streams; 10.8x smaller than the PLY for the real fungi room)
     or auto (spz when the original is compressed: SPZ, SOG, .splat, SuperSplat PLY; ply otherwise,
     so a PLY dataset's assets are strict V1). The manifest's files.aligned names it either way;
-    files.aligned_ply is null for spz, and NavArena's tools load either."""
+    files.aligned_ply is null for spz, and NavArena's tools load either. source: no file at all,
+    the asset's link to the original (asset.source=reference) plus the manifest's
+    aligned_from_source (how ingest read it, a checksum) and extrinsic matrix give the same
+    Gaussians to the bit (navcore.io.asset_files.load_aligned): the smallest asset (the real fungi
+    room 1.28x -> 0.05x of its source), read only by NavArena's tools; not with export.formats
+    habitat, whose episodes name an aligned file."""
     labels: str = "model_predicted"
     """labels.json from: model_predicted (the semantics stage's instances) | ground_truth (synthetic
     scenes) | none."""

@@ -218,6 +218,74 @@ def test_asset_aligned_model_as_spz(tmp_path, make_cfg):
         aligned_file("las")
 
 
+def render_psnr(a, b, width: int = 160, height: int = 120) -> float:
+    """The lowest PSNR (dB) between CPU renders of two scenes from 4 views inside scene a."""
+    from navcore.gaussians.model import render_sh_degree
+    from navcore.nav.embodiment import Embodiment
+    from navcore.render import cpu_fast
+    from navcore.render.camera import embodiment_camera
+
+    c = np.median(a.means, 0)
+    poses = np.array([[c[0], c[1], k * np.pi / 2] for k in range(4)])
+    vm, K, _, _ = embodiment_camera(Embodiment(), poses, width, height)
+    ga, gb = cpu_fast.prepare(a), cpu_fast.prepare(b)
+    deg = render_sh_degree(None, ga["sh"].shape[1])
+    worst = np.inf
+    for i in range(len(vm)):
+        x = np.clip(cpu_fast.render_one(ga, vm[i], K[i], width, height, deg)[0], 0, 1)
+        y = np.clip(cpu_fast.render_one(gb, vm[i], K[i], width, height, deg)[0], 0, 1)
+        worst = min(worst, 10 * np.log10(1 / max(float(np.mean((x - y) ** 2)), 1e-12)))
+    return worst
+
+
+def test_asset_aligned_model_from_the_source_and_its_transform(tmp_path, make_cfg):
+    """asset.aligned_format=source: no aligned file; the asset's link to the original, how ingest
+    read it and the extrinsic matrix give the pipeline's aligned scene to the bit; a changed
+    original is refused by its checksum; habitat export, which names an aligned file, says why not."""
+    import shutil
+
+    from navcore.gaussians.errors import SceneFormatError
+    from navcore.io.asset_files import aligned_model, load_aligned
+    from navcore.io.datasets import AlignedGaussianDataset, GaussianDataset
+
+    s = execute(make_cfg(tmp_path, "stages=[asset]", "asset.aligned_format=source"))
+    sid = next(r["scene_id"] for r in s["results"] if r["stage"] == "asset" and r["status"] == "done")
+    asset = next((tmp_path / "09_assets").glob(f"*/{sid}"))
+    man = json.loads((asset / "manifest.json").read_text())
+    assert man["files"]["aligned"] is None and man["aligned_from_source"]["path"] == "source.ply"
+    assert not list(asset.glob("aligned.*")) and man["source"]["files"] == ["source.ply"]
+    aligned, _ = AlignedGaussianDataset(tmp_path / "01_scenes" / sid / "alignment.json",
+                                        GaussianDataset(tmp_path / "01_scenes" / sid / "gaussians.zarr")).load()
+    got = load_aligned(asset)
+    for k in ("means", "quats", "log_scales", "opacity_logits", "sh"):
+        assert np.array_equal(getattr(got, k), getattr(aligned, k)), k
+    with pytest.raises(FileNotFoundError, match="aligned_format=source"):
+        aligned_model(asset)
+    copy = tmp_path / "copy"
+    shutil.copytree(asset, copy)
+    (copy / "source.ply").unlink()
+    data = bytearray((asset / "source.ply").read_bytes())
+    data[-8] ^= 0x40  # one float of the last Gaussian
+    (copy / "source.ply").write_bytes(bytes(data))
+    with pytest.raises(SceneFormatError, match="not the original the asset"):
+        load_aligned(copy)
+    bad = execute(make_cfg(tmp_path / "b", "stages=[asset]", "asset.aligned_format=source", "asset.source=none"))
+    assert "aligned_format=source needs asset.source=reference" in str(bad["failures"])
+
+
+def test_asset_aligned_spz_renders_as_the_aligned_scene(tmp_path, make_cfg):
+    """The stored SPZ's round trip: its CPU renders against the aligned scene's, >= 40 dB."""
+    from navcore.io.asset_files import load_aligned
+    from navcore.io.datasets import AlignedGaussianDataset, GaussianDataset
+
+    s = execute(make_cfg(tmp_path, "stages=[asset]", "asset.aligned_format=spz"))
+    sid = next(r["scene_id"] for r in s["results"] if r["stage"] == "asset" and r["status"] == "done")
+    asset = next((tmp_path / "09_assets").glob(f"*/{sid}"))
+    aligned, _ = AlignedGaussianDataset(tmp_path / "01_scenes" / sid / "alignment.json",
+                                        GaussianDataset(tmp_path / "01_scenes" / sid / "gaussians.zarr")).load()
+    assert render_psnr(aligned, load_aligned(asset)) >= 40.0
+
+
 def test_damaged_outputs_behind_a_marker_are_recomputed(tmp_path, make_cfg, costmap_root):
     """Markers record their outputs' sizes and sha256: a deleted or truncated output recomputes its
     stage (verify=size, a stat per file); a same-size change needs verify=checksum."""

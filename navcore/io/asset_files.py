@@ -8,15 +8,16 @@ import numpy as np
 
 from navcore.io.paths import contained
 
-ALIGNED_FILES = {"ply": "aligned.ply", "spz": "aligned.spz"}
-"""asset.aligned_format -> the aligned model's file in the asset."""
+ALIGNED_FILES = {"ply": "aligned.ply", "spz": "aligned.spz", "source": None}
+"""asset.aligned_format -> the aligned model's file in the asset (source: none, the asset's link to
+the original and the manifest's extrinsic matrix give it: `load_aligned`)."""
 COMPRESSED_SOURCES = ("spz", "sog", "splat", "supersplat_ply")
 """Source formats whose asset keeps the aligned model as SPZ under asset.aligned_format=auto."""
 
 
-def aligned_file(fmt: str, compressed_source: bool = False) -> str:
+def aligned_file(fmt: str, compressed_source: bool = False) -> str | None:
     """The aligned model's file name for asset.aligned_format fmt (auto: SPZ for a compressed
-    source, an INRIA PLY otherwise)."""
+    source, an INRIA PLY otherwise; source: None)."""
     if fmt == "auto":
         fmt = "spz" if compressed_source else "ply"
     if fmt not in ALIGNED_FILES:
@@ -24,18 +25,55 @@ def aligned_file(fmt: str, compressed_source: bool = False) -> str:
     return ALIGNED_FILES[fmt]
 
 
-def aligned_model(asset_dir) -> Path:
-    """The aligned model's file of a V1 asset folder (aligned.ply or aligned.spz), as its manifest
-    names it; NavArena's readers (`navcore.gaussians.formats.read_gaussians`) load either."""
+def _manifest(asset_dir) -> tuple[Path, Path, dict]:
     folder = Path(asset_dir)
     man = folder / "manifest.json"
     if not man.is_file():
         raise FileNotFoundError(f"{folder}: no manifest.json (not a NavArena V1 asset folder)")
-    files = json.loads(man.read_text()).get("files", {})
+    return folder, man, json.loads(man.read_text())
+
+
+def aligned_model(asset_dir) -> Path:
+    """The aligned model's file of a V1 asset folder (aligned.ply or aligned.spz), as its manifest
+    names it; NavArena's readers (`navcore.gaussians.formats.read_gaussians`) load either. An asset
+    made with asset.aligned_format=source has none: `load_aligned` reads its model."""
+    folder, man, manifest = _manifest(asset_dir)
+    files = manifest.get("files", {})
     name = files.get("aligned") or files.get("aligned_ply")
+    if not name and manifest.get("aligned_from_source"):
+        raise FileNotFoundError(f"{man}: the asset keeps no aligned model file (asset.aligned_format=source: "
+                                "the original and its extrinsic matrix; navcore.io.asset_files.load_aligned reads it)")
     if not name or not contained(folder, name, f"{man}: files.aligned").is_file():
         raise FileNotFoundError(f"{man}: files.aligned names {name!r}, which is not in the folder")
     return folder / name
+
+
+def load_aligned(asset_dir):
+    """The aligned model (GaussianScene, z up, floor at z = 0) of a V1 asset folder: its aligned
+    file, or, for an asset made with asset.aligned_format=source, its copy of the original read as
+    ingest read it (format, level of detail, scale, validation: the manifest's aligned_from_source,
+    checked against the checksum recorded there) and moved by processing.extrinsic_matrix, which
+    also turns the view-dependent colour. The same Gaussians as the pipeline's aligned scene, to
+    the bit, at no bytes beyond the original."""
+    import numpy as np
+
+    folder, man, manifest = _manifest(asset_dir)
+    src = manifest.get("aligned_from_source")
+    if not src:
+        from navcore.gaussians.formats import read_gaussians
+
+        return read_gaussians(aligned_model(folder))
+    from navcore.gaussians.errors import SceneFormatError
+    from navcore.gaussians.store import scene_checksum
+    from navcore.gaussians.validate import ValidationLimits, read_validated
+
+    path = contained(folder, src["path"], f"{man}: aligned_from_source.path")
+    scene, _ = read_validated(path, src["format"], manifest.get("scene_id"), src.get("level"), src.get("scale", 1.0),
+                              ValidationLimits(**src.get("limits", {})))
+    if scene_checksum(scene) != src["checksum"]:
+        raise SceneFormatError(path, f"not the original the asset {folder} was made from (checksum of its Gaussians); "
+                               "re-run the asset stage (stages=[asset] force=true)", manifest.get("scene_id"))
+    return scene.transformed(np.asarray(manifest["processing"]["extrinsic_matrix"], np.float64))
 
 
 def write_pgm(path: Path, occ: np.ndarray) -> None:

@@ -86,6 +86,29 @@ def asset_source(tmp, mode: str, report: dict, catalog, scene) -> tuple[str | No
     raise ValueError(f"asset.source={mode!r}; choose reference | convert | none")
 
 
+def aligned_from_source(cfg, report: dict, source_ply: str | None, catalog, scene) -> dict:
+    """The manifest's recipe of the aligned model under asset.aligned_format=source: the asset's
+    link to the original (relative path), how ingest read it and the checksum of the Gaussians that
+    gives (`navcore.io.asset_files.load_aligned`)."""
+    import dataclasses
+
+    from omegaconf import OmegaConf
+
+    from navcore.gaussians.formats import source_files
+    from navcore.gaussians.store import scene_checksum
+
+    original = Path(report["source"])
+    if source_ply:
+        rel = source_ply
+    else:
+        folder, _ = source_files(original)
+        rel = str(Path("source") / original.relative_to(folder))
+    icfg = OmegaConf.to_object(cfg.ingest)
+    base, battrs = catalog.dataset("scene", scene).load()
+    return {"path": rel, "format": report["format"], "level": icfg.lod_level, "scale": icfg.scale,
+            "limits": dataclasses.asdict(icfg.limits), "checksum": battrs.get("checksum") or scene_checksum(base)}
+
+
 def run(scene, cfg, catalog) -> dict:
     out = catalog.dataset("asset", scene)
     aligned, aattrs = catalog.dataset("aligned", scene).load()
@@ -103,12 +126,18 @@ def run(scene, cfg, catalog) -> dict:
     report = catalog.dataset("ingest_report", scene).load()
     with out.writing() as tmp:
         aligned_name = aligned_file(cfg.asset.aligned_format, compressed_source(report))
-        files = {"source_ply": None, "aligned_ply": aligned_name if aligned_name.endswith(".ply") else None,
+        if aligned_name is None and cfg.asset.source != "reference":
+            raise ValueError(f"asset.aligned_format=source needs asset.source=reference (the asset's link to the "
+                             f"original), not {cfg.asset.source!r}")
+        files = {"source_ply": None, "aligned_ply": aligned_name if aligned_name and aligned_name.endswith(".ply") else None,
                  "aligned": aligned_name, "nav_map": "nav_map.pgm",
                  "nav_map_config": "nav_map.yaml", "nav_mask": "nav_mask.png", "labels": None, "structure": None,
                  "compressed_ply": None}
         files["source_ply"], original_files = asset_source(tmp, cfg.asset.source, report, catalog, scene)
-        if aligned_name.endswith(".spz"):
+        from_source = None
+        if aligned_name is None:  # the original (linked above) read as ingest read it, then moved
+            from_source = aligned_from_source(cfg, report, files["source_ply"], catalog, scene)
+        elif aligned_name.endswith(".spz"):
             write_spz(tmp / aligned_name, aligned, version=4)
         else:
             write_inria_ply(tmp / aligned_name, aligned)
@@ -143,6 +172,7 @@ def run(scene, cfg, catalog) -> dict:
                                       "tau_occ": float(cfg.voxelize.tau_occ)}},
             "processing": {"normalizer_version": NORMALIZER_VERSION, "processed_at": now, "normalized": True,
                            "extrinsic_matrix": t.tolist(), "steps": steps},
+            **({"aligned_from_source": from_source} if from_source else {}),
             "scale": dict(root_attrs.get("scale", {})),  # metric sanity: floor-to-ceiling, doorway-like gaps
             "tags": [scene.group], "created_at": now, "updated_at": now,
         }
