@@ -18,8 +18,9 @@ stopped when started again:
            between runs by the rounds each has to do.
 - eval:    ships each finished reference run as <task>_bc, then each track's zero-shot set at
            640 x 480 (gsplat) for the learned policy (distance and explicit_stop), then for
-           depth_reactive (last: its failures run the whole step budget), one navarena eval per scene and agent, several per GPU; random and the
-           oracle unrendered (they read no image). The parts are merged into one results.parquet and
+           depth_reactive (last: its failures run the whole step budget), one navarena eval per
+           scene and agent, several per GPU; random and the oracle unrendered (they read no
+           image). The parts are merged into one results.parquet and
            summary.json per agent, track and protocol, with the steps per second of each part.
 - pack:    the cards, the shipped model and the summaries into OUT/baselines.tgz (the device's
            $OUT).

@@ -191,7 +191,7 @@ def objectnav_labelled(data: Path, executor: str, pictures: Path) -> list[dict]:
     from omegaconf import OmegaConf
     from PIL import Image
 
-    from benchmarks.captures.scan_truth import rates
+    from benchmarks.captures.scan_truth import measure
     from navcore.io.catalog import Catalog
     from navcore.render import Renderer
     from navcore.render.camera import embodiment_camera
@@ -214,8 +214,8 @@ def objectnav_labelled(data: Path, executor: str, pictures: Path) -> list[dict]:
                "failures": [f["error"] for f in s["failures"] if f["scene_id"] == scene.scene_id],
                "episodes": 0, "by_category": {}, "rejections": ep_info.get("rejections", {}),
                "oracle_sr": oracle_sr(data, scene.scene_id), "goal_views": {}}
-        try:  # the costmap against the scan's own points (benchmarks.captures.scan_truth)
-            row["scan_truth"] = rates(catalog, scene, emb, 4000)
+        try:  # the costmap against the scan's own points, each embodiment's (benchmarks.captures.scan_truth)
+            row["scan_truth"] = measure(Path(scene.path), 4000)
         except (ValueError, FileNotFoundError) as e:  # no per-point labels (a labels.json scan)
             row["scan_truth"] = {"absent": f"{type(e).__name__}: {e}"}
         p = catalog.path("episodes", scene, task="objectnav")
@@ -378,23 +378,25 @@ def objectnav_markdown(rep: dict) -> list[str]:
               "FP: scan free, costmap blocked (target <= 10 %); FN: scan blocked, costmap free (target <= 0.5 %).", "",
               "Area: the same on every point of a 2 cm grid over the scan's floor, as shares of the scan's "
               "blocked / free area (no sampling). A scan without per-point labels takes its floor by height.", "",
-              "| scan | floor | poses free / blocked | FP (95 % CI) | FN (95 % CI) | area FP / FN |",
-              "|---|---|---|---|---|---|"]
+              "| scan | embodiment (radius, body band) | floor | poses free / blocked | FP (95 % CI) | FN (95 % CI) | area FP / FN |",
+              "|---|---|---|---|---|---|---|"]
     for s in rep.get("objectnav_labelled", []):
         r = s.get("scan_truth", {})
-        if "fp_rate" in r:
-            c = r.get("cells")
+        if "fp_rate" not in r:
+            lines.append(f"| {s['scene']} | | | n/a: {r.get('absent', 'not measured')} | | | |")
+        for e in (r.get("embodiments") or {r.get("embodiment"): r}).values() if "fp_rate" in r else []:
+            c = e.get("cells")
             area = f"{c['fp_rate']:.1%} / {c['fn_rate']:.2%}" if c else "-"
-            lines.append(f"| {s['scene']} | {r.get('floor', 'labelled')} | {r['scan_free']} / {r['scan_blocked']} | "
-                         f"{r['fp_rate']:.1%} ({r['fp_ci95'][0]:.1%}-{r['fp_ci95'][1]:.1%}) | {r['fn_rate']:.2%} "
-                         f"({r['fn_ci95'][0]:.2%}-{r['fn_ci95'][1]:.2%}) | {area} |")
-        else:
-            lines.append(f"| {s['scene']} | | n/a: {r.get('absent', 'not measured')} | | | |")
+            lines.append(f"| {s['scene']} | {e['embodiment']} (r {e['radius_m']:g} m, {e['band_m'][0]:g}-{e['band_m'][1]:g} m) "
+                         f"| {e.get('floor', 'labelled')} | {e['scan_free']} / {e['scan_blocked']} | "
+                         f"{e['fp_rate']:.1%} ({e['fp_ci95'][0]:.1%}-{e['fp_ci95'][1]:.1%}) | {e['fn_rate']:.2%} "
+                         f"({e['fn_ci95'][0]:.2%}-{e['fn_ci95'][1]:.2%}) | {area} |")
     t = rep.get("trained_scan")
     if t and "fp_rate" in t:
         c = t.get("cells")
         area = f"{c['fp_rate']:.1%} / {c['fn_rate']:.2%}" if c else "-"
-        lines.append(f"| {t['scene']} ({t['gaussians']:,} Gaussians) | labelled | {t['scan_free']} / {t['scan_blocked']} | "
+        lines.append(f"| {t['scene']} ({t['gaussians']:,} Gaussians) | {t['embodiment']} | labelled | "
+                     f"{t['scan_free']} / {t['scan_blocked']} | "
                      f"{t['fp_rate']:.1%} ({t['fp_ci95'][0]:.1%}-{t['fp_ci95'][1]:.1%}) | {t['fn_rate']:.2%} "
                      f"({t['fn_ci95'][0]:.2%}-{t['fn_ci95'][1]:.2%}) | {area} |")
         a = t["in_aligned_heights"]

@@ -89,14 +89,17 @@ def cell_rates(cm, pts: np.ndarray, is_floor: np.ndarray, emb, step: float = 0.0
 
 
 def measure(scan: Path, poses: int, seed: int = 0) -> dict:
-    """The pipeline up to the costmap on the scan, then `rates`."""
-    from omegaconf import OmegaConf
-
+    """The pipeline up to the costmap on the scan, with a map for every embodiment, then `rates`
+    for the main one, and under "embodiments" for each (its own radius and body band)."""
     from benchmarks.goals.semantics_real import prepare_scan
+    from navcore.nav.embodiment import embodiment_names, load_embodiment
 
+    names = embodiment_names()
     with tempfile.TemporaryDirectory() as tmp:
-        catalog, scene, cfg = prepare_scan(scan, Path(tmp), scan.name)
-        return rates(catalog, scene, OmegaConf.to_object(cfg.embodiment), poses, seed)
+        catalog, scene, cfg = prepare_scan(scan, Path(tmp), scan.name,
+                                           overrides=(f"costmap.embodiments=[{','.join(names)}]",))
+        per = {n: rates(catalog, scene, load_embodiment(n), poses, seed) for n in names}
+        return {**per[cfg.embodiment.name], "embodiments": per}
 
 
 def measure_model(model: Path, scan: Path, poses: int, seed: int = 0) -> dict:
@@ -152,8 +155,9 @@ def main(argv=None) -> dict:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "scan_truth.json").write_text(jsonio.dumps(rep, indent=1))
-    for s in rep["scans"]:
-        print(f"{s['scene']}: FP {s['fp_rate']:.1%} ({s['fp']}/{s['scan_free']}, 95 % {s['fp_ci95'][0]:.1%}-{s['fp_ci95'][1]:.1%}) "
+    for s in [e for r in rep["scans"] for e in r.get("embodiments", {r["embodiment"]: r}).values()]:
+        print(f"{s['scene']} ({s['embodiment']}): FP {s['fp_rate']:.1%} ({s['fp']}/{s['scan_free']}, "
+              f"95 % {s['fp_ci95'][0]:.1%}-{s['fp_ci95'][1]:.1%}) "
               f"FN {s['fn_rate']:.2%} ({s['fn']}/{s['scan_blocked']}, 95 % {s['fn_ci95'][0]:.2%}-{s['fn_ci95'][1]:.2%}); "
               f"area: FP {s['cells']['fp_rate']:.1%} FN {s['cells']['fn_rate']:.2%}")
     return rep

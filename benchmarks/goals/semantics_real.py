@@ -32,9 +32,9 @@ LEVEL_NAMES = LEVELS
 
 
 def prepare_scan(scan: Path, root: Path, name: str, fmt: str | None = "npy_folder", stage: str = "costmap",
-                 group: str = "real_labelled"):
+                 group: str = "real_labelled", overrides: tuple[str, ...] = ()):
     """Run the pipeline up to `stage` on a scan folder (or any scene file, fmt None: by its
-    extension) under root; (catalog, scene, cfg)."""
+    extension) under root, with more config overrides; (catalog, scene, cfg)."""
     from hydra import compose, initialize_config_dir
 
     from navcore.io.catalog import open_catalog
@@ -46,7 +46,7 @@ def prepare_scan(scan: Path, root: Path, name: str, fmt: str | None = "npy_folde
     (root / "cat.yaml").write_text(f"scenes:\n  - {{name: {name}, group: {group}, path: {scan}{fmt_key}}}\n")
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose("config", overrides=[f"data_root={root / 'data'}", "executor=sync", f"scenes.catalog={root / 'cat.yaml'}",
-                                           f"stages=[{stage}]"])
+                                           f"stages=[{stage}]", *overrides])
     s = execute(cfg)
     if s["failures"]:
         raise RuntimeError(f"{scan}: the pipeline failed up to {stage}: {s['failures']}")
