@@ -46,7 +46,7 @@ def rates(catalog, scene, emb, poses: int, seed: int = 0) -> dict:
     per = gaussian_labels(scene, gs, t)
     pts = gs.means.astype(np.float64)
     if per is None:  # boxes only: the floor is the points within half the body's clearance of the aligned floor
-        return {"scene": scene.name, "floor": f"height: |z| <= {emb.h_min / 2:g} m (the scan has no per-point labels)",
+        return {"scene": scene.name, "floor": f"by height: within {emb.h_min / 2:g} m of z = 0 (no per-point labels)",
                 **compare(cm, pts, np.abs(pts[:, 2]) <= emb.h_min / 2, emb, poses, seed)}
     _, seg, names = per
     floor_ids = [i + names.id_offset for i, n in enumerate(names.names) if n.strip().lower() == "floor"]
