@@ -125,6 +125,15 @@ def test_release_loads_with_datasets_pyarrow_and_croissant(release, tmp_path, mo
     table = pds.dataset(out / "episodes", format="parquet", partitioning="hive").to_table()
     assert table.num_rows == sum(card.values())
     assert {"task", "scene_id"} <= set(table.schema.names)
+    # the card's pandas join of expert steps to episodes: every step finds its one episode
+    eps = table.to_pandas()
+    steps = pds.dataset(out / "trajectories", format="parquet", partitioning="hive").to_table().to_pandas()
+    keys = ["task", "split", "scene_id", "episode_id"]
+    assert not eps.duplicated(keys).any()
+    joined = steps.merge(eps, on=keys, validate="many_to_one")
+    assert len(joined) == len(steps) > len(eps) and (joined.groupby(keys).size().reset_index()[keys].shape[0]
+                                                     == len(eps))
+    assert "steps.merge(eps" in (out / "README.md").read_text()
     md = mlc.Dataset(jsonld=str(out / "croissant.json"))
     assert not md.metadata.issues.errors
     n = sum(1 for _ in md.records("pointnav"))
@@ -162,6 +171,30 @@ def test_eval_set_ships_as_a_split_and_runs_in_evaluate(release, release_root, m
     eps = pds.dataset(out / "episodes", format="parquet", partitioning="hive").to_table().to_pandas()
     zs = eps[eps["split"] == "eval_zeroshot"]
     assert (zs["max_steps"] == zs["difficulty"].map(budgets)).all()
+
+
+def test_copied_release_is_independent_of_the_data_root(release, release_root, make_cfg, tmp_path):
+    """release.copy_files (navarena release --copy): no file shares its bytes with the data root; a
+    byte flipped in the copy leaves the root and the hard-linked release as they were."""
+    from navarena.verify_release import verify
+    from pipeline.release.build import build_release
+
+    root, over = release_root
+    linked, _ = release
+    out = tmp_path / "copied"
+    summary = build_release(make_cfg(root, *over, "release.version=1.0.0", "release.copy_files=true"), out)
+    root_inodes = {f.stat().st_ino for f in root.rglob("*") if f.is_file() and out not in f.parents}
+    files = [f for f in out.rglob("*") if f.is_file()]
+    assert files and not any(f.stat().st_ino in root_inodes for f in files)
+    assert summary["hard_links"] == 0 and summary["copies"] > 0
+    victim = next(out.glob("episodes/task=pointnav/split=*/scene_id=*/part-0.parquet"))
+    twin = linked / victim.relative_to(out)
+    before = twin.read_bytes()
+    data = bytearray(victim.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    victim.write_bytes(bytes(data))
+    assert not verify(out, sample=0, quiet=True).ok
+    assert twin.read_bytes() == before and verify(linked, sample=0, quiet=True).ok
 
 
 def test_internal_release_keeps_every_scene(release_root, make_cfg):

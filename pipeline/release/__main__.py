@@ -1,5 +1,5 @@
 """navarena release [--root DATA] [--out DIR] [--version X.Y.Z] [--previous DIR] [--catalog FILE]
-[--internal] [hydra overrides ...]
+[--internal] [--copy] [hydra overrides ...]
 
 Builds the release of a finished data root. The overrides are those the root was made with (the
 release refuses a root whose stages are not done for this config, naming each scene and stage);
@@ -30,6 +30,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--previous", help="the previous release's folder: release notes, unchanged files reused")
     ap.add_argument("--catalog", help="scenes.catalog the root was made from (default catalogs/synthetic.yaml)")
     ap.add_argument("--internal", action="store_true", help="release.public=false: keep every scene, marked internal")
+    ap.add_argument("--copy", action="store_true",
+                    help="release.copy_files=true: copy every file (an independent release; by default files are hard "
+                         "links shared with the data root and the previous release)")
     ap.add_argument("overrides", nargs="*", help="Hydra overrides, as given to `make dataset`")
     a = ap.parse_args(argv)
     over = list(a.overrides)
@@ -39,6 +42,8 @@ def main(argv: list[str] | None = None) -> int:
             over.append(f"{key}={flag}")
     if a.internal:
         over.append("release.public=false")
+    if a.copy:
+        over.append("release.copy_files=true")
     from pipeline.release.build import ReleaseError, build_release
 
     try:

@@ -99,9 +99,13 @@ def not_done(cfg, catalog, scenes) -> list[str]:
     return problems
 
 
-def link_or_copy(src: Path, dst: Path) -> str:
-    """dst as a hard link to src (no second copy of the bytes), a copy where links cannot be made."""
+def link_or_copy(src: Path, dst: Path, copy: bool = False) -> str:
+    """dst as a hard link to src (no second copy of the bytes), a copy where links cannot be made
+    or when `copy` (release.copy_files: an independent release)."""
     dst.parent.mkdir(parents=True, exist_ok=True)
+    if copy:
+        shutil.copyfile(src, dst)
+        return "copy"
     try:
         os.link(src, dst)
         return "link"
@@ -123,7 +127,7 @@ class Builder:
 
     # -- files -------------------------------------------------------------------------------------
     def link(self, rel: str, src: Path, scene_id: str | None = None) -> None:
-        self.links[link_or_copy(Path(src), self.tmp / rel)] += 1
+        self.links[link_or_copy(Path(src), self.tmp / rel, bool(self.rcfg.copy_files))] += 1
         if scene_id:
             self.scene_files[scene_id].append(rel)
 
@@ -219,8 +223,9 @@ class Builder:
             return dict(pool.map(one, files))
 
     def reuse_previous(self, manifest: dict[str, tuple[int, str]]) -> int:
-        """Files whose bytes equal the previous release's at the same path become hard links to it."""
-        if self.previous is None:
+        """Files whose bytes equal the previous release's at the same path become hard links to it
+        (none in a copied release: release.copy_files)."""
+        if self.previous is None or self.rcfg.copy_files:
             return 0
         old = read_manifest(self.previous / MANIFEST)
         reused = 0

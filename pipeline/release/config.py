@@ -17,6 +17,11 @@ class ReleaseConfig:
     out: str | None = None
     """Release folder; null = {data_root}/11_releases/{name}-v{version} (on the data root's
     filesystem, so that every file is a hard link: a release costs no second copy)."""
+    copy_files: bool = False
+    """Copy every file instead of hard-linking it: an independent release. A hard-linked release
+    (the default: no second copy of the bytes) shares its files with the data root and with the
+    previous release; a file changed or damaged in one is changed in the others, so edit neither
+    in place. A copied release reuses nothing of the previous one either."""
     previous: str | None = None
     """Folder of the previous release: release notes (scenes added, removed, changed; counts before
     and after), and files whose bytes did not change are hard links to the previous release's."""
