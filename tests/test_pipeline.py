@@ -271,6 +271,8 @@ def test_asset_aligned_model_from_the_source_and_its_transform(tmp_path, make_cf
         load_aligned(copy)
     bad = execute(make_cfg(tmp_path / "b", "stages=[asset]", "asset.aligned_format=source", "asset.source=none"))
     assert "aligned_format=source needs asset.source=reference" in str(bad["failures"])
+    habitat = execute(make_cfg(tmp_path, "stages=[export]", "asset.aligned_format=source"))
+    assert "habitat" in str(habitat["failures"]) and "keeps none" in str(habitat["failures"])
 
 
 def test_asset_aligned_spz_renders_as_the_aligned_scene(tmp_path, make_cfg):

@@ -227,12 +227,12 @@ def run(scene, cfg, catalog) -> dict:
     if "navarena" in ecfg.formats:
         out += export_navarena(scene, catalog, ecfg, created)
     if "habitat" in ecfg.formats:
-        try:
-            aligned = aligned_model(catalog.dataset("asset", scene).path).name
-        except FileNotFoundError as e:
-            raise ValueError(f"export.formats has habitat, whose episodes name the asset's aligned model file: {e}; "
-                             "use asset.aligned_format=ply (what Habitat reads) or leave habitat out") from None
-        out += export_habitat(scene, catalog, aligned)
+        asset = catalog.dataset("asset", scene).path
+        if json.loads((asset / "manifest.json").read_text()).get("aligned_from_source"):
+            raise ValueError("export.formats has habitat, whose episodes name the asset's aligned model file, and the "
+                             "asset keeps none (asset.aligned_format=source): use asset.aligned_format=ply (what "
+                             "Habitat reads) or leave habitat out of export.formats")
+        out += export_habitat(scene, catalog, aligned_model(asset).name)
     return {"outputs": out}
 
 
