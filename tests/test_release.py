@@ -136,6 +136,9 @@ def test_release_loads_with_datasets_pyarrow_and_croissant(release, tmp_path, mo
     assert "steps.merge(eps" in (out / "README.md").read_text()
     md = mlc.Dataset(jsonld=str(out / "croissant.json"))
     assert not md.metadata.issues.errors
+    assert not [w for w in md.metadata.issues.warnings if "citeAs" in str(w)]  # a citation without release.citation
+    assert "@misc{" in json.loads((out / "croissant.json").read_text())["citeAs"]
+    assert "## Citation" in (out / "README.md").read_text()
     n = sum(1 for _ in md.records("pointnav"))
     assert n == card[("pointnav", "test")] + card[("pointnav", "eval_zeroshot")]
     rec = next(iter(md.records("pointnav")))

@@ -35,6 +35,23 @@ def hub_license(licenses: set[str]) -> dict:
             "license_link": "scenes.parquet"}
 
 
+def citation(info: dict, rcfg) -> str:
+    """The BibTeX users are asked to cite: release.citation, else an entry for this release itself
+    (name, version, year, where it is published, the commit that made it)."""
+    if rcfg.citation:
+        return rcfg.citation.strip()
+    key = f"{rcfg.name}_v{info['version']}".replace(".", "_").replace("-", "_")
+    code = info.get("code") or {}
+    fields = [("title", f"{{{rcfg.name} {info['version']}}}: goal-directed navigation episodes from 3D Gaussian "
+                        "Splatting scenes"),
+              ("author", "{NavArena contributors}"), ("year", str(info["created"])[:4]), ("version", info["version"]),
+              ("note", "Dataset release made with NavArena"
+                       + (f" at commit {code['commit'][:12]}" if code.get("commit") else ""))]
+    if rcfg.homepage:
+        fields.append(("howpublished", f"\\url{{{rcfg.homepage}}}"))
+    return "@misc{" + key + ",\n" + ",\n".join(f"  {k} = {{{v}}}" for k, v in fields) + "\n}"
+
+
 def size_category(n: int) -> str:
     for limit, name in SIZES:
         if n < limit:
@@ -184,8 +201,7 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
           f"Code {code.get('package')} at commit `{code.get('commit')}`" + (" (with uncommitted changes)" if code.get("dirty") else "")
           + f"; resolved config sha256 `{info['config_sha256'][:16]}` (in `release.json`, with each stage's hash, "
           "the catalog and the seeds).", ""]
-    if rcfg.citation:
-        L += ["## Citation", "", "```bibtex", rcfg.citation.strip(), "```", ""]
+    L += ["## Citation", "", "```bibtex", citation(info, rcfg), "```", ""]
     L += ["## Licence", "", f"The code that made it: {PROJECT_LICENSE} (`LICENSE`). Each scene and what is derived from "
           "it keeps the scene's licence (table above, `scenes.parquet`); credit the attribution it names.", ""]
     Path(path).write_text("\n".join(L))

@@ -14,6 +14,7 @@ import pyarrow as pa
 
 from navcore.io.episode_schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA
 from navcore.io.release import CARD, CROISSANT, RELEASE_JSON, SCENES, sha256_file
+from pipeline.release.card import citation
 
 
 def _data_type(t: pa.DataType):
@@ -68,7 +69,7 @@ def metadata(root: Path, info: dict, rcfg):
         description=(f"Goal-directed navigation episodes (PointNav, ImageNav, ObjectNav) with expert trajectories from "
                      f"3D Gaussian Splatting scenes; see {CARD}."),
         url=rcfg.homepage or None, license=[f"https://spdx.org/licenses/{x}.html" for x in licenses],
-        cite_as=rcfg.citation or None, date_published=created, date_created=created,
+        cite_as=citation(info, rcfg), date_published=created, date_created=created,
         keywords=["embodied AI", "navigation", "3D Gaussian Splatting"],
         distribution=docs + sets, record_sets=records)
 
