@@ -200,7 +200,7 @@ def data_markdown() -> str:
     import yaml
 
     from navcore.instances import INSTANCE_SCHEMA
-    from navcore.io.episode_schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA
+    from navcore.io.episode_schema import field_table
     from pipeline.graph import DEFAULT_STAGES, STAGES
 
     L = ["# Stages, data layout and schemas", "",
@@ -227,11 +227,11 @@ def data_markdown() -> str:
             L.append(f"| `{name}` | `{e['path']}` | {e.get('type', '')} |")
         elif isinstance(e, str):
             L.append(f"| `{name}` | `{e}` | folder |")
-    for title, schema in (("Episodes (`05_episodes`, one row per episode)", EPISODE_SCHEMA),
-                          ("Expert trajectories (`06_trajectories`, one row per 20 Hz step)", TRAJECTORY_SCHEMA),
-                          ("ObjectNav instances (`04_semantics/{scene_id}/instances.parquet`)", INSTANCE_SCHEMA)):
-        L += ["", f"## {title}", "", "| column | type |", "|---|---|"]
-        L += [f"| `{f.name}` | `{f.type}` |" for f in schema]
+    for title, kind in (("Episodes (`05_episodes`, one row per episode)", "episodes"),
+                        ("Expert trajectories (`06_trajectories`, one row per 20 Hz step)", "trajectories")):
+        L += ["", f"## {title}", "", *field_table(kind)]
+    L += ["", "## ObjectNav instances (`04_semantics/{scene_id}/instances.parquet`)", "", "| column | type |", "|---|---|"]
+    L += [f"| `{f.name}` | `{f.type}` |" for f in INSTANCE_SCHEMA]
     return "\n".join(L) + "\n"
 
 

@@ -138,7 +138,13 @@ def test_release_loads_with_datasets_pyarrow_and_croissant(release, tmp_path, mo
     assert not md.metadata.issues.errors
     assert not [w for w in md.metadata.issues.warnings if "citeAs" in str(w)]  # a citation without release.citation
     assert "@misc{" in json.loads((out / "croissant.json").read_text())["citeAs"]
-    assert "## Citation" in (out / "README.md").read_text()
+    card_text = (out / "README.md").read_text()
+    assert "## Citation" in card_text
+    from navcore.io.episode_schema import EPISODE_SCHEMA, FIELD_DOCS, TRAJECTORY_SCHEMA
+
+    for kind, schema in (("episodes", EPISODE_SCHEMA), ("trajectories", TRAJECTORY_SCHEMA)):
+        assert set(FIELD_DOCS[kind]) == set(schema.names)  # every column has its meaning, no stale one
+        assert all(f"| `{f.name}` | `{f.type}` | {FIELD_DOCS[kind][f.name]} |" in card_text for f in schema)
     n = sum(1 for _ in md.records("pointnav"))
     assert n == card[("pointnav", "test")] + card[("pointnav", "eval_zeroshot")]
     rec = next(iter(md.records("pointnav")))

@@ -81,6 +81,75 @@ TRAJECTORY_SCHEMA = pa.schema(_fields(
     ("phase", STR),                 # rotate | translate | stop
 ))
 
+def _pose_docs(prefix: str, what: str) -> dict[str, str]:
+    return {**{f"{prefix}position_{a}": f"{what} position {a}, metres (aligned frame; z = 0 is the floor)" for a in "xyz"},
+            **{f"{prefix}rotation_q{a}": f"{what} heading as a quaternion, component {a} (yaw about +z)" for a in "xyzw"}}
+
+
+FIELD_DOCS: dict[str, dict[str, str]] = {
+    "episodes": {
+        "episode_id": "\"{split}_{index:06d}\"; unique within a task and scene (the pair scene_id, episode_id is "
+                      "unique within a task)",
+        "split": "train | val_seen | val_unseen | test (the zero-shot set's copies: its own name)",
+        "scene_path": "\"{group}/{scene_id}\": the scene's source group and id",
+        "task_type": "pointnav | imagenav | objectnav",
+        "embodiment": "the robot whose costmap and limits made the episode (navcore/conf/embodiment)",
+        "difficulty": "easy | medium | hard, by geodesic distance",
+        "max_steps": "closed-loop step budget of the difficulty",
+        **_pose_docs("start_", "start"), "start_yaw": "start heading, radians, counter-clockwise from +x",
+        "goal_type": "position | image | object",
+        **_pose_docs("goal_", "goal"),
+        "goal_yaw": "goal heading, radians (ImageNav: the goal view's; ObjectNav: the nearest view point's); NaN for "
+                    "PointNav",
+        "success_radius": "success threshold around the goal, metres",
+        "heading_tolerance": "ImageNav Pose SR: largest heading error at the goal, radians; NaN otherwise",
+        "geodesic_distance": "shortest valid path from start to goal known, metres (what SPL divides by)",
+        "euclidean_distance": "straight-line start to goal distance, metres",
+        "num_steps": "rows of the expert trajectory (20 Hz steps)",
+        "total_time": "duration of the expert trajectory, seconds",
+        "path_length": "distance the expert travelled, metres",
+        "avg_speed": "the expert's mean speed, m/s", "max_speed": "the expert's top speed, m/s",
+        "oracle_actions": "the discrete expert's actions: 0 stop, 1 forward, 2 left, 3 right",
+        "goal_image_path": "ImageNav: relative path of the goal image once rendered (goal_images)",
+        "goal_camera_json": "ImageNav: camera pose and intrinsics that render the goal view (JSON)",
+        "goal_object_category": "ObjectNav: the goal category (one of the 8 goal categories)",
+        "goal_object_id": "ObjectNav: instance id of the goal chosen for the expert (instances table)",
+        "instruction_text": "null: reserved for instructions in words (VLN), which no task writes yet",
+        "instruction_language": "null: the instruction's language, reserved with it",
+        "goals_json": "JSON array of every goal: ObjectNav instances with their boxes and view points; the goal "
+                      "position otherwise",
+        "seed": "the (scene, task) random stream's seed",
+    },
+    "trajectories": {
+        "episode_id": "the episode this step belongs to (with the task, split and scene_id folders)",
+        "step": "row k is the expert's state at t = k dt (20 Hz)",
+        "timestamp": "t, seconds",
+        **_pose_docs("", "the robot's"), "yaw": "heading, radians, counter-clockwise from +x",
+        "action": "move_forward | turn_left | turn_right | stop: the kind of control of this step",
+        "action_id": "0 stop, 1 move_forward, 2 turn_left, 3 turn_right (Habitat's ids)",
+        "linear_velocity": "v held from this row to the next, m/s (robot frame, forward)",
+        "angular_velocity": "omega held from this row to the next, rad/s (counter-clockwise)",
+        "linear_velocity_x": "v in the world frame, x, m/s", "linear_velocity_y": "v in the world frame, y, m/s",
+        "linear_acceleration": "(v_k - v_k-1) / dt, m/s^2",
+        "angular_acceleration": "(omega_k - omega_k-1) / dt, rad/s^2",
+        "curvature": "omega / v where v > 0, else 0, 1/m",
+        "dx": "forward change of position to the next row, in this row's robot frame, metres",
+        "dy": "leftward change of position to the next row, in this row's robot frame, metres",
+        "dyaw": "change of heading to the next row, radians",
+        "phase": "rotate | translate | stop",
+    },
+}
+"""What each column of EPISODE_SCHEMA and TRAJECTORY_SCHEMA means (the card's and docs' field
+tables are generated from it; tests check that every column has one)."""
+
+
+def field_table(kind: str) -> list[str]:
+    """Markdown rows (header included) of one table's columns: name, Arrow type, meaning."""
+    schema = {"episodes": EPISODE_SCHEMA, "trajectories": TRAJECTORY_SCHEMA}[kind]
+    return ["| column | type | meaning |", "|---|---|---|",
+            *[f"| `{f.name}` | `{f.type}` | {FIELD_DOCS[kind][f.name]} |" for f in schema]]
+
+
 TRAJECTORY_QUANTA = {
     **dict.fromkeys(("rotation_qz", "rotation_qw", "linear_velocity_x", "linear_velocity_y", "dx", "dy", "dyaw"),
                     2.0**-16),  # 1.5e-5 (m, m/s, rad, unit quaternion)

@@ -9,6 +9,7 @@ from pathlib import Path
 import pyarrow as pa
 import yaml
 
+from navcore.io.episode_schema import field_table
 from navcore.io.licences import PROJECT_LICENSE
 
 SCENES_SCHEMA = pa.schema([
@@ -129,7 +130,11 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
           "records = mlc.Dataset(jsonld=\"<this folder>/croissant.json\").records(\"pointnav\")",
           "```", "",
           "Schemas: `release.json` (`schemas`), the same as `navcore/io/episode_schema.py`. Frame: the scene's aligned "
-          "frame (z up, metres, floor at z = 0); headings are yaw about +z.", ""]
+          "frame (z up, metres, floor at z = 0); headings are yaw about +z.", "",
+          "## Fields", "", "Episodes (`episodes/`, one row per episode; the folders add `task`, `split` and "
+          "`scene_id`):", "", *field_table("episodes"), "",
+          "Expert trajectories (`trajectories/`, one row per 20 Hz step; the same folders):", "",
+          *field_table("trajectories"), ""]
     L += ["## Statistics", "", "Per task (the layout of the paper's Table 4; every split except the evaluation set, "
           "whose episodes repeat test episodes):", "", *_table(stats.rows(), None), ""]
     for by, title in (("split", "Per split"), ("group", "Per source group"), ("difficulty", "Per difficulty")):
