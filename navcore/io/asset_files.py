@@ -33,6 +33,12 @@ def _manifest(asset_dir) -> tuple[Path, Path, dict]:
     return folder, man, json.loads(man.read_text())
 
 
+def keeps_aligned_file(asset_dir) -> bool:
+    """Whether a V1 asset folder keeps an aligned model file (False for asset.aligned_format=source,
+    whose model is the original and its extrinsic matrix: `load_aligned`)."""
+    return not _manifest(asset_dir)[2].get("aligned_from_source")
+
+
 def aligned_model(asset_dir) -> Path:
     """The aligned model's file of a V1 asset folder (aligned.ply or aligned.spz), as its manifest
     names it; NavArena's readers (`navcore.gaussians.formats.read_gaussians`) load either. An asset

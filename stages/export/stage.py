@@ -20,7 +20,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from navcore.io.asset_files import aligned_model
+from navcore.io.asset_files import aligned_model, keeps_aligned_file
 from navcore.io.episode_schema import TRAJECTORY_WRITE
 
 FORMAT_VERSION = "1.0"
@@ -228,7 +228,7 @@ def run(scene, cfg, catalog) -> dict:
         out += export_navarena(scene, catalog, ecfg, created)
     if "habitat" in ecfg.formats:
         asset = catalog.dataset("asset", scene).path
-        if json.loads((asset / "manifest.json").read_text()).get("aligned_from_source"):
+        if not keeps_aligned_file(asset):
             raise ValueError("export.formats has habitat, whose episodes name the asset's aligned model file, and the "
                              "asset keeps none (asset.aligned_format=source): use asset.aligned_format=ply (what "
                              "Habitat reads) or leave habitat out of export.formats")
