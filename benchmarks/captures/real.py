@@ -278,6 +278,16 @@ def synthetic_validation(n_scenes: int, poses: int, gaussians: int, levels=("mod
             "realism_align_max_height_m": max(r["align_height_m"] for r in first)}
 
 
+def scan_truth_row(scan: str, embodiment: str, floor: str, r: dict) -> str:
+    """One row of the scan-truth table: poses free / blocked, FP and FN with their intervals, and the
+    area rates (benchmarks.captures.scan_truth's figures `r`)."""
+    c = r.get("cells")
+    area = f"{c['fp_rate']:.1%} / {c['fn_rate']:.2%}" if c else "-"
+    return (f"| {scan} | {embodiment} | {floor} | {r['scan_free']} / {r['scan_blocked']} | "
+            f"{r['fp_rate']:.1%} ({r['fp_ci95'][0]:.1%}-{r['fp_ci95'][1]:.1%}) | {r['fn_rate']:.2%} "
+            f"({r['fn_ci95'][0]:.2%}-{r['fn_ci95'][1]:.2%}) | {area} |")
+
+
 def markdown(rep: dict, pictures_rel: str) -> str:
     pct = lambda v: "n/a" if v is None else f"{100 * v:.1f} %"
     ci = lambda c: f"{100 * c[0]:.1f}-{100 * c[1]:.1f} %"  # noqa: E731
@@ -384,21 +394,13 @@ def objectnav_markdown(rep: dict) -> list[str]:
         r = s.get("scan_truth", {})
         if "fp_rate" not in r:
             lines.append(f"| {s['scene']} | | | n/a: {r.get('absent', 'not measured')} | | | |")
-        for e in (r.get("embodiments") or {r.get("embodiment"): r}).values() if "fp_rate" in r else []:
-            c = e.get("cells")
-            area = f"{c['fp_rate']:.1%} / {c['fn_rate']:.2%}" if c else "-"
-            lines.append(f"| {s['scene']} | {e['embodiment']} (r {e['radius_m']:g} m, {e['band_m'][0]:g}-{e['band_m'][1]:g} m) "
-                         f"| {e.get('floor', 'labelled')} | {e['scan_free']} / {e['scan_blocked']} | "
-                         f"{e['fp_rate']:.1%} ({e['fp_ci95'][0]:.1%}-{e['fp_ci95'][1]:.1%}) | {e['fn_rate']:.2%} "
-                         f"({e['fn_ci95'][0]:.2%}-{e['fn_ci95'][1]:.2%}) | {area} |")
+            continue
+        for e in (r.get("embodiments") or {r["embodiment"]: r}).values():
+            lines.append(scan_truth_row(s["scene"], f"{e['embodiment']} (r {e['radius_m']:g} m, {e['band_m'][0]:g}-"
+                                                    f"{e['band_m'][1]:g} m)", e.get("floor", "labelled"), e))
     t = rep.get("trained_scan")
     if t and "fp_rate" in t:
-        c = t.get("cells")
-        area = f"{c['fp_rate']:.1%} / {c['fn_rate']:.2%}" if c else "-"
-        lines.append(f"| {t['scene']} ({t['gaussians']:,} Gaussians) | {t['embodiment']} | labelled | "
-                     f"{t['scan_free']} / {t['scan_blocked']} | "
-                     f"{t['fp_rate']:.1%} ({t['fp_ci95'][0]:.1%}-{t['fp_ci95'][1]:.1%}) | {t['fn_rate']:.2%} "
-                     f"({t['fn_ci95'][0]:.2%}-{t['fn_ci95'][1]:.2%}) | {area} |")
+        lines.append(scan_truth_row(f"{t['scene']} ({t['gaussians']:,} Gaussians)", t["embodiment"], "labelled", t))
         a = t["in_aligned_heights"]
         lines += ["", f"The trained 3DGS (`python -m benchmarks.captures.train_on_scan` on a GPU: views of the real scan rendered "
                   f"from poses inside the room, a 3DGS trained on them from a fifth of the scan's points; "
