@@ -86,10 +86,11 @@ def asset_source(tmp, mode: str, report: dict, catalog, scene) -> tuple[str | No
     raise ValueError(f"asset.source={mode!r}; choose reference | convert | none")
 
 
-def aligned_from_source(cfg, report: dict, source_ply: str | None, catalog, scene) -> dict:
+def aligned_from_source(cfg, report: dict, source_ply: str | None, catalog, scene, store_attrs: dict) -> dict:
     """The manifest's recipe of the aligned model under asset.aligned_format=source: the asset's
     link to the original (relative path), how ingest read it and the checksum of the Gaussians that
-    gives (`navcore.io.asset_files.load_aligned`)."""
+    gives (`navcore.io.asset_files.load_aligned`): a reference store's own (`store_attrs`, the
+    aligned scene's attrs), else computed from a copy store's Gaussians."""
     import dataclasses
 
     from omegaconf import OmegaConf
@@ -104,9 +105,9 @@ def aligned_from_source(cfg, report: dict, source_ply: str | None, catalog, scen
         folder, _ = source_files(original)
         rel = str(Path("source") / original.relative_to(folder))
     icfg = OmegaConf.to_object(cfg.ingest)
-    base, battrs = catalog.dataset("scene", scene).load()
+    checksum = store_attrs.get("checksum") or scene_checksum(catalog.dataset("scene", scene).load()[0])
     return {"path": rel, "format": report["format"], "level": icfg.lod_level, "scale": icfg.scale,
-            "limits": dataclasses.asdict(icfg.limits), "checksum": battrs.get("checksum") or scene_checksum(base)}
+            "limits": dataclasses.asdict(icfg.limits), "checksum": checksum}
 
 
 def run(scene, cfg, catalog) -> dict:
@@ -136,7 +137,7 @@ def run(scene, cfg, catalog) -> dict:
         files["source_ply"], original_files = asset_source(tmp, cfg.asset.source, report, catalog, scene)
         from_source = None
         if aligned_name is None:  # the original (linked above) read as ingest read it, then moved
-            from_source = aligned_from_source(cfg, report, files["source_ply"], catalog, scene)
+            from_source = aligned_from_source(cfg, report, files["source_ply"], catalog, scene, aattrs)
         elif aligned_name.endswith(".spz"):
             write_spz(tmp / aligned_name, aligned, version=4)
         else:
