@@ -220,6 +220,7 @@ def test_asset_aligned_model_as_spz(tmp_path, make_cfg):
 
 def render_psnr(a, b, width: int = 160, height: int = 120) -> float:
     """The lowest PSNR (dB) between CPU renders of two scenes from 4 views inside scene a."""
+    from benchmarks.gpu.render_gpu import psnr
     from navcore.gaussians.model import render_sh_degree
     from navcore.nav.embodiment import Embodiment
     from navcore.render import cpu_fast
@@ -234,7 +235,7 @@ def render_psnr(a, b, width: int = 160, height: int = 120) -> float:
     for i in range(len(vm)):
         x = np.clip(cpu_fast.render_one(ga, vm[i], K[i], width, height, deg)[0], 0, 1)
         y = np.clip(cpu_fast.render_one(gb, vm[i], K[i], width, height, deg)[0], 0, 1)
-        worst = min(worst, 10 * np.log10(1 / max(float(np.mean((x - y) ** 2)), 1e-12)))
+        worst = min(worst, psnr(x, y))
     return worst
 
 
