@@ -200,6 +200,21 @@ def test_model_cards_and_docs_are_generated_from_the_cards():
     assert write_docs(check=True) == [], "run python -m benchmarks.baselines.cards docs"
 
 
+def test_a_trial_is_recorded_without_weights_and_not_registered(trained, tmp_path):
+    """A run that is measured but not shipped: its card (no model.pt) goes to the trials folder, its
+    .md says so, the docs section lists it as not shipped, and no agent name resolves to it."""
+    from benchmarks.baselines.cards import card_markdown, cards, docs_section, ship
+    from navcore.eval.agents import AGENTS
+
+    dst = ship(trained[0], "tiny_trial", tmp_path, weights=False)
+    assert not (dst / "model.pt").exists() and (dst / "model_card.json").is_file()
+    assert cards(tmp_path) == {} and list(cards(tmp_path, weights=False)) == ["tiny_trial"]
+    card = cards(tmp_path, weights=False)["tiny_trial"]
+    assert "not shipped" in card_markdown(card, shipped=False) and "checked on load" not in card_markdown(card, False)
+    assert "tiny_trial` (pointnav; measured, not shipped)" in docs_section({}, None, {"tiny_trial": card})
+    assert "tiny_trial" not in AGENTS
+
+
 def test_shipped_baseline_behind_the_agent_server_acts_as_in_process(episode_run, tmp_path):
     """navarena serve-agent --agent pointnav_bc, evaluated over ws:// by navarena eval: the same
     episodes end the same way as with the agent in process (the policy is deterministic)."""
