@@ -17,7 +17,9 @@ Episodes run under explicit_stop, so the expert's STOP inside the goal region is
 
 After each round the checkpoint is evaluated in closed loop on held-out episodes (the val_unseen
 split's scenes, else the test split's), and the run folder gets:
-    model.pt                 the policy (navcore.baselines.checkpoint; weights_only loading)
+    model.pt                 the policy (navcore.baselines.checkpoint; weights_only loading): the
+                             round with the best held-out check (--keep best) or the last one
+    rounds/best.pt           the best checked round's weights so far
     model_card.json / .md    data, config, seed, per-round curve (loss, SR, SPL), timings
     rounds/round_<r>.npz     the round's labelled steps (resume reads them back)
     checkpoint.pt            network + optimiser + round (resume)
@@ -42,7 +44,7 @@ from torch import nn
 
 from navarena.dataset import NavDataset
 from navcore.baselines.agent import default_device
-from navcore.baselines.checkpoint import load_checkpoint, save_checkpoint, sha256_of
+from navcore.baselines.checkpoint import load_checkpoint, save_checkpoint
 from navcore.baselines.model import NO_ACTION, TRACKS, NavNet, NavSpec, observation_input, parameter_count
 from navcore.io.atomic import atomic_path, write_text_atomic
 from navcore.nav.actions import STOP
@@ -79,6 +81,10 @@ class TrainConfig:
     val_split: str | None = None
     """Held-out episodes for the per-round closed-loop check (None: val_unseen if present, else test)."""
     val_episodes: int = 64
+    keep: str = "best"
+    """best | last: the final model.pt is the round with the best held-out check (SR, then SPL; the
+    later round on a tie) or the last round. DAgger rounds need not improve: a round whose learner
+    drove lost for most of its episodes can be worse than the one before."""
     scenes: int | None = None
     """Use the first N training scenes (the scene-scaling runs); None: all."""
     workers: int = 0
@@ -92,6 +98,8 @@ class TrainConfig:
     def __post_init__(self):
         if self.spec is None:
             self.spec = NavSpec(task=self.task)
+        if self.keep not in ("best", "last"):
+            raise ValueError(f"keep={self.keep!r}: choose best or last")
         if self.spec.task != self.task:
             raise ValueError(f"the network's task {self.spec.task!r} is not the run's {self.task!r}")
 
@@ -143,6 +151,8 @@ class Trainer:
         self.pool = None                                     # too when workers = 0)
         self.curve: list[dict] = []
         self.frames = 0
+        self.best: tuple[float, float, int] | None = None
+        """(val SR, val SPL, round) of the best checked round so far (rounds/best.pt holds its weights)."""
 
     def log(self, msg: str) -> None:
         if not self.quiet:
@@ -239,10 +249,12 @@ class Trainer:
             self.opt.load_state_dict(ck["opt"])
             torch.set_rng_state(ck["torch_rng"].cpu())
             self.curve, self.frames = list(ck["curve"]), int(ck["frames"])
+            self.best = tuple(ck["best"]) if ck.get("best") is not None else None
             first = int(ck["round"]) + 1
             self.log(f"resuming after round {first - 1}")
         parts = [Steps.load(out / "rounds" / f"round_{r}.npz") for r in range(first)]
-        sha = sha256_of(out / "model.pt") if first else None
+        # the learner of the next round is the last round's network (model.pt may hold the best round's)
+        sha = self.save_model(final=False) if first else None
         if cfg.workers:
             import torch.multiprocessing as tmp
 
@@ -280,11 +292,16 @@ class Trainer:
                 entry["val_s"] = round(time.perf_counter() - t2, 1)
                 entry.update({"val_split": self.val_split, "val_episodes": m["episodes"],
                               "val_sr": round(m["sr"], 4), "val_spl": round(m["spl"], 4)})
+                if self.best is None or (entry["val_sr"], entry["val_spl"]) >= self.best[:2]:
+                    self.best = (entry["val_sr"], entry["val_spl"], rnd)
+                    with atomic_path(out / "rounds" / "best.pt") as tmp:
+                        torch.save(self.net.state_dict(), tmp)
             self.curve.append(entry)
             self.log(f"round {rnd} ({entry['kind']}): {entry}")
             with atomic_path(out / "checkpoint.pt") as tmp:  # a run killed while writing keeps the last one
                 torch.save({"net": self.net.state_dict(), "opt": self.opt.state_dict(), "round": rnd,
-                            "torch_rng": torch.get_rng_state(), "curve": self.curve, "frames": self.frames}, tmp)
+                            "torch_rng": torch.get_rng_state(), "curve": self.curve, "frames": self.frames,
+                            "best": list(self.best) if self.best else None}, tmp)
         sha = self.save_model(final=True)
         return {"model": str(out / "model.pt"), "sha256": sha, "curve": self.curve}
 
@@ -303,9 +320,20 @@ class Trainer:
                 "curve": [{k: v for k, v in e.items() if k not in self.TIMING} for e in self.curve],
                 "parameters": parameter_count(self.net), "frames": self.frames}
 
+    def selected_round(self) -> int:
+        """The round whose weights the final model.pt holds (keep: best or last)."""
+        last = self.curve[-1]["round"]
+        return self.best[2] if self.cfg.keep == "best" and self.best is not None else last
+
     def save_model(self, final: bool) -> str:
-        meta = self.meta()
-        sha = save_checkpoint(self.out / "model.pt", self.cfg.task, self.cfg.spec.to_dict(), self.net.state_dict(), meta)
+        meta, state = self.meta(), self.net.state_dict()
+        if final:
+            meta["selected_round"] = self.selected_round()
+            if meta["selected_round"] != self.curve[-1]["round"]:
+                state = torch.load(self.out / "rounds" / "best.pt", map_location=self.device, weights_only=True)
+                self.log(f"model.pt: round {meta['selected_round']}'s weights (the best held-out check, "
+                         f"SR {self.best[0]:.3f}), not the last round's")
+        sha = save_checkpoint(self.out / "model.pt", self.cfg.task, self.cfg.spec.to_dict(), state, meta)
         if final:
             dev = torch.cuda.get_device_name() if self.device.startswith("cuda") else \
                 f"{platform.machine()} CPU, {os.cpu_count()} cores"
@@ -467,7 +495,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
     d = TrainConfig()
     helps = {"task": None, "rounds": "0: behaviour cloning, then DAgger", "episodes_per_round": None, "grad_steps": None,
              "batch_episodes": None, "slots": "episodes stepped together", "width": "render size", "height": None,
-             "val_episodes": "held-out check", "scenes": "first N train scenes", "seed": None,
+             "val_episodes": "held-out check", "keep": "best|last round into model.pt", "scenes": "first N train scenes", "seed": None,
              "max_learner_steps": None, "workers": "collection processes", "beta": "DAgger mixing",
              "lr": None, "weight_decay": None, "train_split": None, "val_split": None,
              "renderer": "auto|cpu|gsplat", "device": "auto|cpu|cuda"}

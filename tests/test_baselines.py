@@ -45,6 +45,31 @@ def test_tiny_training_loss_falls_and_one_seed_gives_one_checkpoint(trained):
     assert "collect_s" not in ck["meta"]["curve"][0]  # timings live in the card only
 
 
+@pytest.mark.parametrize("keep", ["best", "last"])
+def test_model_keeps_the_best_checked_round(keep, episode_run, tmp_path, monkeypatch):
+    """A DAgger round can be worse than the one before: with keep=best the final model.pt holds the
+    round with the best held-out check (here round 0, scripted: SR 0.5 then 0.25), with keep=last
+    the last round's; the network state a resumed run goes on from is the last round's either way."""
+    from navarena.train import TrainConfig, Trainer, main
+
+    checks = iter([{"episodes": 4, "sr": 0.5, "spl": 0.4}, {"episodes": 4, "sr": 0.25, "spl": 0.2}])
+    monkeypatch.setattr(Trainer, "evaluate", lambda self, *a, **k: next(checks))
+    args = [a for a in TINY if a not in ("--val-episodes", "0")]
+    assert main([str(episode_run[0]), "--out", str(tmp_path), *args, "--val-episodes", "4", "--val-split", "train",
+                 "--keep", keep]) == 0
+    card = json.loads((tmp_path / "model_card.json").read_text())
+    assert [e["val_sr"] for e in card["curve"]] == [0.5, 0.25]
+    assert card["selected_round"] == (0 if keep == "best" else 1)
+    final = load_checkpoint(tmp_path / "model.pt", kind="pointnav")["state_dict"]
+    best = torch.load(tmp_path / "rounds" / "best.pt", weights_only=True)
+    last = torch.load(tmp_path / "checkpoint.pt", weights_only=True)["net"]
+    same = lambda a, b: all(torch.equal(a[k], b[k]) for k in a)  # noqa: E731
+    assert same(final, best if keep == "best" else last) and not same(best, last)
+    assert TrainConfig(keep=keep).keep == keep
+    with pytest.raises(ValueError, match="keep"):
+        TrainConfig(keep="first")
+
+
 def test_collection_workers_give_the_same_run_and_check(episode_run, tmp_path):
     """Collection and the held-out check spread over worker processes (one scene each) give the
     same checkpoint and the same check as this process alone."""

@@ -238,6 +238,14 @@ def _cost(card: dict) -> str:
             f"excluded; {c['machine']}; `python -m benchmarks.baselines.cards cost {card['name']}`).")
 
 
+def kept(card: dict) -> str:
+    """Which round's weights the file holds (cards from before `keep` existed: the last)."""
+    if "selected_round" not in card:
+        return ""
+    how = "the best held-out check" if card["config"].get("keep", "last") == "best" else "the last round"
+    return f" The file holds round {card['selected_round']}'s weights ({how})."
+
+
 def network(spec: dict) -> str:
     """The card's one-paragraph description of the network of a NavSpec (as a dict)."""
     size = f"{spec['depth_w']} x {spec['depth_h']}, area-pooled from any render size"
@@ -277,7 +285,7 @@ Generated from model_card.json by `python -m benchmarks.baselines.cards docs`; d
 - **Training:** round 0 behaviour cloning on the expert's rollouts, then DAgger (the learner drives, the expert's
   action executed with probability beta^round, every visited state labelled by the geodesic oracle);
   {c['episodes_per_round']} episodes and {c['grad_steps']} gradient steps of {c['batch_episodes']} whole episodes a
-  round, AdamW lr {c['lr']}, seed {card['seed']}. On {card['trained_on']} ({card.get('workers', 0)} collection
+  round, AdamW lr {c['lr']}, seed {card['seed']}.{kept(card)} On {card['trained_on']} ({card.get('workers', 0)} collection
   workers): {card['train_seconds']} s of collection and fitting.
 - **Running it on a CPU:** {_cost(card)}
 - **Closed-loop speed in the batched GPU environment:** {_gpu_rate(card)}
