@@ -453,3 +453,24 @@ def test_presets_paper_and_habitat(make_cfg, tmp_path):
     assert (paper.task.objectnav.success_rule, paper.evaluate.dynamics.blocked) == ("centre", "stay")
     assert (habitat.task.objectnav.success_rule, habitat.evaluate.dynamics.blocked) == ("footprint", "slide")
     assert (default.task.objectnav.success_rule, default.evaluate.dynamics.blocked) == ("footprint", "truncate")
+
+
+def test_depth_reactive_explores_where_there_is_no_point_goal(ctx, make_episode):
+    """Without a goal vector (ImageNav, ObjectNav) depth_reactive drives forward while the centre
+    of its depth band is clear and, once blocked, keeps turning the way it began until clear (known
+    answers on hand-made depth); in closed loop on an ObjectNav episode it runs without an agent
+    error, never stops and moves."""
+    agent = make_agent("depth_reactive")
+    agent.reset({})
+    open_room = np.full((24, 32), 3.0, np.float32)
+    wall_left_freer = np.full((24, 32), 0.2, np.float32)
+    wall_left_freer[:, :10] = 2.0
+    wall_right_freer = np.full((24, 32), 0.2, np.float32)
+    wall_right_freer[:, 22:] = 2.0
+    seq = [agent.act({"depth": d}) for d in (open_room, wall_left_freer, wall_right_freer, wall_right_freer,
+                                             open_room, wall_right_freer)]
+    assert seq == [MOVE_FORWARD, TURN_LEFT, TURN_LEFT, TURN_LEFT, MOVE_FORWARD, TURN_RIGHT]
+    assert agent.act({"depth": np.zeros((24, 32), np.float32)}) == MOVE_FORWARD  # nothing hit: open
+    ep = make_episode(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), radius=0.3, max_steps=60, task="objectnav")
+    row = run_episode(NavEnv(ctx, EnvConfig(protocol="distance", width=32, height=24)), make_agent("depth_reactive"), ep)
+    assert row["end_reason"] in ("entered", "budget") and not row["error"] and row["path_length"] > 0.5

@@ -277,7 +277,7 @@ def test_their_client_drives_our_server_and_gets_their_action_forms(space):
     assert unpack(c.ws.recv(timeout=5))["type"] == "error"
     c.send("episode_start", {"task": {}})
     with pytest.raises(RuntimeError, match="fatal"):
-        c.request("observation", {"pose": np.zeros(3, np.float32)}, "action")  # no pointgoal: KeyError
+        c.request("observation", {"pointgoal": "xy"}, "action")  # a goal vector of letters: ValueError
     c.send("batch_episode_start", {"episodes": {"0": {"task": {}}, "1": {"task": {}}}})
     acts = c.request("batch_observation", {"observations": {"0": obs, "1": obs}}, "batch_action")["actions"]
     assert set(acts) == {"0", "1"}

@@ -92,31 +92,58 @@ class NoisyOracleAgent(OracleAgent):
 
 
 class DepthReactiveAgent:
-    """PointNav from its own sensors only: the rendered depth and the goal vector. Turns towards the
-    goal, moves forward when the central band of the depth image is clear, otherwise turns to the
-    side with more free space; stops within `stop_radius` of the goal."""
+    """Navigation from its own sensors only. PointNav (the observation has a goal vector): turns
+    towards the goal, moves forward when the central band of the depth image is clear, otherwise
+    turns to the side with more free space; stops within `stop_radius` of the goal.
+    Tracks without a point goal (ImageNav, ObjectNav): the same obstacle avoidance with no goal to
+    turn to, so it explores (forward while clear, else towards the freer side) and never stops; it
+    reaches a goal only by driving into its success region (the distance protocol), the reactive
+    reference a learned policy of those tracks has to beat."""
 
     def __init__(self, clearance: float = 0.45, stop_radius: float = 0.3, **_):
         self.clearance, self.stop_radius = clearance, stop_radius
 
     def reset(self, task: dict) -> None:
         self.last_turn = TURN_LEFT
+        self.turns = 0
 
     def act(self, obs: dict):
+        depth = obs.get("depth")
+        if "pointgoal" not in obs:
+            return self.explore(depth)
         rho, phi = (float(v) for v in obs["pointgoal"])
         if rho <= self.stop_radius:
             return STOP
-        depth = obs.get("depth")
         if abs(phi) > math.radians(15):
             return TURN_LEFT if phi > 0 else TURN_RIGHT
         if depth is None:
             return MOVE_FORWARD
+        clear, freer = self.look(depth)
+        if clear:
+            return MOVE_FORWARD
+        self.last_turn = freer
+        return self.last_turn
+
+    def look(self, depth) -> tuple[bool, int]:
+        """(is the centre of the depth image's middle band clear beyond `clearance`, the turn towards
+        the side with more free space)."""
         h, w = depth.shape
         band = depth[h // 3: 2 * h // 3]
         d = np.where(band > 0, band, np.inf)  # 0 = nothing hit: open
-        centre = d[:, w // 3: 2 * w // 3]
-        if np.percentile(centre, 5) > self.clearance:
+        # "lower": no interpolation, so a centre where nothing was hit reads inf (open), not inf - inf = nan
+        clear = np.percentile(d[:, w // 3: 2 * w // 3], 5, method="lower") > self.clearance
+        return clear, TURN_LEFT if np.median(d[:, : w // 3]) >= np.median(d[:, 2 * w // 3:]) else TURN_RIGHT
+
+    def explore(self, depth):
+        """No goal to turn to: forward while the centre is clear; when blocked, keep turning the way
+        it began (a dead end is left by a full turn, not by alternating sides) until it is clear."""
+        if depth is None:
             return MOVE_FORWARD
-        left, right = np.median(d[:, : w // 3]), np.median(d[:, 2 * w // 3:])
-        self.last_turn = TURN_LEFT if left >= right else TURN_RIGHT
+        clear, freer = self.look(depth)
+        if clear:
+            self.turns = 0
+            return MOVE_FORWARD
+        if self.turns == 0:
+            self.last_turn = freer
+        self.turns += 1
         return self.last_turn
