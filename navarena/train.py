@@ -14,6 +14,9 @@ beta^round), and every state it visits is labelled with the expert's action ther
 field gives the oracle's action at any pose, so the learner is taught to recover from its own
 mistakes. The rounds' data are aggregated and the network is trained on all of it.
 Episodes run under explicit_stop, so the expert's STOP inside the goal region is learned.
+ObjectNav's expert searches (navcore.nav.search; --expert): until an instance of the category has
+been in its camera's view it drives to the nearest unseen free space, then it is the oracle. The
+oracle alone knows where the goal is, which a policy that sees only its camera cannot imitate.
 
 After each round the checkpoint is evaluated in closed loop on held-out episodes (the val_unseen
 split's scenes, else the test split's), and the run folder gets:
@@ -49,6 +52,7 @@ from navcore.baselines.model import NO_ACTION, TRACKS, NavNet, NavSpec, observat
 from navcore.io.atomic import atomic_path, write_text_atomic
 from navcore.nav.actions import STOP
 from navcore.nav.oracle import DiscreteOracle
+from navcore.nav.search import SearchingExpert
 from navcore.seeds import stream_seed
 
 
@@ -64,6 +68,10 @@ class TrainConfig:
     """Training episodes collected per round (drawn over the training scenes)."""
     beta: float = 0.5
     """DAgger: probability beta^round of executing the expert's action instead of the learner's."""
+    expert: str = "auto"
+    """geodesic | search | auto: the labelling expert. geodesic: the oracle that knows where the goal
+    is; search (navcore.nav.search): looks for the goal until it has been in view, then the oracle,
+    so its actions follow from what the camera saw. auto: search for ObjectNav, else geodesic."""
     max_learner_steps: int = 400
     """A learner-driven episode is cut after this many steps (its labels are kept)."""
     grad_steps: int = 2000
@@ -95,9 +103,16 @@ class TrainConfig:
     spec: NavSpec | None = None
     """The network (None: the task's defaults)."""
 
+    @property
+    def searching(self) -> bool:
+        """Whether the expert searches (expert=search, or auto on ObjectNav)."""
+        return self.expert == "search" or (self.expert == "auto" and self.task == "objectnav")
+
     def __post_init__(self):
         if self.spec is None:
             self.spec = NavSpec(task=self.task)
+        if self.expert not in ("auto", "geodesic", "search"):
+            raise ValueError(f"expert={self.expert!r}: choose auto, geodesic or search")
         if self.keep not in ("best", "last"):
             raise ValueError(f"keep={self.keep!r}: choose best or last")
         if self.spec.task != self.task:
@@ -410,6 +425,9 @@ class Collector:
             slot_ep[i] = ep
             oracle[i] = DiscreteOracle(ctx.field(ep).grid, ctx.costmap, ep.regions, ep.success_radius, ep.goal_yaw,
                                        ep.heading_tolerance, env_cfg.actions.forward_step, env_cfg.actions.turn)
+            if cfg.searching:  # the same oracle once the goal has been in view
+                oracle[i] = SearchingExpert(ctx.graph, oracle[i], ep.regions, ep.success_radius, ctx.emb.hfov_deg,
+                                            cfg.spec.max_depth, env_cfg.actions.forward_step, env_cfg.actions.turn)
             slot_seq[i] = {"obs": [], "goal": [], "prev": [], "label": [], "goal_image": None}
             h[:, i] = 0
             prev[i] = NO_ACTION
@@ -496,7 +514,8 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
     helps = {"task": None, "rounds": "0: behaviour cloning, then DAgger", "episodes_per_round": None, "grad_steps": None,
              "batch_episodes": None, "slots": "episodes stepped together", "width": "render size", "height": None,
              "val_episodes": "held-out check", "keep": "best|last round into model.pt", "scenes": "first N train scenes", "seed": None,
-             "max_learner_steps": None, "workers": "collection processes", "beta": "DAgger mixing",
+             "max_learner_steps": None, "expert": "auto|geodesic|search: the labelling expert",
+             "workers": "collection processes", "beta": "DAgger mixing",
              "lr": None, "weight_decay": None, "train_split": None, "val_split": None,
              "renderer": "auto|cpu|gsplat", "device": "auto|cpu|cuda"}
     for name, text in helps.items():

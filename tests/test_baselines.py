@@ -115,6 +115,12 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     rows = run_episodes_batched(ctx, eps, InProcessBatch(lambda: agent_for("learned", checkpoint=str(tmp_path / "model.pt"),
                                                                            device="cpu")), 2, cfg)
     assert len(rows) == 2 and not any(r["error"] for r in rows), rows
+    if task == "objectnav":  # its expert searches until the goal is in view: longer episodes than the oracle's
+        assert main([str(root), "--out", str(tmp_path / "geo"), "--task", task, *TINY, "--rounds", "1",
+                     "--expert", "geodesic"]) == 0
+        geo = np.load(tmp_path / "geo" / "rounds" / "round_0.npz")
+        assert card["config"]["expert"] == "auto" and z["lengths"].sum() > geo["lengths"].sum(), \
+            (z["lengths"], geo["lengths"])
 
 
 def test_resume_after_the_last_round_changes_nothing(trained, episode_run, tmp_path):
