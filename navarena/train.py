@@ -505,8 +505,11 @@ def train_seconds(curve: list[dict]) -> float:
 
 
 def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
-    ap = ap or argparse.ArgumentParser(prog="navarena train", description=__doc__.split("\n\n")[0] + " "
-                                       "Writes model.pt and model_card.json in --out.")
+    ap = ap or argparse.ArgumentParser(prog="navarena train", usage="navarena train ROOT --out OUT [options]",
+                                       description="Train a learned PointNav, ImageNav or "
+                                       "ObjectNav baseline (behaviour cloning, then DAgger) on a data root or a "
+                                       "release; writes model.pt and model_card.json in --out.")
+    ap.formatter_class = lambda prog: argparse.HelpFormatter(prog, max_help_position=30)  # one line an option
     ap.add_argument("root", help="a data root (make dataset) or a release folder")
     ap.add_argument("--out", required=True, help="the run folder (model.pt, model_card.json, rounds/)")
     ap.add_argument("--resume", action="store_true", help="go on after the last finished round in --out")
