@@ -121,10 +121,17 @@ def test_release_loads_with_datasets_pyarrow_and_croissant(release, tmp_path, mo
     assert {sp for _, sp in card} == {"test", "eval_zeroshot"}
     for (task, split), n in card.items():
         ds = datasets.load_dataset(str(out), task, split=split)
-        assert ds.num_rows == n and set(ds["split"]) == {split}
+        assert ds.num_rows == n
     table = pds.dataset(out / "episodes", format="parquet", partitioning="hive").to_table()
     assert table.num_rows == sum(card.values())
-    assert {"task", "scene_id"} <= set(table.schema.names)
+    assert {"task", "split", "scene_id"} <= set(table.schema.names)
+    # the split lives in the folder only: pandas and pyarrow.parquet read the folder as one table
+    for read in (pd.read_parquet, lambda f: pq.read_table(f).to_pandas()):
+        frame = read(out / "episodes")
+        assert len(frame) == table.num_rows
+        assert frame.groupby(["task", "split"], observed=True).size().to_dict() == \
+            {(t, sp): n for (t, sp), n in card.items()}
+    assert "split" not in pq.read_schema(next((out / "episodes").rglob("*.parquet"))).names
     # the card's pandas join of expert steps to episodes: every step finds its one episode
     eps = table.to_pandas()
     steps = pds.dataset(out / "trajectories", format="parquet", partitioning="hive").to_table().to_pandas()
@@ -149,6 +156,11 @@ def test_release_loads_with_datasets_pyarrow_and_croissant(release, tmp_path, mo
     assert n == card[("pointnav", "test")] + card[("pointnav", "eval_zeroshot")]
     rec = next(iter(md.records("pointnav")))
     assert isinstance(rec["pointnav/geodesic_distance"], float)
+    splits = {r["pointnav/split"].decode() if isinstance(r["pointnav/split"], bytes) else r["pointnav/split"]
+              for r in md.records("pointnav")}
+    assert splits == {"test", "eval_zeroshot"}
+    step = next(iter(md.records("pointnav_trajectories")))["pointnav_trajectories/scene_id"]
+    assert (step.decode() if isinstance(step, bytes) else step) in set(table["scene_id"].to_pylist())
 
 
 def test_eval_set_ships_as_a_split_and_runs_in_evaluate(release, release_root, make_cfg):

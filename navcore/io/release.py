@@ -10,7 +10,7 @@
     RELEASE_NOTES.md               what changed since the previous version (with --previous)
     scenes.parquet                 per scene: provenance, licence, screening, content hash, episodes
     plots/*.png                    geodesic distance and steps per task, ObjectNav categories
-    episodes/task={t}/split={s}/scene_id={id}/part-0.parquet      one row per episode (EPISODE_SCHEMA)
+    episodes/task={t}/split={s}/scene_id={id}/part-0.parquet      one row per episode (EPISODE_SCHEMA less split)
     trajectories/task={t}/split={s}/scene_id={id}/part-0.parquet  one row per expert step (TRAJECTORY_SCHEMA)
     eval_sets/{name}.parquet       the zero-shot evaluation set's listing (also its own split above)
     instances/scene_id={id}/instances.parquet                     ObjectNav instance tables
@@ -45,6 +45,27 @@ def parse_version(v: str) -> tuple[int, int, int]:
     if not m:
         raise ValueError(f"release version {v!r} is not MAJOR.MINOR.PATCH (e.g. 1.0.0)")
     return tuple(int(x) for x in m.groups())
+
+
+FOLDER_COLUMNS = ("split",)
+"""Columns of the data root's episode tables that a release keeps in its folder names only
+(`split=...`). With the column in the file as well, `pandas.read_parquet` and
+`pyarrow.parquet.read_table` of the episodes folder stop at a type clash (the file's string against
+the folder's dictionary); `task` and `scene_id` were folder-only already."""
+
+
+def release_episode_schema():
+    """The schema of a release's episode files: EPISODE_SCHEMA less FOLDER_COLUMNS."""
+    import pyarrow as pa
+
+    from navcore.io.episode_schema import EPISODE_SCHEMA
+
+    return pa.schema([f for f in EPISODE_SCHEMA if f.name not in FOLDER_COLUMNS])
+
+
+def for_release(episodes):
+    """A data root's episode table as a release file holds it (FOLDER_COLUMNS left out)."""
+    return episodes.drop_columns([c for c in FOLDER_COLUMNS if c in episodes.column_names])
 
 
 def episodes_file(task: str, split: str, scene_id: str) -> str:

@@ -2,8 +2,9 @@
 
 Scene by scene (memory does not grow with the number of episodes: one scene's tables at a time,
 statistics kept as sums and fixed-bin histograms): episodes and trajectories partitioned by task,
-split and scene (a scene's file is hard linked when it holds one split, else split into one file a
-split), the zero-shot evaluation set as its own split, ObjectNav instance tables, ImageNav goal
+split and scene (episode files written without the split column their folder names, so that
+pandas and pyarrow read the folder as one table; a scene's trajectory file hard linked when it holds
+one split, else split into one file a split), the zero-shot evaluation set as its own split, ObjectNav instance tables, ImageNav goal
 images, the V1 scene assets and the NavArena navigation layout (hard links). Then the scene table,
 plots, release.json, the dataset card, croissant.json, and last MANIFEST.tsv (and its own digest) with every file's
 sha256 (hashed on several threads). The folder is written under a temporary name and renamed when
@@ -28,19 +29,22 @@ from omegaconf import OmegaConf
 
 from navcore.io import jsonio
 from navcore.io.atomic import atomic_path
-from navcore.io.episode_schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA
+from navcore.io.episode_schema import TRAJECTORY_SCHEMA
 from navcore.io.licences import PROJECT_LICENSE, redistributable
 from navcore.io.release import (
     CARD,
+    FOLDER_COLUMNS,
     MANIFEST,
     MANIFEST_DIGEST,
     NOTES,
     RELEASE_JSON,
     SCENES,
     episodes_file,
+    for_release,
     parse_version,
     read_manifest,
     read_release_json,
+    release_episode_schema,
     schema_fields,
     sha256_file,
     trajectories_file,
@@ -140,14 +144,19 @@ class Builder:
             self.scene_files[scene_id].append(rel)
 
     # -- one scene ---------------------------------------------------------------------------------
-    def write_split(self, task: str, split: str, sid: str, episodes: pa.Table, trajectories: pa.Table) -> None:
-        """One split's episodes of a (task, scene) and their expert steps, written (not linked)."""
+    def write_split(self, task: str, split: str, sid: str, episodes: pa.Table, trajectories) -> None:
+        """One split's episodes of a (task, scene), written without the columns their folder names
+        (for_release), and their expert steps: written when `trajectories` is a table (the split's
+        rows are picked from it), hard linked when it is the path of the scene's whole file."""
         from navcore.io.episode_schema import TRAJECTORY_WRITE
 
-        self.write_table(episodes_file(task, split, sid), episodes, sid)
-        self.write_table(trajectories_file(task, split, sid),
-                         trajectories.filter(pc.is_in(trajectories["episode_id"], value_set=episodes["episode_id"])), sid,
-                         **TRAJECTORY_WRITE)
+        self.write_table(episodes_file(task, split, sid), for_release(episodes), sid)
+        if isinstance(trajectories, pa.Table):
+            self.write_table(trajectories_file(task, split, sid),
+                             trajectories.filter(pc.is_in(trajectories["episode_id"], value_set=episodes["episode_id"])),
+                             sid, **TRAJECTORY_WRITE)
+        else:
+            self.link(trajectories_file(task, split, sid), trajectories, sid)
 
     def add_scene(self, scene, eval_ids: dict[str, set[str]], redistributable: bool = True) -> None:
         cat, sid = self.catalog, scene.scene_id
@@ -160,8 +169,7 @@ class Builder:
             for split in splits:
                 if len(splits) == 1:
                     part = ep
-                    self.link(episodes_file(task, split, sid), ds.path, sid)
-                    self.link(trajectories_file(task, split, sid), tr_ds.path, sid)
+                    self.write_split(task, split, sid, part, tr_ds.path)
                 else:
                     part = ep.filter(pc.equal(ep["split"], split))
                     tr = tr if tr is not None else tr_ds.load()
@@ -342,7 +350,8 @@ def build_release(cfg, out: Path | None = None, console=None) -> dict:
             "counts": b.stats.counts(),
             "eval_set": {"name": es.name, "size": es.size, "proportions": es.proportions,
                          "from_splits": list(es.from_splits), "per_task": eval_report},
-            "schemas": {"episodes": schema_fields(EPISODE_SCHEMA), "trajectories": schema_fields(TRAJECTORY_SCHEMA)},
+            "schemas": {"episodes": schema_fields(release_episode_schema()), "trajectories": schema_fields(TRAJECTORY_SCHEMA)},
+            "folder_columns": {"episodes": ["task", *FOLDER_COLUMNS, "scene_id"], "trajectories": ["task", "split", "scene_id"]},
             "previous": None,
             "licence": PROJECT_LICENSE,
             "manifest_digest": MANIFEST_DIGEST,

@@ -123,16 +123,19 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
           "eps = table.to_pandas()",
           "steps = ds.dataset(\"<this folder>/trajectories\", format=\"parquet\", partitioning=\"hive\").to_table().to_pandas()",
           "joined = steps.merge(eps, on=[\"task\", \"split\", \"scene_id\", \"episode_id\"])",
-          "# (pandas.read_parquet on the episodes folder stops at a type clash: the files carry split as a",
-          "#  column beside the split= folders; read it through pyarrow.dataset as above)",
+          "",
+          "import pandas as pd  # or straight from the folders (task, split, scene_id as categories)",
+          "eps = pd.read_parquet(\"<this folder>/episodes\")",
           "",
           "import mlcroissant as mlc",
           "records = mlc.Dataset(jsonld=\"<this folder>/croissant.json\").records(\"pointnav\")",
           "```", "",
-          "Schemas: `release.json` (`schemas`), the same as `navcore/io/episode_schema.py`. Frame: the scene's aligned "
+          "Schemas: `release.json` (`schemas`, and `folder_columns`: the columns the folders hold), from "
+          "`navcore/io/episode_schema.py`. Frame: the scene's aligned "
           "frame (z up, metres, floor at z = 0); headings are yaw about +z.", "",
           "## Fields", "", "Episodes (`episodes/`, one row per episode; the folders add `task`, `split` and "
-          "`scene_id`):", "", *field_table("episodes"), "",
+          "`scene_id`: a release's files leave the `split` column of the schema out, its folder holds it, so that "
+          "any Parquet reader takes the folder as one table):", "", *field_table("episodes"), "",
           "Expert trajectories (`trajectories/`, one row per 20 Hz step; the same folders):", "",
           *field_table("trajectories"), ""]
     L += ["## Statistics", "", "Per task (the layout of the paper's Table 4; every split except the evaluation set, "

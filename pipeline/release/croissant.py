@@ -3,8 +3,8 @@
 
 Files: the top-level documents as FileObjects with their sha256 (MANIFEST.tsv carries the sha256 of
 every other file), the partitioned tables as FileSets. Record sets: one per task of episodes and
-one per task of trajectories, one field per column of navcore/io/episode_schema.py (the oracle
-action list as an integer array)."""
+one per task of trajectories, one field per column of the release's files (navcore/io/episode_schema.py;
+the oracle action list as an integer array), and split and scene_id from each file's folders."""
 from __future__ import annotations
 
 import datetime as dt
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from navcore.io.episode_schema import EPISODE_SCHEMA, TRAJECTORY_SCHEMA
-from navcore.io.release import CARD, CROISSANT, RELEASE_JSON, SCENES, sha256_file
+from navcore.io.episode_schema import TRAJECTORY_SCHEMA
+from navcore.io.release import CARD, CROISSANT, RELEASE_JSON, SCENES, release_episode_schema, sha256_file
 from pipeline.release.card import citation
 
 
@@ -33,6 +33,10 @@ def _data_type(t: pa.DataType):
     raise TypeError(f"no Croissant data type for {t}")
 
 
+FROM_PATH = ("split", "scene_id")
+"""Fields of every record read from the file's path (its `split=` and `scene_id=` folders), not a column."""
+
+
 def _fields(record: str, file_set: str, schema: pa.Schema) -> list:
     import mlcroissant as mlc
 
@@ -42,6 +46,11 @@ def _fields(record: str, file_set: str, schema: pa.Schema) -> list:
         out.append(mlc.Field(id=f"{record}/{f.name}", name=f.name, data_types=[_data_type(f.type)],
                              is_array=arr or None, array_shape="-1" if arr else None,
                              source=mlc.Source(file_set=file_set, extract=mlc.Extract(column=f.name))))
+    for name in FROM_PATH:
+        out.append(mlc.Field(id=f"{record}/{name}", name=name, data_types=[mlc.DataType.TEXT],
+                             description=f"from the file's {name}= folder",
+                             source=mlc.Source(file_set=file_set, extract=mlc.Extract(file_property=mlc.FileProperty.fullpath),
+                                               transforms=[mlc.Transform(regex=f"^.*/{name}=([^/]+)/.*$")])))
     return out
 
 
@@ -55,7 +64,7 @@ def metadata(root: Path, info: dict, rcfg):
                                        sha256=sha256_file(root / name)))
     sets, records = [], []
     for task in info["counts"]:
-        for kind, schema in (("episodes", EPISODE_SCHEMA), ("trajectories", TRAJECTORY_SCHEMA)):
+        for kind, schema in (("episodes", release_episode_schema()), ("trajectories", TRAJECTORY_SCHEMA)):
             fs = f"{task}-{kind}-files"
             sets.append(mlc.FileSet(id=fs, name=fs, includes=[f"{kind}/task={task}/*/*/*.parquet"],
                                     encoding_formats=["application/x-parquet"]))
