@@ -101,6 +101,12 @@ def test_release_verifies_and_leaves_out_the_licenceless_scene(release, release_
     borrowed = info["scenes"]["excluded"][0]["scene_id"]
     card = (out / "README.md").read_text()
     assert "Scenes left out of this public release" in card and "borrowed" in card
+    # each scene's ObjectNav goal source, as scenes.parquet records it from the semantics stage's marker
+    scenes = pq.read_table(out / "scenes.parquet").to_pandas()
+    for r in scenes.itertuples():
+        goals = f"`{r.goal_segmenter}`, {int(r.goal_instances or 0)} instances" if r.goal_segmenter else "none"
+        assert f"| {r.scene_id} | {r.group} |" in card and f"| {goals} | `" in card, goals
+    assert "No rendered frames ship" in card
     assert not [f for f in read_manifest(out / MANIFEST) if borrowed in f]  # no episodes, assets, goal images
     assert summary["hard_links"] > 0 and summary["copies"] == 0  # the data root's bytes, not a second copy
     report = verify(out, sample=0, quiet=True)

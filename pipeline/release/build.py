@@ -199,11 +199,13 @@ class Builder:
                 self.link(f"navarena/{scene.group}/{sid}/{rel}", export / rel, sid)
         marker = read_marker(cat.path("markers", scene, stage="episodes")) or {}
         screening = (marker.get("info") or {}).get("screening") or {}
+        sem = (read_marker(cat.path("markers", scene, stage="semantics")) or {}).get("info") or {}
         self.scene_rows.append({
             "scene_id": sid, "name": scene.name, "group": scene.group, "format": scene.format,
             "license": scene.license, "redistributable": redistributable, "source_url": scene.source_url, "attribution": scene.attribution,
             "screening_verdict": screening.get("verdict"), "screening_score": screening.get("score"),
-            "episodes_kept": screening.get("kept"), "episodes": json.dumps(counts, sort_keys=True)})
+            "episodes_kept": screening.get("kept"), "episodes": json.dumps(counts, sort_keys=True),
+            "goal_segmenter": sem.get("segmenter"), "goal_instances": sem.get("instances")})
 
     # -- dataset-level files -----------------------------------------------------------------------
     def navarena_meta(self, created: str) -> None:

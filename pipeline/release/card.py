@@ -17,6 +17,8 @@ SCENES_SCHEMA = pa.schema([
     ("license", pa.string()), ("redistributable", pa.bool_()), ("source_url", pa.string()), ("attribution", pa.string()),
     ("screening_verdict", pa.string()), ("screening_score", pa.float64()), ("episodes_kept", pa.bool_()),
     ("episodes", pa.string()),  # JSON {"task/split": count}
+    ("goal_segmenter", pa.string()),  # the semantics segmenter whose instances are its ObjectNav goals (null: none ran)
+    ("goal_instances", pa.int64()),  # how many instances it lifted
     ("content_sha256", pa.string()),  # sha256 over the scene's files (path and sha256): what versions compare
 ])
 """scenes.parquet: one row per released scene."""
@@ -130,6 +132,9 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
           "import mlcroissant as mlc",
           "records = mlc.Dataset(jsonld=\"<this folder>/croissant.json\").records(\"pointnav\")",
           "```", "",
+          "No rendered frames ship: the scenes' Gaussians do (`assets/`), and `navarena render-episodes` or the "
+          "evaluation environment renders any view of an episode (ImageNav goal views ship in `goal_images/` only "
+          "when the data root was made with `goal_images.enabled=true`).", "",
           "Schemas: `release.json` (`schemas`, and `folder_columns`: the columns the folders hold), from "
           "`navcore/io/episode_schema.py`. Frame: the scene's aligned "
           "frame (z up, metres, floor at z = 0); headings are yaw about +z.", "",
@@ -158,8 +163,12 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
                  f"{' / '.join(str(v) for v in c.values())} | {r['scenes']} | {r['groups']} |")
     short = [t for t, r in es["per_task"].items() if r["selected"] < r["requested"]]
     if short:
-        L += ["", f"Fewer than requested for {', '.join(short)}: the held-out scenes hold fewer episodes at these "
-              "proportions (the set is the largest one that keeps them)."]
+        held = sorted({es["per_task"][t]["scenes"] for t in short})
+        n_held = (f"{held[0]} scene{'s' if held[0] != 1 else ''}" if len(held) == 1 else
+                  ", ".join(f"{t} {es['per_task'][t]['scenes']} scenes" for t in short))
+        L += ["", f"Fewer than requested for {', '.join(short)}: the held-out scenes ({n_held}) hold fewer episodes at these "
+              "proportions (the set is the largest one that keeps them). More held-out scenes (a larger `scenes.count`, "
+              "or `episodes.scene_splits`) give a fuller set."]
     if not es["per_task"]:
         L += ["", "Empty: none of this release's scenes is in the held-out splits (episodes.scene_splits assigns "
               "scenes by a hash of their id; a small scene set may have none there)."]
@@ -184,12 +193,16 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
           + ". An episode ends when the agent stops (protocol `explicit_stop`) or reaches the goal region (`distance`), or "
           "when its step budget runs out; metrics (SR, SPL, DTW, collisions) are defined in the evaluation docs and "
           f"computed by `make eval` (dynamics: blocked moves `{cfg['evaluate']['dynamics']['blocked']}`).", ""]
-    L += ["## Scenes", "", "| scene | id | group | licence | source | attribution | screening | content sha256 |",
-          "|---|---|---|---|---|---|---|---|"]
+    L += ["## Scenes", "", "ObjectNav goals: the segmenter whose instances the scene's ObjectNav goals are (`oracle`: the "
+          "scene's own per-Gaussian labels; `detector`, `sam3`, `open_vocab`: masks lifted from rendered views, "
+          "see the semantics stage) and how many instances it found.", "",
+          "| scene | id | group | licence | source | attribution | screening | ObjectNav goals | content sha256 |",
+          "|---|---|---|---|---|---|---|---|---|"]
     for r in scene_rows:
         lic = (r["license"] or "unknown") + ("" if r["redistributable"] else " (**not redistributable**)")
+        goals = f"`{r['goal_segmenter']}`, {r.get('goal_instances') or 0} instances" if r.get("goal_segmenter") else "none"
         L.append(f"| {r['name']} | {r['scene_id']} | {r['group']} | {lic} | "
-                 f"{r['source_url'] or '-'} | {r['attribution'] or '-'} | {r['screening_verdict'] or '-'} | "
+                 f"{r['source_url'] or '-'} | {r['attribution'] or '-'} | {r['screening_verdict'] or '-'} | {goals} | "
                  f"`{(r['content_sha256'] or '')[:16]}` |")
     excluded = info["scenes"]["excluded"]
     if excluded:
