@@ -16,11 +16,12 @@ stopped when started again:
            the same episodes and gradient steps (SCALE_ROUNDS rounds), each checked on the test
            split. Runs alongside train: the GPUs are shared round-robin, the CPU workers split
            between runs by the rounds each has to do.
-- eval:    ships each finished reference run as <task>_bc, then each track's zero-shot set at
-           640 x 480 (gsplat) for the learned policy (distance and explicit_stop), then for
-           depth_reactive (last: its failures run the whole step budget), one navarena eval per
-           scene and agent, several per GPU; random and the oracle unrendered (they read no
-           image). The parts are merged into one results.parquet and
+- eval:    each track's zero-shot set at 640 x 480 (gsplat) for the learned policy (a run trained
+           here from its run folder, else the shipped model; nothing is shipped by the run:
+           `cards ship` or `cards ship --trial` after reading the figures), distance and
+           explicit_stop, then for depth_reactive (last: its failures run the whole step budget),
+           one navarena eval per scene and agent, several per GPU; random and the oracle
+           unrendered (they read no image). The parts are merged into one results.parquet and
            summary.json per agent, track and protocol, with the steps per second of each part.
 - pack:    the cards, the shipped model and the summaries into OUT/baselines.tgz (the device's
            $OUT).
@@ -182,7 +183,7 @@ def test_scenes() -> list[str]:
 def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
     """Each track's zero-shot set for every agent (see the module docstring), merged per agent,
     track and protocol."""
-    from benchmarks.baselines.cards import MODELS, ship
+    from benchmarks.baselines.cards import MODELS
     from navarena.train import TrainConfig
 
     trained = [t for t in TRAIN_TASKS if finished(RUNS / f"{t}_bc", ROUNDS or TrainConfig().rounds)]
@@ -190,12 +191,13 @@ def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
     if not tracks:
         print("eval: no reference run has finished its rounds and no track uses a shipped model", flush=True)
         return 1
-    for task in trained:
-        ship(RUNS / f"{task}_bc", f"{task}_bc")
     scenes, n_gpu = test_scenes(), gpus()
     parts = []  # (folder name, agent arguments, task, protocol, scene or None, more arguments)
     for task in tracks:
-        learned = ["--agent", "learned", "--agent-arg", f"checkpoint=navcore/models/{task}_bc/model.pt"]
+        # a run trained here is measured from its own folder; shipping it (cards ship, or ship --trial when it
+        # loses to random) is decided on its figures, never before them
+        model = RUNS / f"{task}_bc" / "model.pt" if task in trained else MODELS / f"{task}_bc" / "model.pt"
+        learned = ["--agent", "learned", "--agent-arg", f"checkpoint={model}"]
         for agent, proto in RENDERED:
             name = agent.format(task=task)
             args = learned if name == f"{task}_bc" else ["--agent", name]
