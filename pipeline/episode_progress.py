@@ -1,5 +1,6 @@
 """The evaluation's progress on the run's console: episodes done / total, steps/s, time left, and
-one line per finished episode, read from the evaluate tasks' progress logs
+one line per finished episode (and the semantics stage's: views done / total, views/s), read from
+the tasks' progress logs
 (navcore.io.progress_log) while they run, wherever they run (sync, local workers, batch jobs on a
 shared filesystem). The stage-task bar counts (stage, scene) tasks; an evaluation is one task a
 scene that can take hours, so it gets this bar of its own."""
@@ -14,11 +15,16 @@ from navcore.io.progress_log import read_log
 
 class EpisodeWatcher:
     """Polls `folder`/*.jsonl (logs written after `since`, epoch seconds) every `period` seconds into
-    an "episodes" task of a rich Progress, printing each finished episode on its console."""
+    a task of a rich Progress (`name`: "episodes"), printing each finished episode on its console
+    (log_each). An item counts 1, or its `count` field (the semantics stage logs a batch of views);
+    the rate is the items' `rate` field summed per second, in `unit`s (steps, views)."""
 
-    def __init__(self, progress, folder: Path, since: float, period: float = 1.0, log_each: bool = True):
+    def __init__(self, progress, folder: Path, since: float, period: float = 1.0, log_each: bool = True,
+                 name: str = "episodes", count: str | None = None, rate: str = "steps", unit: str = "steps"):
         self.progress, self.folder, self.since, self.period, self.log_each = progress, Path(folder), since, period, log_each
-        self.seen: dict[Path, tuple[int, int]] = {}  # log -> (its header's total, items read)
+        self.name, self.count, self.rate_key, self.unit = name, count, rate, unit
+        self.seen: dict[Path, tuple[int, int]] = {}  # log -> (its header's total, done so far)
+        self.lines: dict[Path, int] = {}  # log -> item lines read
         self.steps = 0
         self.task = None
         self.t0 = time.monotonic()
@@ -48,16 +54,17 @@ class EpisodeWatcher:
             except OSError:
                 continue
             total, read = self.seen.get(log, (0, 0))
-            header, items = read_log(log, read)
+            header, items = read_log(log, self.lines.get(log, 0))
             if header is None:
                 continue
             if log not in self.seen:
                 total = int(header.get("total", 0))
                 if not self.seen:  # steps/s from the first evaluation's start, not the run's
                     self.t0 = time.monotonic()
-            self.seen[log] = (total, read + len(items))
+            self.lines[log] = self.lines.get(log, 0) + len(items)
+            self.seen[log] = (total, read + sum(int(it.get(self.count) or 0) if self.count else 1 for it in items))
             for it in items:
-                self.steps += int(it.get("steps") or 0)
+                self.steps += int(it.get(self.rate_key) or 0)
                 if self.log_each:
                     self.progress.console.print(line(header, it))
         if not self.seen:
@@ -66,7 +73,7 @@ class EpisodeWatcher:
         done = sum(min(n, t) for t, n in self.seen.values())
         rate = self.steps / max(time.monotonic() - self.t0, 1e-9)
         if self.task is None:
-            self.task = self.progress.add_task("episodes", total=total, rate=rate)
+            self.task = self.progress.add_task(self.name, total=total, rate=rate, unit=self.unit)
         self.progress.update(self.task, total=total, completed=done, rate=rate)
 
 
@@ -90,6 +97,6 @@ def rate_column():
         def render(self, task):
             if "rate" not in task.fields:
                 return Text("")
-            return Text(f"{task.fields['rate']:,.0f} steps/s, left ") + left.render(task)
+            return Text(f"{task.fields['rate']:,.0f} {task.fields.get('unit', 'steps')}/s, left ") + left.render(task)
 
     return RateColumn()

@@ -85,16 +85,22 @@ def execute(cfg, console: Console | None = None) -> dict:
             progress.console.print(f"[red]failed[/] {r['stage']} {r['scene_id']} ({r['scene']}): {r['error']}")
         progress.advance(bar)
 
-    watch = contextlib.nullcontext()
+    watchers = []  # entered with the progress display
     if any(st.name == "evaluate" for st in stages):  # one task a scene for hours: a bar of episodes too
         from stages.evaluate.stage import run_name
 
         run = run_name(OmegaConf.to_object(cfg.evaluate))
-        watch = EpisodeWatcher(progress, catalog.path("eval_progress", run=run, scene_id="x").parent,
-                               started.timestamp())
+        watchers.append(EpisodeWatcher(progress, catalog.path("eval_progress", run=run, scene_id="x").parent,
+                                       started.timestamp()))
+    if any(st.name == "semantics" for st in stages):  # minutes a scene with a detector on a CPU: a bar of views
+        watchers.append(EpisodeWatcher(progress, catalog.path("semantics_progress", scene_id="x").parent,
+                                       started.timestamp(), log_each=False, name="semantics views",
+                                       count="views", rate="views", unit="views"))
     interrupted = False
     try:
-        with progress, watch, sources.one_listing_a_run():  # a folder source's files listed once a run
+        with progress, contextlib.ExitStack() as watch, sources.one_listing_a_run():  # a source listed once a run
+            for w in watchers:
+                watch.enter_context(w)
             bar = progress.add_task("tasks", total=len(scenes) * len(stages))
             run = new_run()
             if not scenes:

@@ -298,3 +298,36 @@ def test_instances_that_stay_on_the_floor_are_dropped_when_asked():
     every = {f["label"] for f in lift(frames, means, LiftingConfig())}
     kept = {f["label"] for f in lift(frames, means, LiftingConfig(min_top_m=0.25))}
     assert every == {1, 2} and kept == {1}
+
+
+def test_semantics_logs_its_views_and_the_console_counts_them(episode_run, tmp_path):
+    """The semantics stage writes views done / total while it runs (04_semantics/_progress), and the
+    run console's watcher turns such a log into views done, total and views/s."""
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from navcore.io.progress_log import ProgressLog, read_log
+    from pipeline.episode_progress import EpisodeWatcher
+
+    root = episode_run[0]
+    logs = sorted((root / "04_semantics" / "_progress").glob("*.jsonl"))
+    assert logs
+    for log in logs:
+        header, items = read_log(log)
+        assert header["total"] > 0 and header["segmenter"] and sum(it["views"] for it in items) == header["total"]
+    folder = tmp_path / "_progress"
+    a, b = ProgressLog(folder / "a.jsonl"), ProgressLog(folder / "b.jsonl")
+    a.start(10, scene="a")
+    b.start(6, scene="b")
+    for n in (4, 4):
+        a.item(views=n)
+    b.item(views=6)
+    progress = Progress(console=Console(file=open(tmp_path / "console.txt", "w")))
+    w = EpisodeWatcher(progress, folder, since=0, log_each=False, name="semantics views", count="views",
+                       rate="views", unit="views")
+    w.poll()
+    task = progress.tasks[0]
+    assert (task.description, task.total, task.completed, task.fields["unit"]) == ("semantics views", 16, 14, "views")
+    a.item(views=2)
+    w.poll()
+    assert progress.tasks[0].completed == 16 and w.steps == 16

@@ -16,6 +16,7 @@ import numpy as np
 
 from navcore.gaussians.cameras import CAMERA_FILE, camera_file, read_cameras
 from navcore.instances import labels_to_table, shipped_instances
+from navcore.io.progress_log import ProgressLog
 from navcore.render.camera import camera_to_world, intrinsics
 from stages.semantics.config import SemanticsConfig
 from stages.semantics.lifting import lift
@@ -73,10 +74,12 @@ def render_views(renderer, c2w: np.ndarray, Ks: np.ndarray, scfg: SemanticsConfi
         yield rgb, depth, extra, vm, ks, c2w[s:s + scfg.batch]
 
 
-def scene_frames(renderer, segmenter, c2w: np.ndarray, Ks: np.ndarray, scfg: SemanticsConfig, timings: dict):
+def scene_frames(renderer, segmenter, c2w: np.ndarray, Ks: np.ndarray, scfg: SemanticsConfig, timings: dict,
+                 on_batch=None):
     """Yields (depth [H, W], K, camera -> world, {category index: [masks]}) per view: views rendered
     `batch` at a time (RGB-D, plus the segmenter's per-Gaussian features in the same pass),
-    segmented by batch; seconds spent go to timings["render"] / ["segment"]."""
+    segmented by batch; seconds spent go to timings["render"] / ["segment"]; on_batch(n) after
+    each batch of n views (the progress log)."""
     prompts = [scfg.prompt(c) for c in scfg.categories]
     views = render_views(renderer, c2w, Ks, scfg, segmenter.gaussian_features)
     while True:
@@ -90,6 +93,8 @@ def scene_frames(renderer, segmenter, c2w: np.ndarray, Ks: np.ndarray, scfg: Sem
                                                       for v, k, e, d, c in zip(vm, ks, extra, depth, cw)])
         timings["render"] = timings.get("render", 0.0) + t1 - t0
         timings["segment"] = timings.get("segment", 0.0) + time.perf_counter() - t1
+        if on_batch is not None:
+            on_batch(len(segs))
         for i, seg in enumerate(segs):
             yield depth[i], ks[i], cw[i], category_masks(seg, prompts)
 
@@ -109,12 +114,13 @@ def lifting_config(scfg: SemanticsConfig):
     return scfg.lifting
 
 
-def predict_instances(renderer, segmenter, c2w, Ks, means: np.ndarray, scfg: SemanticsConfig):
+def predict_instances(renderer, segmenter, c2w, Ks, means: np.ndarray, scfg: SemanticsConfig, on_batch=None):
     """Instance candidates of one scene: (labels.json entries with source model_predicted and ids
-    1..n in (category, -support) order, their support, timings {render, segment, lift, total} s)."""
+    1..n in (category, -support) order, their support, timings {render, segment, lift, total} s);
+    on_batch(n) after each batch of n views is segmented."""
     timings: dict = {}
     t0 = time.perf_counter()
-    cands = lift(scene_frames(renderer, segmenter, c2w, Ks, scfg, timings), means, lifting_config(scfg))
+    cands = lift(scene_frames(renderer, segmenter, c2w, Ks, scfg, timings, on_batch), means, lifting_config(scfg))
     total = time.perf_counter() - t0
     timings["lift"] = total - timings.get("render", 0.0) - timings.get("segment", 0.0)
     timings["total"] = total
@@ -171,7 +177,12 @@ def run(scene, cfg, catalog) -> dict:
             res["shortfall"] = [{"task": "objectnav", "episodes": 0, "requested": objectnav.get("episodes_per_scene"),
                                  "reason": f"no goal instances: {e}"}]
         return res
-    labels, support, timings = predict_instances(renderer, seg, c2w, ks, gs.means, scfg)
+    # views done / total while it runs, for the run's console (pipeline/episode_progress.py): the detector
+    # on a large capture's thousands of views runs for many minutes on a CPU
+    log = ProgressLog(catalog.dataset("semantics_progress", scene).path)
+    log.start(len(c2w), scene=scene.name, scene_id=scene.scene_id, segmenter=scfg.segmenter)
+    labels, support, timings = predict_instances(renderer, seg, c2w, ks, gs.means, scfg,
+                                                 on_batch=lambda n: log.item(views=n))
     table = labels_to_table(labels, support)
     out.save(table)
     counts: dict = {}
