@@ -312,19 +312,17 @@ def docs_section(all_cards: dict[str, dict], scaling: dict | None = None, trials
     for name, card in [*all_cards.items(), *(trials or {}).items()]:
         ev = card.get("evaluation") or {}
         shipped = name in all_cards
+        running = (f"CPU cost: {_cost(card)}\n\nClosed-loop speed in the batched GPU environment: {_gpu_rate(card)}\n\n"
+                   if shipped else "")  # what running a shipped policy costs; a trial is not run
         where = f"model card: `navcore/models/{name}/model_card.md`" if shipped else \
             f"card: `benchmarks/baselines/trials/{name}/model_card.md`"
         parts.append(f"""
 ### `{name}` ({card['task']}{'' if shipped else '; measured, not shipped'})
-{'' if shipped else chr(10) + (card.get('notes') or '')}
+{'' if shipped else chr(10) + (card.get('notes') or '') + chr(10)}
 {ev.get('conditions', '')}
 
 {results_table(card)}
-CPU cost: {_cost(card)}
-
-Closed-loop speed in the batched GPU environment: {_gpu_rate(card)}
-
-Training ({card['trained_on']}, {card['train_seconds']} s; {where}):
+{running}Training ({card['trained_on']}, {card['train_seconds']} s; {where}):
 
 {curve_table(card)}""")
     if scaling:
