@@ -23,8 +23,7 @@ class EpisodeWatcher:
                  name: str = "episodes", count: str | None = None, rate: str = "steps", unit: str = "steps"):
         self.progress, self.folder, self.since, self.period, self.log_each = progress, Path(folder), since, period, log_each
         self.name, self.count, self.rate_key, self.unit = name, count, rate, unit
-        self.seen: dict[Path, tuple[int, int]] = {}  # log -> (its header's total, done so far)
-        self.lines: dict[Path, int] = {}  # log -> item lines read
+        self.seen: dict[Path, tuple[int, int, int]] = {}  # log -> (its header's total, done so far, item lines read)
         self.steps = 0
         self.task = None
         self.t0 = time.monotonic()
@@ -53,24 +52,24 @@ class EpisodeWatcher:
                     continue
             except OSError:
                 continue
-            total, read = self.seen.get(log, (0, 0))
-            header, items = read_log(log, self.lines.get(log, 0))
+            total, done, lines = self.seen.get(log, (0, 0, 0))
+            header, items = read_log(log, lines)
             if header is None:
                 continue
             if log not in self.seen:
                 total = int(header.get("total", 0))
                 if not self.seen:  # steps/s from the first evaluation's start, not the run's
                     self.t0 = time.monotonic()
-            self.lines[log] = self.lines.get(log, 0) + len(items)
-            self.seen[log] = (total, read + sum(int(it.get(self.count) or 0) if self.count else 1 for it in items))
+            done += sum(int(it.get(self.count) or 0) if self.count else 1 for it in items)
+            self.seen[log] = (total, done, lines + len(items))
             for it in items:
                 self.steps += int(it.get(self.rate_key) or 0)
                 if self.log_each:
                     self.progress.console.print(line(header, it))
         if not self.seen:
             return
-        total = sum(t for t, _ in self.seen.values())
-        done = sum(min(n, t) for t, n in self.seen.values())
+        total = sum(t for t, _, _ in self.seen.values())
+        done = sum(min(n, t) for t, n, _ in self.seen.values())
         rate = self.steps / max(time.monotonic() - self.t0, 1e-9)
         if self.task is None:
             self.task = self.progress.add_task(self.name, total=total, rate=rate, unit=self.unit)

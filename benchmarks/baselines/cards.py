@@ -349,7 +349,8 @@ def write_docs(check: bool = False, models: Path = MODELS, docs: Path = DOCS, sc
     """Regenerate every card's .md (shipped and trials) and the docs section; with check, write
     nothing and return the files that differ."""
     stale = []
-    all_cards, tried = cards(models), {k: v for k, v in cards(trials, weights=False).items() if k not in cards(models)}
+    all_cards = cards(models)
+    tried = {k: v for k, v in cards(trials, weights=False).items() if k not in all_cards}
     for folder, group, shipped in ((models, all_cards, True), (trials, tried, False)):
         for name, card in group.items():
             f = folder / name / "model_card.md"
