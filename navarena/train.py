@@ -56,6 +56,12 @@ from navcore.nav.search import SearchingExpert
 from navcore.seeds import stream_seed
 
 
+def searches(task: str, expert: str | None) -> bool:
+    """Whether a run's labelling expert searches: expert=search, or auto on ObjectNav (a run from
+    before --expert, expert None, used the geodesic oracle)."""
+    return expert == "search" or (expert == "auto" and task == "objectnav")
+
+
 @dataclass
 class TrainConfig:
     """Every setting of a training run (recorded in the model card)."""
@@ -105,8 +111,7 @@ class TrainConfig:
 
     @property
     def searching(self) -> bool:
-        """Whether the expert searches (expert=search, or auto on ObjectNav)."""
-        return self.expert == "search" or (self.expert == "auto" and self.task == "objectnav")
+        return searches(self.task, self.expert)
 
     def __post_init__(self):
         if self.spec is None:

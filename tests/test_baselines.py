@@ -121,6 +121,11 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
         geo = np.load(tmp_path / "geo" / "rounds" / "round_0.npz")
         assert card["config"]["expert"] == "auto" and z["lengths"].sum() > geo["lengths"].sum(), \
             (z["lengths"], geo["lengths"])
+        from benchmarks.baselines.cards import card_markdown  # the card names the expert that labelled it
+
+        geo_card = json.loads((tmp_path / "geo" / "model_card.json").read_text())
+        assert "labelled by the searching expert" in card_markdown(card, shipped=False)
+        assert "labelled by the geodesic oracle)" in card_markdown(geo_card, shipped=False)
 
 
 def test_resume_after_the_last_round_changes_nothing(trained, episode_run, tmp_path):

@@ -246,6 +246,14 @@ def kept(card: dict) -> str:
     return f" The file holds round {card['selected_round']}'s weights ({how})."
 
 
+def expert(card: dict) -> str:
+    """The labelling expert of a card's run (navarena train --expert; cards from before it: geodesic)."""
+    from navarena.train import searches
+
+    return ("the searching expert: it looks for the goal until it has been in view, then the geodesic oracle"
+            if searches(card["task"], card["config"].get("expert")) else "the geodesic oracle")
+
+
 def network(spec: dict) -> str:
     """The card's one-paragraph description of the network of a NavSpec (as a dict)."""
     size = f"{spec['depth_w']} x {spec['depth_h']}, area-pooled from any render size"
@@ -283,7 +291,7 @@ Generated from model_card.json by `python -m benchmarks.baselines.cards docs`; d
   `{card['data']['split']}`), {card['frames']:,} labelled frames over {len(card['curve'])} rounds, rendered at
   {c['width']} x {c['height']}; closed-loop check after each round on `{val}`.
 - **Training:** round 0 behaviour cloning on the expert's rollouts, then DAgger (the learner drives, the expert's
-  action executed with probability beta^round, every visited state labelled by the geodesic oracle);
+  action executed with probability beta^round, every visited state labelled by {expert(card)});
   {c['episodes_per_round']} episodes and {c['grad_steps']} gradient steps of {c['batch_episodes']} whole episodes a
   round, AdamW lr {c['lr']}, seed {card['seed']}.{kept(card)} On {card['trained_on']} ({card.get('workers', 0)} collection
   workers): {card['train_seconds']} s of collection and fitting.
