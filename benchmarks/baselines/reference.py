@@ -10,7 +10,7 @@ stopped when started again:
            zero-shot set), 5 % for val_unseen; then the zero-shot set is drawn (the evaluate stage,
            oracle, unrendered).
 - train:   the reference run of each of the TRAIN_TASKS (default TASKS), <task>_bc (navarena
-           train's defaults, ROUNDS rounds), resumable. A track of TASKS left out of TRAIN_TASKS is
+           train's defaults; ROUNDS rounds, or per track as pointnav=5,imagenav=3), resumable. A track of TASKS left out of TRAIN_TASKS is
            evaluated with its shipped model (navcore/models/<task>_bc).
 - scaling: the PointNav recipe on the first 8, 32 and 128 training scenes and on all of them, with
            the same episodes and gradient steps (SCALE_ROUNDS rounds), each checked on the test
@@ -46,7 +46,19 @@ ROOT = Path(os.environ.get("ROOT", "data/baselines"))
 RUNS = Path(os.environ.get("RUNS", "data/runs"))
 EVAL = Path(os.environ.get("EVAL", "data/baseline_eval"))
 SCENES = int(os.environ.get("SCENES", "160"))
-ROUNDS = int(os.environ.get("ROUNDS", "0")) or None  # None: navarena train's default (the reference run's)
+ROUNDS = os.environ.get("ROUNDS", "")  # N, or task=N,...; a track not named: navarena train's default
+
+
+def rounds(task: str) -> int:
+    """The reference run's rounds for `task` (ROUNDS: one number for every track, or task=N pairs)."""
+    from navarena.train import TrainConfig
+
+    if ROUNDS.strip().isdigit():
+        return int(ROUNDS)
+    pairs = dict(p.split("=", 1) for p in ROUNDS.replace(" ", "").split(",") if "=" in p)
+    return int(pairs.get(task, TrainConfig().rounds))
+
+
 SCALE_ROUNDS = int(os.environ.get("SCALE_ROUNDS", "2"))
 SCALE_SIZES = [int(s) for s in os.environ.get("SCALE_SIZES", "8,32,128,0").split(",") if s]  # 0: every training scene
 WORKERS = int(os.environ.get("WORKERS", str(max(1, (os.cpu_count() or 2) - 2))))
@@ -142,9 +154,7 @@ def train_jobs(which: str) -> list[tuple[Path, list[str], int]]:
     """(run folder, navarena train arguments, rounds) of the reference run and/or the scaling runs."""
     jobs = []
     if which in ("train", "all"):
-        from navarena.train import TrainConfig
-
-        jobs += [(RUNS / f"{task}_bc", ["--task", task], ROUNDS or TrainConfig().rounds) for task in TRAIN_TASKS]
+        jobs += [(RUNS / f"{task}_bc", ["--task", task], rounds(task)) for task in TRAIN_TASKS]
     if which in ("scaling", "all"):
         for n in SCALE_SIZES:
             extra = ["--val-split", "test", "--val-episodes", "160"] + (["--scenes", str(n)] if n else [])
@@ -184,9 +194,8 @@ def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
     """Each track's zero-shot set for every agent (see the module docstring), merged per agent,
     track and protocol."""
     from benchmarks.baselines.cards import MODELS
-    from navarena.train import TrainConfig
 
-    trained = [t for t in TRAIN_TASKS if finished(RUNS / f"{t}_bc", ROUNDS or TrainConfig().rounds)]
+    trained = [t for t in TRAIN_TASKS if finished(RUNS / f"{t}_bc", rounds(t))]
     tracks = [t for t in TASKS if t in trained or (t not in TRAIN_TASKS and (MODELS / f"{t}_bc").is_dir())]
     if not tracks:
         print("eval: no reference run has finished its rounds and no track uses a shipped model", flush=True)
