@@ -210,12 +210,17 @@ def data_markdown() -> str:
          "One Dask task per (stage, scene); a stage runs after its own scene's upstream stages only. A stage is "
          "recomputed when its config sections, its version or an upstream stage changed (the marker's hash).", "",
          "```text"]
+    width = max(len(st.name) for st in STAGES) + 1
     for st in STAGES:
         arrow = " <- " + ", ".join(st.needs) if st.needs else ""
-        L.append(f"{st.name:<12}{arrow}")
-    L += ["```", "", "| stage | needs | config sections | version | GPU | default |", "|---|---|---|---|---|---|"]
+        L.append(f"{st.name:<{width}}{arrow}".rstrip())
+    L += ["```", "", "`stages=[episodes]` also selects `objectnav_episodes` (a stage's `part_of`): one step for users, "
+          "split so that PointNav and ImageNav do not wait for semantics.", "",
+          "| stage | needs | config sections (and what else it hashes) | version | GPU | default |",
+          "|---|---|---|---|---|---|"]
     for st in STAGES:
-        L.append(f"| `{st.name}` | {', '.join(st.needs) or '-'} | {', '.join(f'`{c}`' for c in st.config) or '-'} | "
+        also = f" + {' '.join((st.inputs.__doc__ or '').split(':')[0].split())}" if st.inputs else ""  # its first words
+        L.append(f"| `{st.name}` | {', '.join(st.needs) or '-'} | {', '.join(f'`{c}`' for c in st.config) or '-'}{also} | "
                  f"{st.version} | {'yes' if st.gpu else ''} | {'yes' if st.name in DEFAULT_STAGES else 'no'} |")
     from navcore.io.catalog import LAYOUT_FILE
 

@@ -22,7 +22,7 @@ from pipeline.backends import run_on_dask
 from pipeline.config import unknown_keys, unknown_keys_message
 from pipeline.config_guard import config_changes, describe, refusal
 from pipeline.episode_progress import EpisodeWatcher, rate_column
-from pipeline.graph import closure, config_hashes, scene_hash
+from pipeline.graph import closure, config_hashes, scene_hash, selection
 from pipeline.summary import build_summary, print_summary, write_summary
 from pipeline.tasks import finalize_due, new_run, run_finalize, run_task
 
@@ -45,7 +45,7 @@ def execute(cfg, console: Console | None = None) -> dict:
     stages = closure(list(cfg.stages))
     results: list[dict] = [missing_source_result(st, sc, catalog) for sc in missing for st in stages]
     hashes = config_hashes(cfg)
-    selected = set(cfg.stages)
+    selected = set(selection(list(cfg.stages)))
     started = dt.datetime.now(dt.timezone.utc)
     console.print(f"[bold]navarena[/]: {len(scenes)} scene(s) from {cat_file.name} "
                   f"(shard {cfg.scenes.shard}/{cfg.scenes.num_shards}), stages {[s.name for s in stages]}, "

@@ -47,6 +47,9 @@ class Stage:
             worker runs at most as many tasks at once as its memory holds).
         storage: (section, key, default) of config keys that decide only what this stage keeps
             on disk beside its outputs, never what a later stage reads (`config_hashes`).
+        package: its package stages/<package>/ when it shares one with another stage (None: its name).
+        part_of: selecting that stage (`stages=[episodes]`) selects this one too: one user-facing
+            step the graph splits so that each half waits only for what it needs.
     """
 
     name: str
@@ -61,6 +64,8 @@ class Stage:
     gpu: bool = False
     memory_gb: float = 1.0
     storage: tuple[tuple[str, str, object], ...] = ()
+    package: str | None = None
+    part_of: str | None = None
 
 
 STAGES: tuple[Stage, ...] = (
@@ -72,27 +77,38 @@ STAGES: tuple[Stage, ...] = (
     Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="7",
           inputs=costmap.hashed_inputs),
     Stage("screen", screen.run, ("costmap",), ("screen.layer", "embodiment")),
+    # PointNav and ImageNav episodes (and their goal images) before semantics, which can take an hour on a
+    # large capture on a CPU: the graph's order is also the order a scene's tasks are started in
+    Stage("episodes", episodes.run, ("costmap", "screen"), ("episodes", "planner", "embodiment", "screen"),
+          version="9", inputs=episodes.hashed_inputs),
+    Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",), gpu=True, memory_gb=2.0),
     Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), version="3", gpu=True,
           memory_gb=3.0),
     Stage("asset", asset.run, ("costmap", "semantics"), ("asset",), version="4"),
-    Stage("episodes", episodes.run, ("costmap", "semantics", "screen"),
-          ("episodes", "task", "planner", "embodiment", "screen"), version="8"),
-    Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",), gpu=True, memory_gb=2.0),
-    Stage("export", export.run, ("episodes", "asset", "goal_images"), ("export",), finalize=export.finalize),
-    Stage("evaluate", evaluate.run, ("episodes",), ("evaluate", "episodes", "task", "embodiment"),
+    Stage("objectnav_episodes", episodes.run_objects, ("costmap", "semantics", "screen"),
+          ("episodes", "planner", "embodiment", "screen"), version="9", inputs=episodes.hashed_object_inputs,
+          package="episodes", part_of="episodes"),
+    Stage("export", export.run, ("episodes", "objectnav_episodes", "asset", "goal_images"), ("export",),
+          finalize=export.finalize),
+    Stage("evaluate", evaluate.run, ("episodes", "objectnav_episodes"), ("evaluate", "episodes", "task", "embodiment"),
           finalize=evaluate.finalize, default=False, gpu=True, memory_gb=2.0, inputs=evaluate.hashed_inputs),
 )
 DEFAULT_STAGES = [s.name for s in STAGES if s.default]
 BY_NAME = {s.name: s for s in STAGES}
 
 
-def closure(selected: list[str]) -> list[Stage]:
-    """Selected stages plus everything upstream of them, in graph order."""
+def selection(selected: list[str]) -> list[str]:
+    """The stages a `stages=[...]` list names: each named one and those that are part of it."""
     unknown = [s for s in selected if s not in BY_NAME]
     if unknown:
         raise ValueError(f"unknown stage(s) {unknown}; stages are {[s.name for s in STAGES]}")
+    return list(dict.fromkeys([*selected, *(s.name for s in STAGES if s.part_of in selected)]))
+
+
+def closure(selected: list[str]) -> list[Stage]:
+    """Selected stages (with the stages part of them) plus everything upstream of them, in graph order."""
     need: set[str] = set()
-    todo = list(selected)
+    todo = selection(selected)
     while todo:
         n = todo.pop()
         if n not in need:

@@ -305,11 +305,13 @@ def test_episode_shards_are_byte_identical_on_rerun_with_workers(episode_run, tm
     # the finished root less the episodes and what follows them: only the episodes stage runs again
     # (the upstream stages' bytes across worker counts: test_pipeline's test_same_config_same_bytes...)
     copy_data_root(root, tmp_path, "05_episodes", "06_trajectories", "07_eval", "09_assets", "10_exports", "episodes",
-                   "goal_images", "asset", "export*")
+                   "objectnav_episodes", "goal_images", "asset", "export*")
     s = execute(make_cfg(tmp_path, *over[:-1], "stages=[episodes]", "executor=local", "executor.n_workers=2",
                          "executor.dashboard=false"))
-    assert not s["failures"] and {r["stage"]: r["status"] for r in s["results"]}["episodes"] == "done"
-    assert {r["status"] for r in s["results"] if r["stage"] != "episodes"} == {"cached"}
+    status = {r["stage"]: r["status"] for r in s["results"]}
+    # stages=[episodes] names both episode stages (PointNav and ImageNav; ObjectNav after semantics)
+    assert not s["failures"] and status["episodes"] == status["objectnav_episodes"] == "done"
+    assert {r["status"] for r in s["results"] if "episodes" not in r["stage"]} == {"cached"}
     files = sorted(p.relative_to(root) for p in (root / "05_episodes").rglob("*.parquet"))
     files += sorted(p.relative_to(root) for p in (root / "06_trajectories").rglob("*.parquet"))
     assert len(files) == 6

@@ -126,7 +126,8 @@ def test_label_spec_from_catalog_entry_and_scene_hash(tmp_path):
     assert a.labels.classes == "scannet200" and a.labels.path(a.labels.mesh) == tmp_path / "m" / "x.ply"
     assert dict(a.labels.goal_map) == {"ottoman": "sofa"} and b.labels is None
     assert scene_hash("h", "semantics", b) == "h" and scene_hash("h", "costmap", a) == "h"
-    assert scene_hash("h", "semantics", a) != "h" and scene_hash("h", "episodes", a) != "h"  # downstream too
+    assert scene_hash("h", "semantics", a) != "h" and scene_hash("h", "objectnav_episodes", a) != "h"  # downstream too
+    assert scene_hash("h", "episodes", a) == "h"  # PointNav and ImageNav do not read the labels
     (tmp_path / "bad.yaml").write_text("scenes:\n  - {name: a, path: a, format: npy_folder, labels: {klasses: x}}\n")
     with pytest.raises(ValueError, match="unknown labels key"):
         Catalog(tmp_path / "bad.yaml", tmp_path / "data")

@@ -4,6 +4,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import zarr
 
@@ -954,3 +955,60 @@ def test_a_stage_made_from_an_older_upstream_is_refused_with_the_true_cause(tmp_
     assert "navarena run stages=[screen" in msg
     changes = {"screen": {"scenes": ["x"], "keys": [], "cause": "c", "storage_only": False, "stale_after": ["costmap"]}}
     assert "  navarena run stages=[screen] costmap.resolution=0.1" in refusal(changes, ["screen"], ["costmap.resolution=0.1"])
+
+
+def test_pointnav_and_imagenav_episodes_do_not_wait_for_semantics(tmp_path, make_cfg):
+    """The episodes of tasks without object goals need the costmap and its screening only: run before
+    semantics in a scene's order, and made even when semantics fails; ObjectNav's follow semantics
+    (skipped here, its upstream failed), and the graph says so."""
+    from pipeline.executor import execute
+    from pipeline.graph import BY_NAME, closure, selection
+
+    def upstream(name):  # what a stage waits for (its needs, transitively)
+        out, todo = set(), list(BY_NAME[name].needs)
+        while todo:
+            n = todo.pop()
+            out.add(n)
+            todo.extend(BY_NAME[n].needs)
+        return out
+
+    assert "semantics" not in upstream("episodes") and "semantics" not in upstream("goal_images")
+    assert "semantics" in upstream("objectnav_episodes")
+    assert selection(["episodes"]) == ["episodes", "objectnav_episodes"]  # one step for users
+    order = [s.name for s in closure(["export"])]
+    assert order.index("episodes") < order.index("goal_images") < order.index("semantics")
+    assert BY_NAME["objectnav_episodes"].package == "episodes"
+    s = execute(make_cfg(tmp_path, "task=[pointnav,imagenav,objectnav]", "semantics.segmenter=detector",
+                         f"semantics.detector.model={tmp_path / 'no_such_model.onnx'}",
+                         "task.pointnav.episodes_per_scene=6", "task.imagenav.episodes_per_scene=3",
+                         "task.objectnav.episodes_per_scene=3"))
+    st = statuses(s)
+    assert st["semantics"] == "failed" and st["episodes"] == "done" and st["goal_images"] == "done"
+    assert st["objectnav_episodes"] == "skipped"
+    sid = s["results"][0]["scene_id"]
+    for task, n in (("pointnav", 6), ("imagenav", 3)):
+        assert pd.read_parquet(tmp_path / "05_episodes" / f"task={task}" / f"scene_id={sid}").shape[0] == n
+    assert not (tmp_path / "05_episodes" / "task=objectnav").exists()
+
+
+def test_an_objectnav_setting_recomputes_objectnav_episodes_only(tmp_path, make_cfg):
+    """Each episode stage hashes its own tasks' settings: changing ObjectNav's leaves the PointNav
+    episodes (and their bytes) as they are, and changing PointNav's leaves ObjectNav's."""
+    from pipeline.executor import execute
+
+    base = ["task=[pointnav,objectnav]", "task.pointnav.episodes_per_scene=6", "task.objectnav.episodes_per_scene=3"]
+    s1 = execute(make_cfg(tmp_path, *base))
+    assert not s1["failures"], s1["failures"]
+    sid = s1["results"][0]["scene_id"]
+    pn = tmp_path / "05_episodes" / "task=pointnav" / f"scene_id={sid}" / "part-0.parquet"
+    before = pn.read_bytes()
+    s2 = execute(make_cfg(tmp_path, *base[:2], "task.objectnav.episodes_per_scene=4", "stages=[episodes]"))
+    st = statuses(s2)
+    assert st["episodes"] == "cached" and st["objectnav_episodes"] == "done" and pn.read_bytes() == before
+    assert pd.read_parquet(tmp_path / "05_episodes" / "task=objectnav").shape[0] == 4
+    s3 = execute(make_cfg(tmp_path, base[0], "task.pointnav.episodes_per_scene=5",
+                          "task.objectnav.episodes_per_scene=4", "stages=[episodes]"))
+    st = statuses(s3)
+    assert st["episodes"] == "done" and st["objectnav_episodes"] == "cached"
+    assert pd.read_parquet(tmp_path / "05_episodes" / "task=pointnav").shape[0] == 5
+    assert pd.read_parquet(tmp_path / "05_episodes" / "task=objectnav").shape[0] == 4

@@ -137,14 +137,22 @@ def candidates(catalog, scenes, splits: list[str] | None = None) -> pd.DataFrame
     return pd.concat(parts, ignore_index=True)[LISTING_COLUMNS + ["split"]]
 
 
+EPISODE_STAGES = ("episodes", "objectnav_episodes")
+"""The pipeline stages that write a scene's episodes (PointNav and ImageNav; ObjectNav, after semantics)."""
+
+
 def episodes_stamp(catalog, scene) -> str | None:
-    """The config hash of a scene's stored episodes (its episodes marker), or None."""
+    """The config hashes of a scene's stored episodes (its episode stages' markers, joined), or None
+    when no such stage has run."""
     import json
 
-    try:
-        return json.loads(catalog.path("markers", scene, stage="episodes").read_text()).get("config_hash")
-    except (OSError, ValueError):
-        return None
+    stamps = []
+    for stage in EPISODE_STAGES:
+        try:
+            stamps.append(json.loads(catalog.path("markers", scene, stage=stage).read_text()).get("config_hash") or "")
+        except (OSError, ValueError):
+            stamps.append("")
+    return "+".join(stamps) if any(stamps) else None
 
 
 def settings_json(cfg: EvalSetConfig) -> str:

@@ -28,8 +28,9 @@ def embodiments(cfg) -> list:
 
 
 def hashed_inputs(cfg) -> list[dict]:
-    """The embodiments this stage builds maps for, as read from navcore/conf/embodiment (part of its
-    config hash: editing an embodiment file recomputes the costmaps)."""
+    """the embodiment files: the embodiments this stage builds maps for, as read from
+    navcore/conf/embodiment (part of its config hash: editing an embodiment file recomputes the
+    costmaps)."""
     return [vars(e) for e in embodiments(cfg)]
 
 

@@ -1,5 +1,10 @@
-"""Stage `episodes`: per scene, the configured tasks' episodes and expert trajectories ->
-hive-partitioned Parquet (05_episodes, 06_trajectories)."""
+"""Stages `episodes` and `objectnav_episodes`: per scene, the configured tasks' episodes and expert
+trajectories -> hive-partitioned Parquet (05_episodes, 06_trajectories).
+
+Two graph stages share this code so that a task waits only for what it needs: `episodes` makes the
+tasks whose goals are points or views (PointNav, ImageNav) as soon as the costmap and its screening
+exist; `objectnav_episodes` makes the tasks whose goals are object instances (ObjectNav) once the
+semantics stage has lifted them, which can take an hour on a large capture on a CPU."""
 from __future__ import annotations
 
 import time
@@ -30,12 +35,36 @@ def write_table(rows_or_cols, schema: pa.Schema, dataset, **options) -> None:
     dataset.save(table, **(options or {"row_group_size": 1 << 20}))
 
 
-def remove_scene_partitions(catalog, scene) -> None:
-    """Delete this scene's previous shards of every task (a task dropped from the config must not
-    leave stale episodes behind)."""
+OBJECT_GOALS = ("objectnav",)
+"""Task types whose goals are object instances: made by `objectnav_episodes`, after semantics."""
+
+
+def stage_tasks(cfg, objects: bool) -> list[str]:
+    """The configured tasks (names) one of the two stages makes: those with object goals or the others."""
+    return sorted(n for n in cfg.task if (cfg.task[n].type in OBJECT_GOALS) == objects)
+
+
+def hashed_inputs(cfg) -> dict:
+    """`task.*` of PointNav and ImageNav: what `episodes` reads beyond its config sections, its own
+    tasks' settings (an ObjectNav change leaves PointNav and ImageNav episodes as they are)."""
+    return {n: OmegaConf.to_container(cfg.task[n], resolve=True) for n in stage_tasks(cfg, False)}
+
+
+def hashed_object_inputs(cfg) -> dict:
+    """`task.*` of ObjectNav: what `objectnav_episodes` reads beyond its config sections."""
+    return {n: OmegaConf.to_container(cfg.task[n], resolve=True) for n in stage_tasks(cfg, True)}
+
+
+def remove_scene_partitions(catalog, scene, cfg, objects: bool) -> None:
+    """Delete this scene's previous shards of the tasks this stage makes; `episodes` also deletes
+    those of tasks no longer configured (a task dropped from the config must not leave stale episodes
+    behind), never the current ObjectNav tasks' (the other stage's)."""
+    keep = set() if objects else set(stage_tasks(cfg, True))
+    mine = set(stage_tasks(cfg, objects))
     for name in ("episodes", "trajectories"):
-        for ds in catalog.find(name, scene).values():
-            ds.delete()
+        for task, ds in catalog.find(name, scene).items():
+            if task in mine or (not objects and task not in keep):
+                ds.delete()
 
 
 def screening(scene, cfg, catalog, cm) -> tuple[dict, np.ndarray | None]:
@@ -57,7 +86,18 @@ def screening(scene, cfg, catalog, cm) -> tuple[dict, np.ndarray | None]:
 
 
 def run(scene, cfg, catalog) -> dict:
+    """PointNav and ImageNav (every task without object goals)."""
+    return generate(scene, cfg, catalog, objects=False)
+
+
+def run_objects(scene, cfg, catalog) -> dict:
+    """ObjectNav (the tasks whose goals are the semantics stage's instances)."""
+    return generate(scene, cfg, catalog, objects=True)
+
+
+def generate(scene, cfg, catalog, objects: bool) -> dict:
     cpu0 = time.process_time()
+    tasks = stage_tasks(cfg, objects)
     ecfg: EpisodesConfig = OmegaConf.to_object(cfg.episodes)
     pcfg: PlannerConfig = OmegaConf.to_object(cfg.planner)
     emb = OmegaConf.to_object(cfg.embodiment)
@@ -65,17 +105,17 @@ def run(scene, cfg, catalog) -> dict:
     screen, screened = screening(scene, cfg, catalog, cm)
     graph = NavGraph(cm, eligible_cells(cm, ecfg), ecfg.geodesic_neighbourhood)
     views = goal_views = cam = None
-    if ecfg.view_near_m > 0 and screen["kept"]:
+    if ecfg.view_near_m > 0 and screen["kept"] and tasks:
         cam, _ = camera_scene(catalog, scene, emb.name, view_dependent=False)
         views = NearViews(cam, cm, emb, ecfg.view_near_m)
-    if cfg.screen.avoid and screen["kept"] and any(cfg.task[n].type == "imagenav" for n in cfg.task):
+    if cfg.screen.avoid and screen["kept"] and any(cfg.task[n].type == "imagenav" for n in tasks):
         if cam is None:
             cam, _ = camera_scene(catalog, scene, emb.name, view_dependent=False)
         q = cfg.screen.layer
         goal_views = (DefectViews(cam, emb, q.view_width, q.view_width * 3 // 4, q.blur_angle, q.blur_sigma_m, q.view_range_m),
                       cfg.screen.goal_view_blur_max)
     setup_s = time.process_time() - cpu0  # per scene, whatever the number of episodes
-    remove_scene_partitions(catalog, scene)
+    remove_scene_partitions(catalog, scene, cfg, objects)
     held_out = scene_split(scene.scene_id, ecfg.scene_splits)
     if held_out:
         ecfg.splits = {held_out: 1.0}
@@ -85,7 +125,7 @@ def run(scene, cfg, catalog) -> dict:
     result = {"outputs": [], "tasks": {}, "graph_nodes": len(graph.cells), "graph_edges": graph.num_edges,
               "split": held_out, "setup_cpu_s": round(setup_s, 3), "screening": screen}
     shortfalls = []
-    for name in sorted(cfg.task):
+    for name in tasks:
         tcfg: TaskConfig = OmegaConf.to_object(cfg.task[name])
         instances = None
         if tcfg.type == "objectnav":

@@ -43,8 +43,9 @@ def eval_set_config(cfg) -> EvalSetConfig | None:
 
 
 def hashed_inputs(cfg) -> dict | None:
-    """What decides the episodes of an evaluation on the zero-shot set beside its config sections:
-    the set's settings and which scenes a public release may hold (None for any other split)."""
+    """the zero-shot set's settings: what decides the episodes of an evaluation on the zero-shot set
+    beside its config sections, the set's settings and which scenes a public release may hold (None
+    for any other split)."""
     es = eval_set_config(cfg)
     if es is None:
         return None
