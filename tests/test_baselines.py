@@ -249,6 +249,32 @@ def test_a_trial_is_recorded_without_weights_and_not_registered(trained, tmp_pat
     assert "not shipped" in card_markdown(card, shipped=False) and "checked on load" not in card_markdown(card, False)
     assert "tiny_trial` (pointnav; measured, not shipped)" in docs_section({}, None, {"tiny_trial": card})
     assert "tiny_trial" not in AGENTS
+    assert "the gap to real captures is not measured yet" in card_markdown(card, False)
+
+
+def test_a_card_holds_further_tables_and_says_when_real_captures_were_measured(trained, tmp_path):
+    """cards evaluation --title adds a table in another setting (replacing one of the same title,
+    the main table untouched); --real makes the card say it was measured on real captures."""
+    from benchmarks.baselines.cards import add_evaluation, card_markdown, cards, docs_section, ship
+
+    ship(trained[0], "tiny", tmp_path, weights=False)
+    summ = tmp_path / "real_run" / "summary.json"
+    summ.parent.mkdir()
+    metrics = {"episodes": 30, "sr": 0.5, "spl": 0.4, "ne": 1.0, "collision_rate": 0.1, "steps": 200}
+    summ.write_text(json.dumps({"root": "/x/data", "agent": "learned", "label": "tiny", "protocol": "distance",
+                                "render": {"width": 160, "height": 120, "renderer": "cpu"},
+                                "tasks": {"pointnav": {"overall": metrics}}}))
+    for sr in (0.25, 0.5):  # the second replaces the first
+        metrics["sr"] = sr
+        summ.write_text(json.dumps({**json.loads(summ.read_text()), "tasks": {"pointnav": {"overall": metrics}}}))
+        add_evaluation("tiny", [summ], "30 episodes of two captures", "navarena eval ...", tmp_path,
+                       title="On real captures", real=True)
+    card = cards(tmp_path, weights=False)["tiny"]
+    assert len(card["more_evaluations"]) == 1 and card["more_evaluations"][0]["runs"]["real_run"]["root"] == "data"
+    md = card_markdown(card, False)
+    assert "### On real captures" in md and "| tiny | distance | 160x120 cpu | overall | 30 | 0.500 |" in md
+    assert "also measured on real captures" in md and "gap to real captures is not measured" not in md
+    assert "#### On real captures" in docs_section({}, None, {"tiny": card})
 
 
 def test_shipped_baseline_behind_the_agent_server_acts_as_in_process(episode_run, tmp_path):

@@ -3,6 +3,7 @@ Baselines section of docs/evaluation.md, generated from one source: the card's J
 
     python -m benchmarks.baselines.cards ship RUN NAME            # a navarena train run folder -> navcore/models/NAME
     python -m benchmarks.baselines.cards evaluation NAME SUMMARY.json ...   # closed-loop figures into the card
+                     [--title T [--real]]   # a further table (another setting; --real: on real captures)
     python -m benchmarks.baselines.cards cost NAME                # CPU ms per step into the card
     python -m benchmarks.baselines.cards gpu-rate NAME --machine M --setting S AGENT:STEPS:SECONDS ...
                                                                   # closed-loop steps/s in the batched GPU env
@@ -60,9 +61,12 @@ def home(name: str) -> Path:
     return MODELS if (MODELS / name / "model_card.json").is_file() or not (TRIALS / name).is_dir() else TRIALS
 
 
-def add_evaluation(name: str, summaries: list[Path], conditions: str, command: str, models: Path = MODELS) -> None:
+def add_evaluation(name: str, summaries: list[Path], conditions: str, command: str, models: Path = MODELS,
+                   title: str | None = None, real: bool = False) -> None:
     """Merge navarena eval summary.json files (one per agent and protocol, named by their folder)
-    into the card's `evaluation`, with the conditions they were measured under and the command."""
+    into the card's `evaluation`, with the conditions they were measured under and the command.
+    With a title, a further table instead (`more_evaluations`, replacing one of that title): figures
+    in another setting, e.g. on real captures (`real`)."""
     f = models / name / "model_card.json"
     card = json.loads(f.read_text())
     runs = {}
@@ -70,7 +74,12 @@ def add_evaluation(name: str, summaries: list[Path], conditions: str, command: s
         summ = json.loads(Path(s).read_text())
         summ["root"] = Path(summ["root"]).name  # no machine's paths in a shipped card
         runs[Path(s).parent.name] = summ
-    card["evaluation"] = {"conditions": conditions, "command": command, "runs": runs}
+    entry = {"conditions": conditions, "command": command, "runs": runs}
+    if title:
+        more = [m for m in card.get("more_evaluations", []) if m["title"] != title]
+        card["more_evaluations"] = more + [{"title": title, "real": real, **entry}]
+    else:
+        card["evaluation"] = entry
     f.write_text(json.dumps(card, indent=1) + "\n")
 
 
@@ -199,9 +208,10 @@ def _num(v, digits: int = 3) -> str:
     return "-" if v is None else (f"{v:.0f}" if digits == 0 else f"{v:.{digits}f}")
 
 
-def results_table(card: dict) -> str:
-    """Agents x (overall, easy, medium, hard) of the card's evaluation runs, as markdown."""
-    ev = card.get("evaluation") or {}
+def results_table(card: dict, ev: dict | None = None) -> str:
+    """Agents x (overall, easy, medium, hard) of the card's evaluation runs (or those of `ev`, one of
+    its further evaluations), as markdown."""
+    ev = card.get("evaluation") or {} if ev is None else ev
     runs = ev.get("runs") or {}
     if not runs:
         return "_No closed-loop evaluation recorded yet._\n"
@@ -270,6 +280,18 @@ def network(spec: dict) -> str:
             "episode, logits of STOP / FORWARD / LEFT / RIGHT; argmax.")
 
 
+def more_tables(card: dict, level: str = "###") -> str:
+    """The card's further evaluations (other settings: real captures, the CPU renderer), as sections."""
+    return "".join(f"\n{level} {m['title']}\n\n{m['conditions']}\n\n{results_table(card, m)}\n"
+                   f"Reproduce: `{m['command']}`\n" for m in card.get("more_evaluations", []))
+
+
+def real_note(card: dict) -> str:
+    if any(m.get("real") for m in card.get("more_evaluations", [])):
+        return "Trained on generated scenes only; also measured on real captures (above)."
+    return "Trained and measured on generated scenes only: the gap to real captures is not measured yet."
+
+
 def card_markdown(card: dict, shipped: bool = True) -> str:
     """navcore/models/<name>/model_card.md (or a trial's), from its JSON."""
     c, ev = card["config"], card.get("evaluation") or {}
@@ -307,11 +329,11 @@ Generated from model_card.json by `python -m benchmarks.baselines.cards docs`; d
 
 {results_table(card)}
 Reproduce: `{ev.get('command', '')}`
-
+{more_tables(card)}
 ## Limitations
 
 {card.get('notes') or ''}
-Trained and measured on generated scenes only: the gap to real captures is not measured yet. {status}
+{real_note(card)} {status}
 """
 
 
@@ -329,7 +351,7 @@ def docs_section(all_cards: dict[str, dict], scaling: dict | None = None, trials
 {'' if shipped else chr(10) + (card.get('notes') or '') + chr(10)}
 {ev.get('conditions', '')}
 
-{results_table(card)}
+{results_table(card)}{more_tables(card, '####')}
 {running}Training ({card['trained_on']}, {card['train_seconds']} s; {where}):
 
 {curve_table(card)}""")
@@ -393,6 +415,8 @@ def main(argv=None) -> int:
     e.add_argument("summaries", nargs="+", type=Path)
     e.add_argument("--conditions", required=True, help="what the figures were measured under (one paragraph)")
     e.add_argument("--command", required=True, help="the command that reproduces them")
+    e.add_argument("--title", help="a further table under this title (another setting) instead of the main one")
+    e.add_argument("--real", action="store_true", help="the further table's episodes are on real captures")
     c = sub.add_parser("cost")
     c.add_argument("name")
     n = sub.add_parser("note")
@@ -412,7 +436,7 @@ def main(argv=None) -> int:
     if a.cmd == "ship":
         print(ship(a.run, a.name, TRIALS, weights=False) if a.trial else ship(a.run, a.name))
     elif a.cmd == "evaluation":
-        add_evaluation(a.name, a.summaries, a.conditions, a.command, home(a.name))
+        add_evaluation(a.name, a.summaries, a.conditions, a.command, home(a.name), a.title, a.real)
     elif a.cmd == "cost":
         print(cpu_cost(a.name))
     elif a.cmd == "note":
