@@ -10,7 +10,7 @@ CUDA ?=
 WHEELS ?=
 GSPLAT_BUILD ?=
 
-.PHONY: docs release verify-release bench-release bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: bench-tour docs release verify-release bench-release bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 # pip byte-compiles every package at install (torch: 18 s, 8 s with --no-compile): once, in one
 # process; with --no-compile every process that first imports a module compiles it, and make test's
@@ -101,6 +101,11 @@ bench-stale: $(STAMP)
 
 bench-spatial: $(STAMP)
 	$(BIN)/python -m benchmarks.map.spatial --docs $(ARGS)
+
+# the README's tour as a new user meets it: each command's time against the time the README states
+# (a scratch folder with its own data/) -> data/08_reports/tour.json, docs/bench_tour.md
+bench-tour: $(STAMP)
+	$(BIN)/python -m benchmarks.usage.tour --docs $(ARGS)
 
 # the episode dataset of the default scenes: Table-4 style summary, throughput, re-checks
 bench-episodes: $(STAMP)

@@ -43,8 +43,8 @@ DOCS = ROOT / "docs"
 STAMP_RE = re.compile(r"<!-- bench-page: commit=(?P<commit>[0-9a-f]{7,40}) dirty=(?P<dirty>[01]) "
                       r"date=(?P<date>[0-9-]+) -->(\n<!-- bench-inputs: (?P<inputs>\{.*\}) -->)?")
 
-ALL_STAGES = ("synthesize", "ingest", "voxelize", "align", "costmap", "screen", "semantics", "asset", "episodes",
-              "goal_images", "export")
+ALL_STAGES = ("synthesize", "ingest", "voxelize", "align", "costmap", "screen", "episodes", "goal_images", "semantics",
+              "asset", "objectnav_episodes", "export")
 
 
 @dataclass(frozen=True)
@@ -63,8 +63,8 @@ class Page:
 _RENDER = ("navcore/render",)
 PAGES: dict[str, Page] = {
     "bench_spatial.md": Page("make bench-spatial", ("benchmarks/map/spatial.py",), ("costmap",)),
-    "bench_episodes.md": Page("make bench-episodes", ("benchmarks/dataset/episodes.py",), ("episodes", "goal_images")),
-    "bench_eval.md": Page("make bench-eval", ("benchmarks/closed_loop/eval.py", "navcore/eval", *_RENDER), ("episodes",)),
+    "bench_episodes.md": Page("make bench-episodes", ("benchmarks/dataset/episodes.py",), ("episodes", "goal_images", "objectnav_episodes")),
+    "bench_eval.md": Page("make bench-eval", ("benchmarks/closed_loop/eval.py", "navcore/eval", *_RENDER), ("episodes", "objectnav_episodes")),
     "bench_real.md": Page("make bench-real", ("benchmarks/captures/real.py", "benchmarks/captures/scan_truth.py",
                                               "catalogs/real_indoor.yaml"), ("costmap", "screen", "episodes")),
     "bench_screening.md": Page("make bench-screening", ("benchmarks/captures/screening.py", *_RENDER), ("screen",)),
@@ -85,7 +85,9 @@ PAGES: dict[str, Page] = {
                             ALL_STAGES),
     "bench_gpu.md": Page("make bench-gpu", ("benchmarks/gpu/bench_gpu.py", "benchmarks/gpu/multi_gpu.py",
                                             "benchmarks/gpu/render_gpu.py", *_RENDER, "navcore/voxels", "navcore/eval"),
-                         ("voxelize", "semantics", "episodes")),
+                         ("voxelize", "semantics", "episodes", "objectnav_episodes")),
+    "bench_tour.md": Page("make bench-tour", ("benchmarks/usage/tour.py", "navarena", "pipeline", "README.md"),
+                          ALL_STAGES),
     "bench_release.md": Page("make bench-release", ("benchmarks/publishing/release.py", "pipeline/release",
                                                     "navarena/verify_release.py", "navcore/io/release.py"), ("export",)),
     "bench_scale.md": Page("make bench-scale", ("benchmarks/scale/suite.py", "benchmarks/scale/bench_scale.py",

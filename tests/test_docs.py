@@ -99,3 +99,16 @@ def test_getting_started_commands_run_as_written(project_root, tmp_path):
             assert glob.glob(str(data / m["expect"].strip())), (m["code"], m["expect"])
     assert not (project_root / "first_run").exists()
     shutil.rmtree(data, ignore_errors=True)
+
+
+def test_the_tour_benchmark_times_what_the_readme_prints():
+    """make bench-tour runs the README's tour commands as printed, each against a stated time; a
+    README edit that drops or changes one is caught here, not by a benchmark measuring something else."""
+    from benchmarks.usage.tour import STEPS, in_readme, markdown
+
+    assert [s.command for s in STEPS if not in_readme(s)] == []
+    assert not in_readme(STEPS[0], "navarena run stages=[costmap]")  # a real check, not always true
+    rows = [{"step": s.what, "command": s.command, "stated_s": s.stated_s, "measured_s": s.stated_s + k,
+             "runs": [s.stated_s + k], "exit": 0, "within": k == 0} for k, s in enumerate(STEPS[:2])]
+    md = markdown({"machine": "m", "steps": rows, "tour_s": 1.0, "tour_stated_s": 2.0})
+    assert "| yes |" in md and "| **no** |" in md
