@@ -63,8 +63,10 @@ class Page:
 _RENDER = ("navcore/render",)
 PAGES: dict[str, Page] = {
     "bench_spatial.md": Page("make bench-spatial", ("benchmarks/map/spatial.py",), ("costmap",)),
-    "bench_episodes.md": Page("make bench-episodes", ("benchmarks/dataset/episodes.py",), ("episodes", "goal_images", "objectnav_episodes")),
-    "bench_eval.md": Page("make bench-eval", ("benchmarks/closed_loop/eval.py", "navcore/eval", *_RENDER), ("episodes", "objectnav_episodes")),
+    "bench_episodes.md": Page("make bench-episodes", ("benchmarks/dataset/episodes.py",),
+                              ("episodes", "goal_images", "objectnav_episodes")),
+    "bench_eval.md": Page("make bench-eval", ("benchmarks/closed_loop/eval.py", "navcore/eval", *_RENDER),
+                          ("episodes", "objectnav_episodes")),
     "bench_real.md": Page("make bench-real", ("benchmarks/captures/real.py", "benchmarks/captures/scan_truth.py",
                                               "catalogs/real_indoor.yaml"), ("costmap", "screen", "episodes")),
     "bench_screening.md": Page("make bench-screening", ("benchmarks/captures/screening.py", *_RENDER), ("screen",)),
