@@ -31,7 +31,8 @@ from navcore.io import jsonio
 
 TASKS = ("pointnav", "imagenav", "objectnav")
 PROTOCOLS = ("distance", "explicit_stop")
-STAGES = ("ingest", "voxelize", "align", "costmap", "screen", "semantics", "asset", "episodes", "export")
+STAGES = ("ingest", "voxelize", "align", "costmap", "screen", "episodes", "semantics", "asset", "objectnav_episodes",
+          "export")
 
 
 def compose(data: str, *over: str):
@@ -168,11 +169,12 @@ def scene_report(data: Path, catalog, scene, cfg, poses: int, pictures: Path) ->
         "episodes": episode_counts(catalog, scene), "oracle_sr": oracle_sr(data, scene.scene_id),
         "semantics": {k: v for k, v in marker(catalog, scene, "semantics").get("info", {}).items()
                       if k in ("labels_from", "shortfall", "instances", "segmenter")},
-        "objectnav_rejections": marker(catalog, scene, "episodes").get("info", {}).get("tasks", {})
+        "objectnav_rejections": marker(catalog, scene, "objectnav_episodes").get("info", {}).get("tasks", {})
         .get("objectnav", {}).get("rejections", {}),
         "screening": marker(catalog, scene, "episodes").get("info", {}).get("screening", {}),
         "screen_rejections": {t: {k: v for k, v in r.get("rejections", {}).items() if "screened" in k or "blurred" in k}
-                              for t, r in marker(catalog, scene, "episodes").get("info", {}).get("tasks", {}).items()},
+                              for st in ("episodes", "objectnav_episodes")
+                              for t, r in marker(catalog, scene, st).get("info", {}).get("tasks", {}).items()},
         "render_fp_est": round(rc["fp_est"], 4), "render_fn_est": round(rc["fn_est"], 4),
         "render_check": {k: rc[k] for k in ("render_free", "render_blocked", "costmap_blocked", "poses", "fp_ci95",
                                             "fn_ci95", "fn_noise_only")} | {"seconds": round(rc_s, 1)},
@@ -209,7 +211,7 @@ def objectnav_labelled(data: Path, executor: str, pictures: Path) -> list[dict]:
     out = []
     for scene in catalog.select():
         sem = marker(catalog, scene, "semantics").get("info", {})
-        ep_info = marker(catalog, scene, "episodes").get("info", {}).get("tasks", {}).get("objectnav", {})
+        ep_info = marker(catalog, scene, "objectnav_episodes").get("info", {}).get("tasks", {}).get("objectnav", {})
         row = {"scene": scene.name, "labels_from": sem.get("labels_from"), "goal_mapping": sem.get("goal_mapping", {}),
                "failures": [f["error"] for f in s["failures"] if f["scene_id"] == scene.scene_id],
                "episodes": 0, "by_category": {}, "rejections": ep_info.get("rejections", {}),

@@ -208,6 +208,19 @@ def run_stage(data: str, episodes: int | None) -> dict:
     return {"wall_s": time.perf_counter() - t0, "cfg": cfg}
 
 
+def episode_markers(data: Path) -> list[dict]:
+    """Per scene, the episode stages' markers (`episodes`: PointNav and ImageNav; `objectnav_episodes`)
+    as one: their tasks merged, their CPU seconds summed (each stage pays its own set-up)."""
+    merged: dict[str, dict] = {}
+    for stage in ("episodes", "objectnav_episodes"):
+        for p in sorted((data / "_markers" / stage).glob("*.json")):
+            m = json.loads(p.read_text())
+            into = merged.setdefault(m["scene_id"], {**m, "info": {**m["info"], "tasks": {}, "cpu_s": 0.0}})
+            into["info"]["tasks"].update(m["info"].get("tasks", {}))
+            into["info"]["cpu_s"] += m["info"].get("cpu_s", 0.0)
+    return [merged[k] for k in sorted(merged)]
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--episodes", type=int, default=None, help="episodes per scene and task (default: config)")
@@ -227,7 +240,7 @@ def main(argv=None) -> dict:
 
     # the run's scene set only: other scene sets may share the data root (bench-real's real scenes)
     scenes = sorted(s.scene_id for s in open_catalog(run["cfg"])[1])
-    markers = [json.loads(p.read_text()) for p in sorted((data / "_markers" / "episodes").glob("*.json"))]
+    markers = episode_markers(data)
     eps = pd.read_parquet(data / "05_episodes")
     trajs = pd.read_parquet(data / "06_trajectories")
     eps["task"] = eps["task"].astype(str)

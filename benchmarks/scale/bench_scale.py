@@ -37,7 +37,7 @@ SIM = ["scenes.num_gaussians=20000", "synthetic.layout.rooms_min=1", "synthetic.
 # release density per scene: 8,000 PointNav + ImageNav and 2,800 ObjectNav (22.2 M over 2,000 scenes)
 RELEASE = {"pointnav": 4000, "imagenav": 4000, "objectnav": 2800}
 RELEASE_SCENES = 2000
-PER_EPISODE_STAGES = ("episodes", "goal_images", "export")
+PER_EPISODE_STAGES = ("episodes", "objectnav_episodes", "goal_images", "export")
 
 
 def run_pipeline(root: Path, overrides: list[str], log: Path, env=None) -> dict:
@@ -95,7 +95,8 @@ def sim(args) -> dict:
 
 TASK_SHARE = {t: n / sum(RELEASE.values()) for t, n in RELEASE.items()}
 RELEASE_EPISODES = 22_200_000
-CPU_STAGES = ("ingest", "voxelize", "align", "costmap", "semantics", "asset", "episodes", "goal_images", "export")
+CPU_STAGES = ("ingest", "voxelize", "align", "costmap", "episodes", "goal_images", "semantics", "asset",
+              "objectnav_episodes", "export")
 GPU_STAGES = ("voxelize", "semantics", "goal_images")
 SAM3_FPS_H100 = 16.7  # SAM3 image model, 8 prompts, bf16, on the H100 (bench-semantics-gpu, README)
 
@@ -115,13 +116,15 @@ def sample_of(root: Path) -> dict:
     sem = json.loads(next((root / "_markers" / "semantics").glob("*.json")).read_text())["info"]
     cm = json.loads(next((root / "_markers" / "costmap").glob("*.json")).read_text())["info"]
     ep = json.loads(next((root / "_markers" / "episodes").glob("*.json")).read_text())["info"]
+    on = next((root / "_markers" / "objectnav_episodes").glob("*.json"), None)
+    on = json.loads(on.read_text())["info"] if on else {}
     free_m2 = max(e["free_area_m2"] for e in cm["embodiments"].values())
     ing = json.loads(next((root / "01_scenes").glob("*/ingest.json")).read_text())
     st = measure(root)
     return {"name": ing["name"], "gaussians": ing["validation"]["n_kept"], "seconds": sec, "episodes": eps,
             "failures": [f"{r['stage']}: {r.get('error')}" for r in summary["failures"]],
             "semantics_views": sem.get("views", 0), "semantics_renderer": sem.get("renderer"),
-            "episodes_setup_s": ep.get("setup_cpu_s", 0.0),
+            "episodes_setup_s": ep.get("setup_cpu_s", 0.0), "objectnav_episodes_setup_s": on.get("setup_cpu_s", 0.0),
             "free_area_m2": free_m2,
             "bytes_scene": st["scenes"][0]["store_and_asset_bytes"] + st["scenes"][0]["maps_bytes"],
             "source_bytes": st["scenes"][0]["source_bytes"], "bytes_per_episode": st["bytes_per_episode"]}
@@ -137,10 +140,11 @@ def extrapolate(sample: dict, gpu: dict | None, objectnav_like: str = "pointnav"
     scale = sum(per_scene_eps.values()) / max(n_sample, 1)
     goal_per = sec.get("goal_images", 0.0) / max(eps.get("imagenav", 0), 1)
     cpu = {st: sec.get(st, 0.0) for st in ("ingest", "voxelize", "align", "costmap", "semantics", "asset")}
-    # the episodes stage's per-scene set-up (costmap, graph, the blind-view test's scene) does not
+    # each episode stage's per-scene set-up (costmap, graph, the blind-view test's scene) does not
     # grow with the episodes; the rest is scaled
-    setup = min(sample.get("episodes_setup_s", 0.0), sec.get("episodes", 0.0))
-    cpu["episodes"] = setup + (sec.get("episodes", 0.0) - setup) * scale
+    for st in ("episodes", "objectnav_episodes"):
+        setup = min(sample.get(f"{st}_setup_s", 0.0), sec.get(st, 0.0))
+        cpu[st] = setup + (sec.get(st, 0.0) - setup) * scale
     cpu["goal_images"] = goal_per * per_scene_eps["imagenav"]
     cpu["export"] = sec.get("export", 0.0) * scale
     out = {"per_scene_cpu_only_s": cpu, "release_core_hours_cpu_only": sum(cpu.values()) * RELEASE_SCENES / 3600}
