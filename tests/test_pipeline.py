@@ -69,7 +69,7 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
     assert np.array_equal(read_pgm(asset / "nav_map.pgm"), occ)  # PGM rows flipped, 0 = occupied
     assert np.array_equal(np.asarray(Image.open(asset / "nav_mask.png"))[::-1] > 0, sup)
     # the costmap picture: the map enlarged k times, a scale bar on it, its legend under it
-    from stages.asset.stage import topdown_image
+    from navcore.io.map_picture import topdown_image
 
     pic = np.asarray(Image.open(asset / "costmap_topdown.png"))
     k = int(np.ceil(480 / max(occ.shape)))
@@ -77,6 +77,8 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
     cells = pic[:occ.shape[0] * k:k, :occ.shape[1] * k:k]
     assert cells.shape[:2] == occ.shape and pic.shape[0] > occ.shape[0] * k + 60  # legend rows below
     assert (cells != topdown_image(layers["raw"], sup, occ, layers["components"])).any(-1).mean() < 0.03
+    # drawn by the costmap stage (before semantics and the asset), the asset holding the same bytes
+    assert (tmp_path / "03_costmaps" / f"{sid}.png").read_bytes() == (asset / "costmap_topdown.png").read_bytes()
     assert man["map_info"]["size"] == [occ.shape[1], occ.shape[0]]
     ros = (asset / "nav_map.yaml").read_text()
     assert "image: nav_map.pgm" in ros and f"resolution: {man['map_info']['resolution']}" in ros
@@ -984,11 +986,13 @@ def test_pointnav_and_imagenav_episodes_do_not_wait_for_semantics(tmp_path, make
                          "task.objectnav.episodes_per_scene=3"))
     st = statuses(s)
     assert st["semantics"] == "failed" and st["episodes"] == "done" and st["goal_images"] == "done"
-    assert st["objectnav_episodes"] == "skipped"
+    assert st["objectnav_episodes"] == "skipped" and st["asset"] == "skipped"
     sid = s["results"][0]["scene_id"]
     for task, n in (("pointnav", 6), ("imagenav", 3)):
         assert pd.read_parquet(tmp_path / "05_episodes" / f"task={task}" / f"scene_id={sid}").shape[0] == n
     assert not (tmp_path / "05_episodes" / "task=objectnav").exists()
+    # the pictures to look at first exist all the same: the costmap's and the screening's
+    assert (tmp_path / "03_costmaps" / f"{sid}.png").is_file() and (tmp_path / "03_costmaps" / "screen" / f"{sid}.png").is_file()
 
 
 def test_an_objectnav_setting_recomputes_objectnav_episodes_only(tmp_path, make_cfg):

@@ -1,5 +1,6 @@
 """Top-down map pictures for people: the map enlarged to a readable size, a scale bar on it and a
-legend under it (the costmap picture of the asset stage, the screening picture of the screen stage)."""
+legend under it (the costmap picture of the costmap stage, copied into the asset; the screening
+picture of the screen stage)."""
 from __future__ import annotations
 
 import numpy as np
@@ -40,3 +41,29 @@ def annotated(img: np.ndarray, resolution: float, legend: list[tuple[tuple[int, 
         d.text((10, y + 1), text, fill=(80, 80, 80))
         y += row
     return np.asarray(canvas)
+
+
+TOPDOWN_LEGEND = [((255, 255, 255), "free: the robot's centre may be here"),
+                  ((170, 205, 240), "free island cut off from the main free space (no episodes)"),
+                  ((160, 160, 160), "within the robot's radius (+ margin) of an obstacle"),
+                  ((0, 0, 0), "obstacle in the robot's body band"),
+                  ((235, 190, 190), "unsupported: no floor seen (outside the scene, holes)")]
+
+
+def topdown_image(raw, support, occ, components=None) -> np.ndarray:
+    """RGB picture of a costmap (north up), one pixel a cell: free white (islands not connected to
+    the largest free component light blue), obstacles black, inflation grey, unsupported pink."""
+    img = np.full(occ.shape + (3,), 255, np.uint8)
+    if components is not None:
+        img[components > 1] = TOPDOWN_LEGEND[1][0]
+    img[occ & support] = TOPDOWN_LEGEND[2][0]
+    img[raw] = TOPDOWN_LEGEND[3][0]
+    img[~support] = TOPDOWN_LEGEND[4][0]
+    return img[::-1]
+
+
+def topdown_picture(raw, support, occ, components, resolution: float, embodiment: str) -> np.ndarray:
+    """The costmap picture (03_costmaps/{scene_id}.png, the asset's costmap_topdown.png): topdown_image
+    enlarged, with a scale bar and its legend."""
+    return annotated(topdown_image(raw, support, occ, components), resolution, TOPDOWN_LEGEND,
+                     note=f"costmap of {embodiment} at {resolution:g} m a cell, north up")

@@ -16,35 +16,10 @@ from navcore.gaussians.formats import source_files, write_inria_ply, write_splat
 from navcore.gaussians.formats.ply import is_inria_ply
 from navcore.instances import ground_truth_labels, load_instances, table_to_labels
 from navcore.io.asset_files import COMPRESSED_SOURCES, aligned_file, write_pgm
-from navcore.io.map_picture import annotated
+from navcore.io.map_picture import topdown_picture
 from navcore.io.stamps import build_time
 
 NORMALIZER_VERSION = "navarena-0.1"
-
-
-TOPDOWN_LEGEND = [((255, 255, 255), "free: the robot's centre may be here"),
-                  ((170, 205, 240), "free island cut off from the main free space (no episodes)"),
-                  ((160, 160, 160), "within the robot's radius (+ margin) of an obstacle"),
-                  ((0, 0, 0), "obstacle in the robot's body band"),
-                  ((235, 190, 190), "unsupported: no floor seen (outside the scene, holes)")]
-
-
-def topdown_image(raw, support, occ, components=None) -> np.ndarray:
-    """RGB picture of a costmap (north up), one pixel a cell: free white (islands not connected to
-    the largest free component light blue), obstacles black, inflation grey, unsupported pink."""
-    img = np.full(occ.shape + (3,), 255, np.uint8)
-    if components is not None:
-        img[components > 1] = TOPDOWN_LEGEND[1][0]
-    img[occ & support] = TOPDOWN_LEGEND[2][0]
-    img[raw] = TOPDOWN_LEGEND[3][0]
-    img[~support] = TOPDOWN_LEGEND[4][0]
-    return img[::-1]
-
-
-def topdown_picture(raw, support, occ, components, resolution: float, embodiment: str) -> np.ndarray:
-    """costmap_topdown.png: topdown_image enlarged, with a scale bar and its legend."""
-    return annotated(topdown_image(raw, support, occ, components), resolution, TOPDOWN_LEGEND,
-                     note=f"costmap of {embodiment} at {resolution:g} m a cell, north up")
 
 
 def asset_labels(scene, cfg, catalog) -> list[dict] | None:
@@ -147,7 +122,11 @@ def run(scene, cfg, catalog) -> dict:
             "image: nav_map.pgm\n" f"resolution: {res}\n" f"origin: [{origin[0]}, {origin[1]}, 0.0]\n"
             "negate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.25\n")
         tmp.image("nav_mask.png", np.where(sup, 255, 0).astype(np.uint8)[::-1])
-        tmp.image("costmap_topdown.png", topdown_picture(raw, sup, occ, comp, res, emb))
+        pic = catalog.dataset("costmap_picture", scene)  # the costmap stage's (costmaps made before it: drawn here)
+        if pic.exists():
+            shutil.copyfile(pic.path, tmp / "costmap_topdown.png")
+        else:
+            tmp.image("costmap_topdown.png", topdown_picture(raw, sup, occ, comp, res, emb))
         side = catalog.dataset("floor_side_view", scene)
         if side.exists():  # the floor the align stage chose, over the Gaussian density
             shutil.copyfile(side.path, tmp / "floor_side_view.png")

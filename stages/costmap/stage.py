@@ -7,6 +7,7 @@ import numpy as np
 from omegaconf import OmegaConf
 
 from navcore.gaussians.content import content_mask_of, content_of
+from navcore.io.map_picture import topdown_picture
 from navcore.nav.embodiment import load_embodiment
 from stages.costmap.build import (
     CostmapConfig,
@@ -58,6 +59,7 @@ def run(scene, cfg, catalog) -> dict:
             if emb.name == cfg.embodiment.name:
                 gaps = doorway_gaps(layers.clearance, layers.resolution)  # -1 where unsupported
                 g.attrs["doorway_gaps_m"] = gaps
+                main = layers
             result["embodiments"][emb.name] = {"free_area_m2": round(info["free_area_m2"], 2),
                                                "hidden_splats": info.get("hidden_splats"),
                                                "main_component_area_m2": round(info["main_component_area_m2"], 2),
@@ -70,4 +72,8 @@ def run(scene, cfg, catalog) -> dict:
             result["warnings"] = warnings
         if not np.asarray(support[0]).any():
             raise ValueError("the supported region is empty: no occupied structure found near the floor")
+    # the picture to look at first, written here so that it never waits for the later stages (semantics)
+    pic = catalog.dataset("costmap_picture", scene)
+    pic.save(topdown_picture(main.raw, main.support, main.occ, main.components, main.resolution, cfg.embodiment.name))
+    result["outputs"].append(str(pic.path))
     return result
