@@ -88,7 +88,7 @@ PAGES: dict[str, Page] = {
     "bench_gpu.md": Page("make bench-gpu", ("benchmarks/gpu/bench_gpu.py", "benchmarks/gpu/multi_gpu.py",
                                             "benchmarks/gpu/render_gpu.py", *_RENDER, "navcore/voxels", "navcore/eval"),
                          ("voxelize", "semantics", "episodes", "objectnav_episodes")),
-    "bench_tour.md": Page("make bench-tour", ("benchmarks/usage/tour.py", "navarena", "pipeline", "README.md"),
+    "bench_tour.md": Page("make bench-tour", ("benchmarks/usage/tour.py", "navarena", "pipeline"),
                           ALL_STAGES),
     "bench_release.md": Page("make bench-release", ("benchmarks/publishing/release.py", "pipeline/release",
                                                     "navarena/verify_release.py", "navcore/io/release.py"), ("export",)),
