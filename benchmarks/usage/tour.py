@@ -40,14 +40,14 @@ class Step:
 
 
 STEPS = (
-    Step("generate the default dataset (make dataset, venv ready)", ".venv/bin/navarena run", 80, repeat=False),
+    Step("generate the default dataset (make dataset, venv ready)", ".venv/bin/navarena run", 90, repeat=False),
     Step("run again: nothing to do", ".venv/bin/navarena run", 15),
     Step("one stage with an override, its own root",
          ".venv/bin/navarena run stages=[costmap] costmap.resolution=0.02 data_root=data_fine", 60, repeat=False),
     Step("query the episodes with pandas", ".venv/bin/python examples/query_episodes.py", 10),
     Step("evaluate the learned PointNav baseline",
          ".venv/bin/navarena eval data --agent pointnav_bc --tasks pointnav --split test --episodes-per-scene 5 "
-         "--renderer cpu --width 160 --height 120 --batch-slots 5", 100),
+         "--renderer cpu --width 160 --height 120 --batch-slots 5", 60),
     Step("export 12 training episodes for LeRobot",
          ".venv/bin/navarena export-lerobot --root data --out exports/lerobot_train --split train --episodes 12", 60),
     Step("render 4 episode videos and their page",
