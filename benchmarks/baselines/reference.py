@@ -27,7 +27,8 @@ stopped when started again:
            $OUT).
 
 make setup-gpu first (WHEELS=dir offline). Paths: ROOT (data/baselines), RUNS (data/runs), EVAL
-(data/baseline_eval); WORKERS (CPU cores - 2).
+(data/baseline_eval); WORKERS (CPU cores - 2); SCENE_IDS (only these of the SCENES: the zero-shot
+set's scenes for a call that only evaluates finished runs).
 """
 from __future__ import annotations
 
@@ -71,6 +72,10 @@ TRAIN_TASKS = os.environ.get("TRAIN_TASKS", ",".join(TASKS)).split(",")
 DATA = [f"data_root={ROOT}", f"scenes.count={SCENES}", f"task=[{','.join(TASKS)}]",
         f"semantics.enabled={'true' if 'objectnav' in TASKS else 'false'}", "episodes.scene_splits.test=0.1",
         "executor.dashboard=false"]
+# SCENE_IDS=a,b,...: only these scenes of the SCENES (an evaluation-only call builds just the zero-shot set's scenes:
+# a scene's split is a hash of its id, its episodes its own seed's, so they come out as in the whole set)
+SCENE_IDS = [s for s in os.environ.get("SCENE_IDS", "").split(",") if s]
+DATA += [f"scenes.ids=[{','.join(SCENE_IDS)}]"] if SCENE_IDS else []
 RENDERED = [("{task}_bc", "distance"), ("{task}_bc", "explicit_stop"), ("depth_reactive", "distance")]
 UNRENDERED = [("random", "distance"), ("oracle", "distance")]
 
