@@ -191,20 +191,37 @@ def test_inputs_are_resolution_independent():
     assert torch.allclose(g, torch.tensor([[np.log1p(2.0), 0.0, 1.0]], dtype=torch.float32), atol=1e-6)
 
 
-def test_shipped_baseline_is_checked_and_registered():
+SHIPPED_OBS = {  # an observation of each shipped track at 160 x 120
+    "pointnav_bc": {"depth": np.full((120, 160), 3.0, np.float32), "pointgoal": np.array([2.0, 0.0], np.float32)},
+    "objectnav_bc": {"depth": np.full((120, 160), 3.0, np.float32), "rgb": np.full((120, 160, 3), 128, np.uint8),
+                     "goal_category": "chair"},
+}
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED_OBS))
+def test_shipped_baseline_is_checked_and_registered(name):
     from navcore.baselines.agent import shipped
     from navcore.eval.agents import AGENTS, agent_for
 
-    path, digest = shipped("pointnav_bc")
+    path, digest = shipped(name)
     assert sha256_of(path) == digest
-    assert "pointnav_bc" in AGENTS
-    agent = agent_for("pointnav_bc", device="cpu")
-    agent.reset({"task_type": "pointnav"})
-    obs = {"depth": np.full((120, 160), 3.0, np.float32), "pointgoal": np.array([2.0, 0.0], np.float32)}
-    a = agent.act(obs)
-    assert a in (0, 1, 2, 3)
+    assert name in AGENTS
+    agent = agent_for(name, device="cpu")
+    assert agent.task == name.removesuffix("_bc")  # the registry name loads its own track's network
+    agent.reset({"task_type": agent.task})
+    obs = SHIPPED_OBS[name]
+    assert agent.act(obs) in (0, 1, 2, 3)
     with pytest.raises(ValueError, match="needs the observations"):
-        agent.act({"pointgoal": obs["pointgoal"]})
+        agent.act({k: v for k, v in obs.items() if k != "depth"})
+
+
+def test_every_shipped_baseline_has_a_registry_name():
+    from benchmarks.baselines.cards import cards
+    from navcore.eval.agents import AGENTS
+
+    shipped = set(cards())
+    assert shipped == set(SHIPPED_OBS), "a shipped baseline without a test observation here, or one gone"
+    assert shipped == {k for k in AGENTS if k.endswith("_bc")}
 
 
 def test_shipped_pointnav_baseline_beats_depth_reactive(episode_run):

@@ -98,9 +98,14 @@ def cpu_cost(name: str, repeats: int = 300, models: Path = MODELS) -> dict:
     agent = agent_for(name, device="cpu")
     agent.reset({})
     out = {"machine": f"{platform.machine()} CPU, {os.cpu_count()} cores, torch threads {torch.get_num_threads()}"}
+    spec, rng = agent.net.spec, np.random.default_rng(0)
     for w, h in ((640, 480), (160, 120)):
-        obs = {"depth": np.random.default_rng(0).uniform(0.5, 4.0, (h, w)).astype(np.float32),
-               "pointgoal": np.array([3.0, 0.3], np.float32)}
+        # every observation the track's agent gets (it reads those its spec names)
+        obs = {"depth": rng.uniform(0.5, 4.0, (h, w)).astype(np.float32),
+               "rgb": rng.integers(0, 256, (h, w, 3), dtype=np.uint8),
+               "goal_image": rng.integers(0, 256, (h, w, 3), dtype=np.uint8),
+               "pointgoal": np.array([3.0, 0.3], np.float32),
+               "goal_category": (spec.categories or ["chair"])[0]}
         for _ in range(20):
             agent.act(obs)
         times = []

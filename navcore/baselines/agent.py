@@ -1,5 +1,5 @@
 """The learned baselines as agents of the evaluator (registry names in navcore.eval.agents:
-`pointnav_bc`, ...), in-process or behind the agent server (navarena serve-agent --agent pointnav_bc).
+`pointnav_bc`, `objectnav_bc`), in-process or behind the agent server (navarena serve-agent --agent pointnav_bc).
 
     agent = LearnedNavAgent()                               # the shipped pointnav_bc
     agent = LearnedNavAgent(checkpoint="runs/on/model.pt", device="cuda")   # any track's navarena train run
@@ -93,3 +93,15 @@ class LearnedNavAgent:
         for i, a in enumerate(agents):
             a.h, a.prev = h[:, i:i + 1], int(acts[i])
         return [int(x) for x in acts]
+
+
+def shipped_agent(name: str):
+    """The registry's constructor of the shipped baseline `name` (navcore/models/<name>)."""
+    def make(**kwargs) -> LearnedNavAgent:
+        return LearnedNavAgent(name=name, **kwargs)
+    make.__doc__ = f"The shipped {name} (navcore/models/{name}/model_card.md)."
+    return make
+
+
+pointnav_bc = shipped_agent("pointnav_bc")
+objectnav_bc = shipped_agent("objectnav_bc")

@@ -23,7 +23,8 @@ AGENTS = Registry("agent", {
     "noisy_oracle": "navcore.eval.agents:NoisyOracleAgent",
     "depth_reactive": "navcore.eval.agents:DepthReactiveAgent",
     # the learned baselines, trained on NavArena's own episodes (navcore/models/<name>/model_card.md)
-    "pointnav_bc": "navcore.baselines.agent:LearnedNavAgent",
+    "pointnav_bc": "navcore.baselines.agent:pointnav_bc",
+    "objectnav_bc": "navcore.baselines.agent:objectnav_bc",
     # any navarena train run's policy: --agent learned --agent-arg checkpoint=runs/x/model.pt
     "learned": "navcore.baselines.agent:LearnedNavAgent",
 })
