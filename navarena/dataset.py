@@ -67,7 +67,11 @@ class NavDataset:
         if self.is_release:
             from navcore.io.release import read_release_json
 
-            self._config = read_release_json(self.path).get("config") or {}
+            info = read_release_json(self.path)
+            if "key_columns" not in info:
+                raise ValueError(f"{self.path}: a release in the earlier hive layout (episodes/task=.../split=.../"
+                                 "scene_id=...); rebuild it with this version's `navarena release`")
+            self._config = info.get("config") or {}
         else:
             from navcore.io.catalog import Catalog
 
@@ -94,36 +98,36 @@ class NavDataset:
     # ------------------------------------------------------------------ tables
     def _episode_files(self, task: str, scene_id: str | None = None) -> list[Path]:
         if self.is_release:
-            return sorted(self.path.glob(f"episodes/task={task}/split=*/scene_id={scene_id or '*'}/part-0.parquet"))
+            return sorted(self.path.glob(f"episodes/{task}/*/{scene_id or '*'}.parquet"))
         return sorted(self.path.glob(f"05_episodes/task={task}/scene_id={scene_id or '*'}/part-0.parquet"))
 
     def scene_ids(self, task: str | None = None) -> list[str]:
         """Scenes with episodes (of `task`, or of any task), sorted."""
         out = set()
         for t in ([task] if task else TASKS):
-            out |= {p.parent.name.split("=", 1)[1] for p in self._episode_files(t)}
+            out |= {p.stem if self.is_release else p.parent.name.split("=", 1)[1] for p in self._episode_files(t)}
         return sorted(out)
 
     def episode_table(self, scene_id: str, task: str):
-        """The episodes of one scene and task as a pandas DataFrame (the canonical columns plus split)."""
+        """The episodes of one scene and task as a pandas DataFrame: the canonical columns with task,
+        split and scene_id (a release's key columns), from a release or a data root alike."""
         import pandas as pd
         import pyarrow.parquet as pq
 
-        parts = []
-        for f in self._episode_files(task, scene_id):
-            df = pq.read_table(f).to_pandas()
-            if self.is_release and "split" not in df.columns:
-                df["split"] = f.parent.parent.name.split("=", 1)[1]
-            parts.append(df)
+        parts = [pq.read_table(f).to_pandas() for f in self._episode_files(task, scene_id)]
         if not parts:
             raise KeyError(f"{self.path}: no {task} episodes of scene {scene_id!r} (scenes: {', '.join(self.scene_ids(task))})")
-        return pd.concat(parts, ignore_index=True)
+        df = pd.concat(parts, ignore_index=True)
+        for col, value in (("task", task), ("scene_id", scene_id)):
+            if col not in df.columns:  # a data root's files: its folders name them
+                df.insert(0, col, value)
+        return df
 
     def _reference_paths(self, scene_id: str, task: str, ids: set[str]) -> dict[str, np.ndarray]:
         import pyarrow.dataset as pds
 
         if self.is_release:
-            files = sorted(self.path.glob(f"trajectories/task={task}/split=*/scene_id={scene_id}/part-0.parquet"))
+            files = sorted(self.path.glob(f"trajectories/{task}/*/{scene_id}.parquet"))
         else:
             files = sorted(self.path.glob(f"06_trajectories/task={task}/scene_id={scene_id}/part-0.parquet"))
         if not files:

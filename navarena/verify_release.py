@@ -33,6 +33,7 @@ import numpy as np
 
 from navcore.io.release import (
     CARD,
+    KEY_COLUMNS,
     MANIFEST,
     MANIFEST_DIGEST,
     RELEASE_JSON,
@@ -41,6 +42,7 @@ from navcore.io.release import (
     read_manifest_digest,
     schema_fields,
     sha256_file,
+    table_keys,
     walk_files,
 )
 
@@ -141,14 +143,13 @@ def check_files(root: Path, report: Report, workers: int, quiet: bool) -> dict[s
     return manifest
 
 
-def _partitions(rel: str) -> dict[str, str]:
-    return dict(p.split("=", 1) for p in Path(rel).parent.parts if "=" in p)
-
-
 def _check_table(path: Path, name: str, kind: str, expected: dict, report: Report, counts: dict, files: dict) -> None:
     import pyarrow.parquet as pq
 
-    part = _partitions(name)
+    keys = table_keys(name)
+    if keys is None:
+        report.bad("tables", name, f"not a {kind} file of the layout {kind}/<task>/<split>/<scene_id>.parquet")
+        return
     schema = pq.read_schema(path)
     meta = pq.read_metadata(path)
     got = [tuple(f) for f in schema_fields(schema)]
@@ -157,17 +158,14 @@ def _check_table(path: Path, name: str, kind: str, expected: dict, report: Repor
         report.bad("tables", name, f"schema differs from release.json's {kind} schema (e.g. {diff})")
         return
     report.checked[f"{kind} files"] += 1
+    t = pq.read_table(path, columns=list(KEY_COLUMNS))
+    for col in KEY_COLUMNS:  # the key columns must say what the path says
+        wrong = set(t[col].to_pylist()) - {keys[col]}
+        if wrong:
+            report.bad("tables", name, f"rows of {col} {sorted(wrong)[:3]} in the file of {col} {keys[col]!r}")
     if kind == "episodes":
-        # releases before the split column moved to the folder only (navcore.io.release.FOLDER_COLUMNS) have both
-        t = pq.read_table(path, columns=["task_type"] + (["split"] if "split" in schema.names else []))
-        if "split" in t.column_names and set(t["split"].to_pylist()) - {part.get("split")}:
-            report.bad("tables", name, f"rows of split(s) {sorted(set(t['split'].to_pylist()))} in the "
-                                       f"split={part.get('split')} partition")
-        if set(t["task_type"].to_pylist()) - {part.get("task")}:
-            report.bad("tables", name, f"rows of task(s) {sorted(set(t['task_type'].to_pylist()))} in the "
-                                       f"task={part.get('task')} partition")
-        counts[(part.get("task"), part.get("split"))] += meta.num_rows
-        files[(part.get("task"), part.get("split"))].append(name)
+        counts[(keys["task"], keys["split"])] += meta.num_rows
+        files[(keys["task"], keys["split"])].append(name)
 
 
 def check_tables(root: Path, info: dict, report: Report) -> dict[tuple[str, str], list[str]]:
@@ -204,7 +202,7 @@ def check_tables(root: Path, info: dict, report: Report) -> dict[tuple[str, str]
     for key in sorted(set(counts) | set(card) | set(recorded), key=str):
         n, c, r = counts.get(key, 0), card.get(key), recorded.get(key)
         if c != n or r != n:
-            report.bad("tables", f"episodes/task={key[0]}/split={key[1]}",
+            report.bad("tables", f"episodes/{key[0]}/{key[1]}",
                        f"{n} episodes in the files, the card says {c}, release.json {r}")
     return files
 

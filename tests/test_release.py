@@ -125,24 +125,34 @@ def test_release_loads_with_datasets_pyarrow_and_croissant(release, tmp_path, mo
     fm = read_card_front_matter(out / "README.md")
     card = {(c["config_name"], s["name"]): s["num_examples"] for c in fm["dataset_info"] for s in c["splits"]}
     assert {sp for _, sp in card} == {"test", "eval_zeroshot"}
+    keys = ["task", "split", "scene_id", "episode_id"]
     for (task, split), n in card.items():
-        ds = datasets.load_dataset(str(out), task, split=split)
-        assert ds.num_rows == n
-    table = pds.dataset(out / "episodes", format="parquet", partitioning="hive").to_table()
+        # datasets adds no columns from paths: the key columns come from the files themselves, and the
+        # card's datasets join finds every step's one episode
+        eps_hf = datasets.load_dataset(str(out), task, split=split).to_pandas()
+        steps_hf = datasets.load_dataset(str(out), f"{task}_trajectories", split=split).to_pandas()
+        assert len(eps_hf) == n and set(eps_hf["task"]) == {task} and set(eps_hf["split"]) == {split}
+        assert set(eps_hf["scene_id"]) and not eps_hf.duplicated(["scene_id", "episode_id"]).any()
+        joined = steps_hf.merge(eps_hf, on=keys, validate="many_to_one")
+        assert len(joined) == len(steps_hf) > 0 and joined[keys].drop_duplicates().shape[0] == n
+    table = pds.dataset(out / "episodes", format="parquet").to_table()
     assert table.num_rows == sum(card.values())
-    assert {"task", "split", "scene_id"} <= set(table.schema.names)
-    # the split lives in the folder only: pandas and pyarrow.parquet read the folder as one table
-    for read in (pd.read_parquet, lambda f: pq.read_table(f).to_pandas()):
+    assert table.schema.names[:3] == ["task", "split", "scene_id"]
+    for read in (pd.read_parquet, lambda f: pq.read_table(f).to_pandas()):  # a folder read as one table
         frame = read(out / "episodes")
         assert len(frame) == table.num_rows
         assert frame.groupby(["task", "split"], observed=True).size().to_dict() == \
             {(t, sp): n for (t, sp), n in card.items()}
-    assert "split" not in pq.read_schema(next((out / "episodes").rglob("*.parquet"))).names
+    # every file's key columns are its path's
+    for f in (out / "episodes").rglob("*.parquet"):
+        t = pq.read_table(f, columns=["task", "split", "scene_id"]).to_pandas().drop_duplicates()
+        assert t.values.tolist() == [list(f.relative_to(out / "episodes").with_suffix("").parts)]
     # the card's pandas join of expert steps to episodes: every step finds its one episode
     eps = table.to_pandas()
-    steps = pds.dataset(out / "trajectories", format="parquet", partitioning="hive").to_table().to_pandas()
-    keys = ["task", "split", "scene_id", "episode_id"]
-    assert not eps.duplicated(keys).any()
+    steps = pd.read_parquet(out / "trajectories")
+    assert not eps.duplicated(keys).any()  # unique across the release
+    # and without the split, outside the evaluation set's split (its episodes are copies of test episodes)
+    assert not eps[eps["split"] != "eval_zeroshot"].duplicated(["task", "scene_id", "episode_id"]).any()
     joined = steps.merge(eps, on=keys, validate="many_to_one")
     assert len(joined) == len(steps) > len(eps) and (joined.groupby(keys).size().reset_index()[keys].shape[0]
                                                      == len(eps))
@@ -157,7 +167,8 @@ def test_release_loads_with_datasets_pyarrow_and_croissant(release, tmp_path, mo
 
     for kind, schema in (("episodes", EPISODE_SCHEMA), ("trajectories", TRAJECTORY_SCHEMA)):
         assert set(FIELD_DOCS[kind]) == set(schema.names)  # every column has its meaning, no stale one
-        assert all(f"| `{f.name}` | `{f.type}` | {FIELD_DOCS[kind][f.name]} |" in card_text for f in schema)
+        assert all(f"| `{f.name}` | `{f.type}` | {FIELD_DOCS[kind][f.name]} |" in card_text for f in schema
+                   if f.name != "split")  # the key columns are described once, before the tables
     n = sum(1 for _ in md.records("pointnav"))
     assert n == card[("pointnav", "test")] + card[("pointnav", "eval_zeroshot")]
     rec = next(iter(md.records("pointnav")))
@@ -195,7 +206,7 @@ def test_eval_set_ships_as_a_split_and_runs_in_evaluate(release, release_root, m
     assert sorted(zip(res["task"], res["episode_id"])) == sorted(zip(listing["task"], listing["episode_id"]))
     assert pq.read_table(in_root).equals(pq.read_table(out / "eval_sets" / "eval_zeroshot.parquet"))
     budgets = {"easy": 500, "medium": 1000, "hard": 1500}
-    eps = pds.dataset(out / "episodes", format="parquet", partitioning="hive").to_table().to_pandas()
+    eps = pds.dataset(out / "episodes", format="parquet").to_table().to_pandas()
     zs = eps[eps["split"] == "eval_zeroshot"]
     assert (zs["max_steps"] == zs["difficulty"].map(budgets)).all()
 
@@ -214,7 +225,7 @@ def test_copied_release_is_independent_of_the_data_root(release, release_root, m
     files = [f for f in out.rglob("*") if f.is_file()]
     assert files and not any(f.stat().st_ino in root_inodes for f in files)
     assert summary["hard_links"] == 0 and summary["copies"] > 0
-    victim = next(out.glob("episodes/task=pointnav/split=*/scene_id=*/part-0.parquet"))
+    victim = next(out.glob("episodes/pointnav/*/*.parquet"))
     twin = linked / victim.relative_to(out)
     before = twin.read_bytes()
     data = bytearray(victim.read_bytes())
@@ -286,7 +297,7 @@ def test_verify_release_names_every_damaged_file(release, tmp_path, damage):
     from navarena.verify_release import verify
 
     out, _ = release
-    rel = next(f for f in read_manifest(out / MANIFEST) if f.startswith("episodes/task=pointnav/split=test/"))
+    rel = next(f for f in read_manifest(out / MANIFEST) if f.startswith("episodes/pointnav/test/"))
     d = _damaged_copy(out, tmp_path / "copy")
     p = d / rel
     if damage == "flip":

@@ -143,11 +143,11 @@ FIELD_DOCS: dict[str, dict[str, str]] = {
 tables are generated from it; tests check that every column has one)."""
 
 
-def field_table(kind: str) -> list[str]:
-    """Markdown rows (header included) of one table's columns: name, Arrow type, meaning."""
+def field_table(kind: str, skip: tuple[str, ...] = ()) -> list[str]:
+    """Markdown rows (header included) of one table's columns (less `skip`): name, Arrow type, meaning."""
     schema = {"episodes": EPISODE_SCHEMA, "trajectories": TRAJECTORY_SCHEMA}[kind]
     return ["| column | type | meaning |", "|---|---|---|",
-            *[f"| `{f.name}` | `{f.type}` | {FIELD_DOCS[kind][f.name]} |" for f in schema]]
+            *[f"| `{f.name}` | `{f.type}` | {FIELD_DOCS[kind][f.name]} |" for f in schema if f.name not in skip]]
 
 
 TRAJECTORY_QUANTA = {

@@ -10,8 +10,8 @@
     RELEASE_NOTES.md               what changed since the previous version (with --previous)
     scenes.parquet                 per scene: provenance, licence, screening, content hash, episodes
     plots/*.png                    geodesic distance and steps per task, ObjectNav categories
-    episodes/task={t}/split={s}/scene_id={id}/part-0.parquet      one row per episode (EPISODE_SCHEMA less split)
-    trajectories/task={t}/split={s}/scene_id={id}/part-0.parquet  one row per expert step (TRAJECTORY_SCHEMA)
+    episodes/{task}/{split}/{scene_id}.parquet      one row per episode (KEY_COLUMNS + EPISODE_SCHEMA)
+    trajectories/{task}/{split}/{scene_id}.parquet  one row per expert step (KEY_COLUMNS + TRAJECTORY_SCHEMA)
     eval_sets/{name}.parquet       the zero-shot evaluation set's listing (also its own split above)
     instances/scene_id={id}/instances.parquet                     ObjectNav instance tables
     goal_images/task=imagenav/scene_id={id}/part-0.parquet        ImageNav goal images (JPEG), when rendered
@@ -47,33 +47,58 @@ def parse_version(v: str) -> tuple[int, int, int]:
     return tuple(int(x) for x in m.groups())
 
 
-FOLDER_COLUMNS = ("split",)
-"""Columns of the data root's episode tables that a release keeps in its folder names only
-(`split=...`). With the column in the file as well, `pandas.read_parquet` and
-`pyarrow.parquet.read_table` of the episodes folder stop at a type clash (the file's string against
-the folder's dictionary); `task` and `scene_id` were folder-only already."""
+KEY_COLUMNS = ("task", "split", "scene_id")
+"""Columns every episode and trajectory file of a release holds, equal to its path's
+`{task}/{split}/{scene_id}`: any reader (pandas, pyarrow, polars, duckdb, `datasets`, which adds no
+path columns) gets them from the files themselves. An episode is (task, scene_id, episode_id);
+its expert steps join on those columns. The folders are plain names, not hive `key=value`
+partitions: a hive folder beside the same column in the file makes readers disagree on its type."""
+
+
+def with_keys(table, task: str, split: str, scene_id: str):
+    """A data root's episode or trajectory table as a release file holds it: its KEY_COLUMNS first."""
+    import pyarrow as pa
+
+    table = table.drop_columns([c for c in KEY_COLUMNS if c in table.column_names])
+    for i, (name, value) in enumerate(zip(KEY_COLUMNS, (task, split, scene_id))):
+        table = table.add_column(i, pa.field(name, pa.string(), nullable=False), pa.array([value] * table.num_rows, pa.string()))
+    return table
 
 
 def release_episode_schema():
-    """The schema of a release's episode files: EPISODE_SCHEMA less FOLDER_COLUMNS."""
+    """The schema of a release's episode files: KEY_COLUMNS, then EPISODE_SCHEMA less split."""
     import pyarrow as pa
 
     from navcore.io.episode_schema import EPISODE_SCHEMA
 
-    return pa.schema([f for f in EPISODE_SCHEMA if f.name not in FOLDER_COLUMNS])
+    return pa.schema([pa.field(k, pa.string(), nullable=False) for k in KEY_COLUMNS] +
+                     [f for f in EPISODE_SCHEMA if f.name not in KEY_COLUMNS])
 
 
-def for_release(episodes):
-    """A data root's episode table as a release file holds it (FOLDER_COLUMNS left out)."""
-    return episodes.drop_columns([c for c in FOLDER_COLUMNS if c in episodes.column_names])
+def release_trajectory_schema():
+    """The schema of a release's trajectory files: KEY_COLUMNS, then TRAJECTORY_SCHEMA."""
+    import pyarrow as pa
+
+    from navcore.io.episode_schema import TRAJECTORY_SCHEMA
+
+    return pa.schema([pa.field(k, pa.string(), nullable=False) for k in KEY_COLUMNS] + list(TRAJECTORY_SCHEMA))
 
 
 def episodes_file(task: str, split: str, scene_id: str) -> str:
-    return f"episodes/task={task}/split={split}/scene_id={scene_id}/part-0.parquet"
+    return f"episodes/{task}/{split}/{scene_id}.parquet"
 
 
 def trajectories_file(task: str, split: str, scene_id: str) -> str:
-    return f"trajectories/task={task}/split={split}/scene_id={scene_id}/part-0.parquet"
+    return f"trajectories/{task}/{split}/{scene_id}.parquet"
+
+
+def table_keys(rel: str) -> dict[str, str] | None:
+    """{task, split, scene_id} of a release table file's path (`episodes/...` or `trajectories/...`,
+    relative to the release), None when the path is not one."""
+    parts = Path(rel).parts
+    if len(parts) != 4 or parts[0] not in ("episodes", "trajectories") or not parts[3].endswith(".parquet"):
+        return None
+    return {"task": parts[1], "split": parts[2], "scene_id": parts[3][:-len(".parquet")]}
 
 
 def type_name(t) -> str:

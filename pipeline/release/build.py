@@ -29,26 +29,26 @@ from omegaconf import OmegaConf
 
 from navcore.io import jsonio
 from navcore.io.atomic import atomic_path
-from navcore.io.episode_schema import TRAJECTORY_SCHEMA
 from navcore.io.licences import PROJECT_LICENSE, redistributable
 from navcore.io.release import (
     CARD,
-    FOLDER_COLUMNS,
+    KEY_COLUMNS,
     MANIFEST,
     MANIFEST_DIGEST,
     NOTES,
     RELEASE_JSON,
     SCENES,
     episodes_file,
-    for_release,
     parse_version,
     read_manifest,
     read_release_json,
     release_episode_schema,
+    release_trajectory_schema,
     schema_fields,
     sha256_file,
     trajectories_file,
     walk_files,
+    with_keys,
     write_manifest,
 )
 from navcore.io.stamps import build_time
@@ -144,45 +144,32 @@ class Builder:
             self.scene_files[scene_id].append(rel)
 
     # -- one scene ---------------------------------------------------------------------------------
-    def write_split(self, task: str, split: str, sid: str, episodes: pa.Table, trajectories) -> None:
-        """One split's episodes of a (task, scene), written without the columns their folder names
-        (for_release), and their expert steps: written when `trajectories` is a table (the split's
-        rows are picked from it), hard linked when it is the path of the scene's whole file."""
+    def write_split(self, task: str, split: str, sid: str, episodes: pa.Table, trajectories: pa.Table) -> None:
+        """One split's episodes of a (task, scene) and their expert steps (the split's rows of the
+        scene's `trajectories`), each file with its KEY_COLUMNS (navcore.io.release)."""
         from navcore.io.episode_schema import TRAJECTORY_WRITE
 
-        self.write_table(episodes_file(task, split, sid), for_release(episodes), sid)
-        if isinstance(trajectories, pa.Table):
-            self.write_table(trajectories_file(task, split, sid),
-                             trajectories.filter(pc.is_in(trajectories["episode_id"], value_set=episodes["episode_id"])),
-                             sid, **TRAJECTORY_WRITE)
-        else:
-            self.link(trajectories_file(task, split, sid), trajectories, sid)
+        self.write_table(episodes_file(task, split, sid), with_keys(episodes, task, split, sid), sid)
+        steps = trajectories.filter(pc.is_in(trajectories["episode_id"], value_set=episodes["episode_id"]))
+        options = {**TRAJECTORY_WRITE, "use_dictionary": [*TRAJECTORY_WRITE["use_dictionary"], *KEY_COLUMNS]}
+        self.write_table(trajectories_file(task, split, sid), with_keys(steps, task, split, sid), sid, **options)
 
     def add_scene(self, scene, eval_ids: dict[str, set[str]], redistributable: bool = True) -> None:
         cat, sid = self.catalog, scene.scene_id
         counts = {}
         for task, ds in cat.find("episodes", scene).items():
             ep = ds.load()
-            tr_ds = cat.dataset("trajectories", scene, task=task)
-            tr = None  # the task's trajectories, read once when a file has to be written
-            splits = sorted(set(ep["split"].to_pylist()))
-            for split in splits:
-                if len(splits) == 1:
-                    part = ep
-                    self.write_split(task, split, sid, part, tr_ds.path)
-                else:
-                    part = ep.filter(pc.equal(ep["split"], split))
-                    tr = tr if tr is not None else tr_ds.load()
-                    self.write_split(task, split, sid, part, tr)
+            tr = cat.dataset("trajectories", scene, task=task).load()
+            for split in sorted(set(ep["split"].to_pylist())):
+                part = ep.filter(pc.equal(ep["split"], split))
+                self.write_split(task, split, sid, part, tr)
                 self.stats.add(task, split, scene.group, part)
                 counts[f"{task}/{split}"] = part.num_rows
             chosen = eval_ids.get(task)
             if chosen:
                 name = self.rcfg.eval_set.name
                 part = ep.filter(pc.is_in(ep["episode_id"], value_set=pa.array(sorted(chosen))))
-                part = part.set_column(part.schema.get_field_index("split"), "split",
-                                       pa.array([name] * part.num_rows, pa.string()))
-                self.write_split(task, name, sid, part, tr if tr is not None else tr_ds.load())
+                self.write_split(task, name, sid, part, tr)
                 self.stats.add(task, name, scene.group, part, total=False)
                 counts[f"{task}/{name}"] = part.num_rows
         inst = cat.dataset("instances", scene)
@@ -352,8 +339,9 @@ def build_release(cfg, out: Path | None = None, console=None) -> dict:
             "counts": b.stats.counts(),
             "eval_set": {"name": es.name, "size": es.size, "proportions": es.proportions,
                          "from_splits": list(es.from_splits), "per_task": eval_report},
-            "schemas": {"episodes": schema_fields(release_episode_schema()), "trajectories": schema_fields(TRAJECTORY_SCHEMA)},
-            "folder_columns": {"episodes": ["task", *FOLDER_COLUMNS, "scene_id"], "trajectories": ["task", "split", "scene_id"]},
+            "schemas": {"episodes": schema_fields(release_episode_schema()),
+                        "trajectories": schema_fields(release_trajectory_schema())},
+            "key_columns": list(KEY_COLUMNS),  # in every episode and trajectory file, equal to its path's
             "previous": None,
             "licence": PROJECT_LICENSE,
             "manifest_digest": MANIFEST_DIGEST,

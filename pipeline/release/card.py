@@ -11,6 +11,7 @@ import yaml
 
 from navcore.io.episode_schema import field_table
 from navcore.io.licences import PROJECT_LICENSE
+from navcore.io.release import KEY_COLUMNS
 
 SCENES_SCHEMA = pa.schema([
     ("scene_id", pa.string()), ("name", pa.string()), ("group", pa.string()), ("format", pa.string()),
@@ -68,7 +69,7 @@ def front_matter(info: dict, rcfg) -> dict:
     for task, splits in counts.items():
         for kind, folder in (("", "episodes"), ("_trajectories", "trajectories")):
             configs.append({"config_name": f"{task}{kind}",
-                            "data_files": [{"split": sp, "path": f"{folder}/task={task}/split={sp}/*/*.parquet"}
+                            "data_files": [{"split": sp, "path": f"{folder}/{task}/{sp}/*.parquet"}
                                            for sp in splits]})
         dataset_info.append({"config_name": task, "splits": [{"name": sp, "num_examples": n} for sp, n in splits.items()]})
     lic = {s["license"] or "unknown" for s in info["scene_rows"]} | {PROJECT_LICENSE}
@@ -113,21 +114,24 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
           f"created {info['created']}. Every file is listed with its sha256 in `MANIFEST.tsv` "
           "(whose own digest is `MANIFEST.tsv.sha256`); `navarena verify-release <folder>` checks a downloaded copy "
           "and names every damaged file.", "",
-          "## Loading", "", "```python",
+          "## Loading", "",
+          "Every episode and trajectory file holds `task`, `split` and `scene_id` as columns, equal to its path "
+          "`{episodes,trajectories}/<task>/<split>/<scene_id>.parquet`. An episode is unique by "
+          "(`task`, `split`, `scene_id`, `episode_id`) across the release (`episode_id` alone repeats across "
+          f"scenes; the evaluation set's split `{info['eval_set']['name']}` repeats test episodes under its own name); "
+          "its expert steps join on those four columns.", "", "```python",
           "import datasets",
           "episodes = datasets.load_dataset(\"<this folder>\", \"pointnav\", split=\"train\")",
           "steps = datasets.load_dataset(\"<this folder>\", \"pointnav_trajectories\", split=\"train\")",
+          "joined = steps.to_pandas().merge(episodes.to_pandas(), on=[\"task\", \"split\", \"scene_id\", \"episode_id\"])",
           "",
-          "import pyarrow.dataset as ds  # hive partitions task=, split=, scene_id= become columns",
-          "table = ds.dataset(\"<this folder>/episodes\", format=\"parquet\", partitioning=\"hive\").to_table()",
-          "",
-          "# pandas: expert steps joined to their episodes (episode_id is unique within a task and scene)",
-          "eps = table.to_pandas()",
-          "steps = ds.dataset(\"<this folder>/trajectories\", format=\"parquet\", partitioning=\"hive\").to_table().to_pandas()",
+          "import pandas as pd  # every task, split and scene at once",
+          "eps = pd.read_parquet(\"<this folder>/episodes\")",
+          "steps = pd.read_parquet(\"<this folder>/trajectories/pointnav\")",
           "joined = steps.merge(eps, on=[\"task\", \"split\", \"scene_id\", \"episode_id\"])",
           "",
-          "import pandas as pd  # or straight from the folders (task, split, scene_id as categories)",
-          "eps = pd.read_parquet(\"<this folder>/episodes\")",
+          "import pyarrow.dataset as ds",
+          "table = ds.dataset(\"<this folder>/episodes\", format=\"parquet\").to_table(filter=ds.field(\"split\") == \"train\")",
           "",
           "import mlcroissant as mlc",
           "records = mlc.Dataset(jsonld=\"<this folder>/croissant.json\").records(\"pointnav\")",
@@ -135,14 +139,15 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
           "No rendered frames ship: the scenes' Gaussians do (`assets/`), and `navarena render-episodes` or the "
           "evaluation environment renders any view of an episode (ImageNav goal views ship in `goal_images/` only "
           "when the data root was made with `goal_images.enabled=true`).", "",
-          "Schemas: `release.json` (`schemas`, and `folder_columns`: the columns the folders hold), from "
+          "Schemas: `release.json` (`schemas`; `key_columns`: the columns every table file holds), from "
           "`navcore/io/episode_schema.py`. Frame: the scene's aligned "
           "frame (z up, metres, floor at z = 0); headings are yaw about +z.", "",
-          "## Fields", "", "Episodes (`episodes/`, one row per episode; the folders add `task`, `split` and "
-          "`scene_id`: a release's files leave the `split` column of the schema out, its folder holds it, so that "
-          "any Parquet reader takes the folder as one table):", "", *field_table("episodes"), "",
-          "Expert trajectories (`trajectories/`, one row per 20 Hz step; the same folders):", "",
-          *field_table("trajectories"), ""]
+          "## Fields", "", "Every episode and trajectory file starts with the key columns `task` (pointnav | imagenav | "
+          "objectnav), `split` and `scene_id` (string; equal to the file's path), then:", "",
+          "Episodes (`episodes/<task>/<split>/<scene_id>.parquet`, one row per episode):", "",
+          *field_table("episodes", skip=KEY_COLUMNS), "",
+          "Expert trajectories (`trajectories/<task>/<split>/<scene_id>.parquet`, one row per 20 Hz step):", "",
+          *field_table("trajectories", skip=KEY_COLUMNS), ""]
     L += ["## Statistics", "", "Per task (the layout of the paper's Table 4; every split except the evaluation set, "
           "whose episodes repeat test episodes):", "", *_table(stats.rows(), None), ""]
     for by, title in (("split", "Per split"), ("group", "Per source group"), ("difficulty", "Per difficulty")):

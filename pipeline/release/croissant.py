@@ -12,8 +12,7 @@ from pathlib import Path
 
 import pyarrow as pa
 
-from navcore.io.episode_schema import TRAJECTORY_SCHEMA
-from navcore.io.release import CARD, CROISSANT, RELEASE_JSON, SCENES, release_episode_schema, sha256_file
+from navcore.io.release import CARD, CROISSANT, RELEASE_JSON, SCENES, release_episode_schema, release_trajectory_schema, sha256_file
 from pipeline.release.card import citation
 
 
@@ -33,10 +32,6 @@ def _data_type(t: pa.DataType):
     raise TypeError(f"no Croissant data type for {t}")
 
 
-FROM_PATH = ("split", "scene_id")
-"""Fields of every record read from the file's path (its `split=` and `scene_id=` folders), not a column."""
-
-
 def _fields(record: str, file_set: str, schema: pa.Schema) -> list:
     import mlcroissant as mlc
 
@@ -46,11 +41,6 @@ def _fields(record: str, file_set: str, schema: pa.Schema) -> list:
         out.append(mlc.Field(id=f"{record}/{f.name}", name=f.name, data_types=[_data_type(f.type)],
                              is_array=arr or None, array_shape="-1" if arr else None,
                              source=mlc.Source(file_set=file_set, extract=mlc.Extract(column=f.name))))
-    for name in FROM_PATH:
-        out.append(mlc.Field(id=f"{record}/{name}", name=name, data_types=[mlc.DataType.TEXT],
-                             description=f"from the file's {name}= folder",
-                             source=mlc.Source(file_set=file_set, extract=mlc.Extract(file_property=mlc.FileProperty.fullpath),
-                                               transforms=[mlc.Transform(regex=f"^.*/{name}=([^/]+)/.*$")])))
     return out
 
 
@@ -64,9 +54,9 @@ def metadata(root: Path, info: dict, rcfg):
                                        sha256=sha256_file(root / name)))
     sets, records = [], []
     for task in info["counts"]:
-        for kind, schema in (("episodes", release_episode_schema()), ("trajectories", TRAJECTORY_SCHEMA)):
+        for kind, schema in (("episodes", release_episode_schema()), ("trajectories", release_trajectory_schema())):
             fs = f"{task}-{kind}-files"
-            sets.append(mlc.FileSet(id=fs, name=fs, includes=[f"{kind}/task={task}/*/*/*.parquet"],
+            sets.append(mlc.FileSet(id=fs, name=fs, includes=[f"{kind}/{task}/*/*.parquet"],
                                     encoding_formats=["application/x-parquet"]))
             rid = task if kind == "episodes" else f"{task}_trajectories"
             records.append(mlc.RecordSet(id=rid, name=rid, fields=_fields(rid, fs, schema),
