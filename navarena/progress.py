@@ -7,6 +7,8 @@ from __future__ import annotations
 import sys
 import time
 
+from navcore.io.progress_log import duration
+
 
 class ToolProgress:
     """with ToolProgress("export-lerobot", total_episodes, quiet) as p: p.advance(frames=n) per item."""
@@ -51,11 +53,7 @@ class ToolProgress:
         now = time.perf_counter()
         self.logged = now
         dt = now - self.t0
-        left = "" if final or not self.done else f", about {_duration(dt / self.done * max(0, self.total - self.done))} left"
+        left = "" if final or not self.done else f", about {duration(dt / self.done * max(0, self.total - self.done))} left"
         print(f"{self.what}: {self.done}/{self.total if not final else self.done} {self.unit}, {self.frames:,} frames "
-              f"({self.frames / max(dt, 1e-9):.1f}/s), {_duration(dt)} elapsed{left}{' (done)' if final else ''}",
+              f"({self.frames / max(dt, 1e-9):.1f}/s), {duration(dt)} elapsed{left}{' (done)' if final else ''}",
               file=sys.stderr, flush=True)
-
-
-def _duration(s: float) -> str:
-    return f"{s:.0f} s" if s < 120 else f"{s / 60:.1f} min" if s < 7200 else f"{s / 3600:.1f} h"

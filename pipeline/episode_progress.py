@@ -10,7 +10,7 @@ import threading
 import time
 from pathlib import Path
 
-from navcore.io.progress_log import read_log
+from navcore.io.progress_log import duration, read_log
 
 
 class EpisodeWatcher:
@@ -20,9 +20,11 @@ class EpisodeWatcher:
     the rate is the items' `rate` field summed per second, in `unit`s (steps, views)."""
 
     def __init__(self, progress, folder: Path, since: float, period: float = 1.0, log_each: bool = True,
-                 name: str = "episodes", count: str | None = None, rate: str = "steps", unit: str = "steps"):
+                 name: str = "episodes", count: str | None = None, rate: str = "steps", unit: str = "steps",
+                 log_every_s: float = 30.0):
         self.progress, self.folder, self.since, self.period, self.log_each = progress, Path(folder), since, period, log_each
         self.name, self.count, self.rate_key, self.unit = name, count, rate, unit
+        self.log_every, self.logged = log_every_s, time.monotonic()
         self.seen: dict[Path, tuple[int, int, int]] = {}  # log -> (its header's total, done so far, item lines read)
         self.steps = 0
         self.task = None
@@ -74,6 +76,12 @@ class EpisodeWatcher:
         if self.task is None:
             self.task = self.progress.add_task(self.name, total=total, rate=rate, unit=self.unit)
         self.progress.update(self.task, total=total, completed=done, rate=rate)
+        now = time.monotonic()
+        if not self.progress.console.is_terminal and done < total and now - self.logged >= self.log_every:
+            # without a terminal (a log, a batch job) no bar redraws: a plain line now and then
+            self.logged = now
+            left = f", about {duration((total - done) / rate)} left" if rate > 0 else ""
+            self.progress.console.print(f"{self.name}: {done:,}/{total:,} ({rate:,.1f} {self.unit}/s){left}")
 
 
 def line(header: dict, it: dict) -> str:

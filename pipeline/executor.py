@@ -83,6 +83,11 @@ def execute(cfg, console: Console | None = None) -> dict:
         results.append(r)
         if r["status"] == "failed":
             progress.console.print(f"[red]failed[/] {r['stage']} {r['scene_id']} ({r['scene']}): {r['error']}")
+        elif not progress.console.is_terminal and r["status"] not in ("n/a", "cached"):
+            # a log without a terminal gets no bar redrawn: a line per (stage, scene) task run instead
+            took = f", {r['duration_s']:.0f} s" if isinstance(r.get("duration_s"), (int, float)) else ""
+            progress.console.print(f"[{len(results)}/{len(scenes) * len(stages)}] {r['status']} {r['stage']} "
+                                   f"{r['scene_id']} ({r['scene']}){took}")
         progress.advance(bar)
 
     watchers = []  # entered with the progress display

@@ -1,5 +1,6 @@
 """The pipeline: outputs, markers, reruns, config changes, failures, determinism, Dask."""
 import json
+import re
 import os
 from pathlib import Path
 
@@ -34,10 +35,14 @@ def costmap_root(tmp_path_factory, make_cfg, copy_data_root):
     return copy
 
 
-def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg):
+def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg, capsys):
     cfg = make_cfg(tmp_path, "asset.write_compressed_splat=true")
     s1 = execute(cfg)
     assert set(statuses(s1).values()) == {"done"} and not s1["failures"]
+    # without a terminal (here: captured) no bar redraws: a line per (stage, scene) task as it ends
+    out = capsys.readouterr().out
+    n = len([r for r in s1["results"] if ":" not in r["stage"]])  # (stage, scene) tasks, not dataset-level steps
+    assert re.search(rf"\[\d+/{n}\] done costmap \w+ \(\w+\), \d+ s", out), out[-2000:]
     sid = s1["results"][0]["scene_id"]
     asset = next((tmp_path / "09_assets" / "synthetic").iterdir())
     man = json.loads((asset / "manifest.json").read_text())

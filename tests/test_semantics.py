@@ -1,5 +1,6 @@
 """Semantic lifting core: back-projection, voting rules, instances from multi-view masks."""
 import math
+import re
 
 import numpy as np
 import pytest
@@ -322,12 +323,15 @@ def test_semantics_logs_its_views_and_the_console_counts_them(episode_run, tmp_p
     for n in (4, 4):
         a.item(views=n)
     b.item(views=6)
-    progress = Progress(console=Console(file=open(tmp_path / "console.txt", "w")))
+    console_file = open(tmp_path / "console.txt", "w")
+    progress = Progress(console=Console(file=console_file, width=200))  # a file: no terminal
     w = EpisodeWatcher(progress, folder, since=0, log_each=False, name="semantics views", count="views",
-                       rate="views", unit="views")
+                       rate="views", unit="views", log_every_s=0)
     w.poll()
     task = progress.tasks[0]
     assert (task.description, task.total, task.completed, task.fields["unit"]) == ("semantics views", 16, 14, "views")
+    console_file.flush()  # without a terminal the watcher prints a plain line: done / total, rate, time left
+    assert re.search(r"semantics views: 14/16 \([\d,.]+ views/s\), about \d+ s left", (tmp_path / "console.txt").read_text())
     a.item(views=2)
     w.poll()
     assert progress.tasks[0].completed == 16 and w.steps == 16

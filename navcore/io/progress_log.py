@@ -15,6 +15,11 @@ from pathlib import Path
 from navcore.io import jsonio
 
 
+def duration(s: float) -> str:
+    """Seconds as a progress line says them: 45 s, 3.5 min, 2.1 h."""
+    return f"{s:.0f} s" if s < 120 else f"{s / 60:.1f} min" if s < 7200 else f"{s / 3600:.1f} h"
+
+
 class ProgressLog:
     def __init__(self, path: str | Path):
         self.path = Path(path)
