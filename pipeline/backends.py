@@ -10,6 +10,7 @@ task also asks for its stage's memory_gb (capped at a worker's memory).
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import subprocess
@@ -246,6 +247,7 @@ def run_on_dask(cfg, catalog: Catalog, chain, record, console: Console, run: dic
 
     dask: dict = {}
     run_id = (run or new_run())["id"]
+    interrupted = False
 
     def submit(st, scene, h, force, ups):
         # a task whose inputs are settled and whose marker is current is answered here: a finished
@@ -280,8 +282,19 @@ def run_on_dask(cfg, catalog: Catalog, chain, record, console: Console, run: dic
                              f"executor.memory_limit={cfg.executor.memory_limit}; or killed from outside): {e}")
                 r = {"stage": name, "scene_id": sc.scene_id, "scene": sc.name, "status": "failed", "error": error}
             record(r)
+    except KeyboardInterrupt:
+        interrupted = True
+        raise
     finally:
-        if dask:
+        if dask and interrupted:
+            # Ctrl-C (or SIGINT to this process alone, whose workers go on computing): stop the
+            # workers without waiting for their tasks, whose outputs are written whole or not at all
+            with contextlib.suppress(Exception):
+                dask["client"].close(timeout=5)
+            if dask["cluster"] is not None:
+                with contextlib.suppress(Exception):
+                    dask["cluster"].close(timeout=10)
+        elif dask:
             dask["client"].close()
             if dask["cluster"] is not None:
                 dask["cluster"].close()

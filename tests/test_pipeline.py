@@ -1,7 +1,7 @@
 """The pipeline: outputs, markers, reruns, config changes, failures, determinism, Dask."""
 import json
-import re
 import os
+import re
 from pathlib import Path
 
 import numpy as np
