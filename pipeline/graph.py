@@ -47,6 +47,9 @@ class Stage:
             worker runs at most as many tasks at once as its memory holds).
         storage: (section, key, default) of config keys that decide only what this stage keeps
             on disk beside its outputs, never what a later stage reads (`config_hashes`).
+        added: (section, key, default) of config keys added to the stage after data roots were made
+            with it: left out of its hash while at their default, so that those roots stay valid
+            (a value other than the default is hashed: the stage and what follows recompute).
         package: its package stages/<package>/ when it shares one with another stage (None: its name).
         part_of: selecting that stage (`stages=[episodes]`) selects this one too: one user-facing
             step the graph splits so that each half waits only for what it needs.
@@ -64,6 +67,7 @@ class Stage:
     gpu: bool = False
     memory_gb: float = 1.0
     storage: tuple[tuple[str, str, object], ...] = ()
+    added: tuple[tuple[str, str, object], ...] = ()
     package: str | None = None
     part_of: str | None = None
 
@@ -83,7 +87,7 @@ STAGES: tuple[Stage, ...] = (
           version="9", inputs=episodes.hashed_inputs),
     Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",), gpu=True, memory_gb=2.0),
     Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), version="3", gpu=True,
-          memory_gb=3.0),
+          memory_gb=3.0, added=semantics.ADDED_KEYS),
     Stage("asset", asset.run, ("costmap", "semantics"), ("asset",), version="4"),
     Stage("objectnav_episodes", episodes.run_objects, ("costmap", "semantics", "screen"),
           ("episodes", "planner", "embodiment", "screen"), version="9", inputs=episodes.hashed_object_inputs,
@@ -156,6 +160,9 @@ def stage_config(cfg, name: str) -> dict:
         for sec, key, _ in storage:
             if sec == k and isinstance(part[k], dict):
                 part[k].pop(key, None)
+        for sec, key, default in s.added:
+            if sec == k and isinstance(part[k], dict) and part[k].get(key) == default:
+                part[k].pop(key)
     if s.inputs and (extra := s.inputs(cfg)) is not None:  # None: nothing read beyond the sections
         part["_inputs"] = extra
     return part

@@ -119,6 +119,26 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg, capsys)
     assert latest["counts"]["align"] == {"done": 1}
 
 
+def test_keys_added_to_a_stage_leave_its_hash_at_their_defaults(tmp_path, make_cfg):
+    """Stage.added (semantics.view_selection, semantics.coverage): a root made before the keys
+    existed stays valid at their defaults; another value recomputes the stage and what follows."""
+    from omegaconf import OmegaConf
+
+    from pipeline.graph import config_hashes
+
+    cfg = make_cfg(tmp_path)
+    old = cfg.copy()  # the config as before the keys existed
+    sem = OmegaConf.to_container(old.semantics)
+    del sem["view_selection"], sem["coverage"]
+    OmegaConf.set_struct(old, False)
+    old._set_value({**{k: old[k] for k in old}, "semantics": OmegaConf.create(sem)})
+    h, h_old = config_hashes(cfg), config_hashes(old)
+    assert h == h_old
+    h_cov = config_hashes(make_cfg(tmp_path, "semantics.view_selection=coverage"))
+    changed = {k for k in h if h[k] != h_cov[k]}
+    assert "semantics" in changed and "costmap" not in changed and "objectnav_episodes" in changed
+
+
 def test_voxel_opacity_field_is_a_storage_key(tmp_path, make_cfg, costmap_root):
     # 02_voxels/A is kept only with voxelize.store_opacity=true; V (all any later stage reads) is
     # the same, so voxelize alone re-runs and no later stage's hash changes; the default leaves

@@ -44,7 +44,8 @@ def per_category(pred: list[dict], truth: list[dict], categories, tol: float) ->
 
 def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int = 320, model: Path | None = None,
                transfer_radius: float = 0.05, spacing: float | None = None, yaw_step: float | None = None,
-               camera_height: float | None = None, pitch: float | None = None, robot_camera: bool = False) -> dict:
+               camera_height: float | None = None, pitch: float | None = None, robot_camera: bool = False,
+               views: str = "coverage", overrides: tuple[str, ...] = ()) -> dict:
     """The measures of the module doc on the scan (or, with `model`, on a 3DGS trained in the scan's
     frame, whose Gaussians take the instance of the nearest scanned point within transfer_radius)."""
     from omegaconf import OmegaConf
@@ -60,7 +61,7 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
         t0 = time.perf_counter()
         (Path(tmp) / "scan").mkdir()
         (Path(tmp) / "model").mkdir()
-        catalog, scene, cfg = prepare_scan(scan, Path(tmp) / "scan", scan.name)
+        catalog, scene, cfg = prepare_scan(scan, Path(tmp) / "scan", scan.name, overrides=overrides)
         scfg = OmegaConf.to_object(cfg.semantics)
         scfg.width, scfg.height, scfg.poses = width, height, "free_space"
         scfg.segmenter = "detector"  # its pose density (detector.spacing, detector.yaw_step_deg) unless given
@@ -97,7 +98,10 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
         prompt_to_cat = {scfg.prompt(c): c for c in scfg.categories}
         renderer = Renderer(gs, scfg.renderer)
         oracle = OracleSegmenter(renderer, ids, gt_cats, "none", 0)
-        c2w, ks, _ = covering_cameras(scene, catalog, scfg, emb, t, cm)
+        coverage: dict = {}
+        t_sel = time.perf_counter()
+        c2w, ks, _ = covering_cameras(scene, catalog, scfg, emb, t, cm, gs if views == "coverage" else None, coverage)
+        select_s = time.perf_counter() - t_sel
         all_cats = sorted(set(COCO_TO_GOAL.values()))
         dcfg = DetectorConfig(categories=all_cats, confidence={}, default_confidence=min(THRESHOLDS), input_size=input_size)
         det = DetectorSegmenter(dcfg, {c: scfg.prompt(c) for c in all_cats})
@@ -129,9 +133,11 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
                "spacing_m": scfg.detector.spacing,
                "yaw_step_deg": scfg.detector.yaw_step_deg,
                "gaussians": int(renderer.num_gaussians), "views": len(views), "input": input_size,
+               "view_selection": views, "coverage": coverage,
                "resolution": [width, height], "renderer": renderer.backend, "tolerance_m": tol,
                "ground_truth": {c: sum(1 for x in truth if x["category"] == c) for c in all_cats},
-               "seconds": {"pipeline_to_costmap": round(prep_s, 1), "render": round(render_s, 1),
+               "seconds": {"pipeline_to_costmap": round(prep_s, 1), "view_selection": round(select_s, 1),
+                           "render": round(render_s, 1),
                            "detect": round(detect_s, 1), "detect_per_view": round(detect_s / max(len(views), 1), 4)},
                "boxes": {}, "lifted": {}}
         for cat in all_cats:

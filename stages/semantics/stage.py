@@ -10,7 +10,7 @@ source "model_predicted"), which the episodes stage's ObjectNav and the asset's 
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import asdict, replace
 
 import numpy as np
 
@@ -18,11 +18,14 @@ from navcore.gaussians.cameras import CAMERA_FILE, camera_file, read_cameras
 from navcore.instances import labels_to_table, shipped_instances
 from navcore.io.progress_log import ProgressLog
 from navcore.render.camera import camera_to_world, intrinsics
-from stages.semantics.config import SemanticsConfig
+from stages.semantics.config import CoverageConfig, SemanticsConfig
 from stages.semantics.lifting import lift
-from stages.semantics.poses import free_space_poses
+from stages.semantics.poses import coverage_poses, free_space_poses, surface_targets
 from stages.semantics.segmenters import SEGMENTERS, SegmenterUnavailable
 
+ADDED_KEYS = (("semantics", "view_selection", "grid"), ("semantics", "coverage", asdict(CoverageConfig())))
+"""Keys added after data roots were made with this stage: at their defaults they leave its hash
+as it was (pipeline.graph.Stage.added)."""
 
 def spread(n: int, k: int) -> np.ndarray:
     """Indices of k of n items spread evenly (all when k is 0 or >= n)."""
@@ -31,8 +34,12 @@ def spread(n: int, k: int) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, k).round().astype(int))
 
 
-def covering_cameras(scene, catalog, scfg: SemanticsConfig, emb, to_aligned: np.ndarray, costmap=None):
-    """(camera -> world [M, 4, 4] in the aligned frame, Ks [M, 3, 3], "source" | "free_space")."""
+def covering_cameras(scene, catalog, scfg: SemanticsConfig, emb, to_aligned: np.ndarray, costmap=None, gs=None,
+                     report: dict | None = None):
+    """(camera -> world [M, 4, 4] in the aligned frame, Ks [M, 3, 3], "source" | "free_space" |
+    "free_space_coverage"). With the aligned Gaussians `gs` and view_selection=coverage, the
+    free-space lattice is thinned to the views that cover the scene's surfaces (its figures into
+    `report`)."""
     cams = camera_file(scene, catalog) if scfg.poses in ("auto", "source") else None
     if scfg.poses == "source" and cams is None:
         raise FileNotFoundError(f"scene {scene.scene_id!r} ({scene.name}): semantics.poses=source but the scene has "
@@ -50,10 +57,20 @@ def covering_cameras(scene, catalog, scfg: SemanticsConfig, emb, to_aligned: np.
             spacing, yaw_step = d.spacing, d.yaw_step_deg
             height = height if d.camera_height is None else d.camera_height
             pitch = pitch if d.camera_pitch_deg is None else d.camera_pitch_deg
-        poses = free_space_poses(costmap, valid, spacing, yaw_step)
+        poses, kind = free_space_poses(costmap, valid, spacing, yaw_step), "free_space"
+        if scfg.view_selection not in ("coverage", "grid"):
+            raise ValueError(f"semantics.view_selection={scfg.view_selection!r}; choose coverage | grid")
+        if scfg.view_selection == "coverage" and gs is not None and len(poses):
+            cov = scfg.coverage
+            targets = surface_targets(gs.means, gs.alphas, cov.cell, cov.z_min, cov.z_max)
+            poses, rep = coverage_poses(poses, targets, height, pitch, emb.hfov_deg, cov.k, cov.sectors, cov.max_range,
+                                        cov.cell, cov.min_gain)
+            kind = "free_space_coverage"
+            if report is not None:
+                report.update(rep)
         c2w = np.stack([camera_to_world(x, y, yaw, height, pitch) for x, y, yaw in poses]) \
             if len(poses) else np.zeros((0, 4, 4))
-        ks, kind = np.repeat(intrinsics(scfg.width, scfg.height, emb.hfov_deg)[None], len(c2w), 0), "free_space"
+        ks = np.repeat(intrinsics(scfg.width, scfg.height, emb.hfov_deg)[None], len(c2w), 0)
     keep = spread(len(c2w), scfg.max_views)
     return c2w[keep], ks[keep], kind
 
@@ -162,7 +179,10 @@ def run(scene, cfg, catalog) -> dict:
         return {"outputs": [str(out.path)], "instances": len(cats), "labels_from": origin, "source": "ground_truth",
                 "by_category": {c: cats.count(c) for c in sorted(set(cats))}, "labels": report.as_dict(),
                 "goal_mapping": report.goal_mapping, **({"warnings": report.warnings} if report.warnings else {})}
-    c2w, ks, kind = covering_cameras(scene, catalog, scfg, emb, np.asarray(attrs["source_to_aligned"]), cm)
+    coverage: dict = {}
+    t_views = time.perf_counter()
+    c2w, ks, kind = covering_cameras(scene, catalog, scfg, emb, np.asarray(attrs["source_to_aligned"]), cm, gs, coverage)
+    view_seconds = time.perf_counter() - t_views
     if not len(c2w):
         raise ValueError(f"scene {scene.scene_id!r} ({scene.name}): no covering poses (no free costmap cells)")
     renderer = Renderer(gs, scfg.renderer)
@@ -190,4 +210,5 @@ def run(scene, cfg, catalog) -> dict:
         counts[lab["category"]] = counts.get(lab["category"], 0) + 1
     return {"outputs": [str(out.path)], "views": len(c2w), "poses": kind, "renderer": renderer.backend,
             "segmenter": scfg.segmenter, "instances": len(labels), "by_category": dict(sorted(counts.items())),
-            "seconds": {k: round(v, 3) for k, v in timings.items()}}
+            **({"coverage": coverage} if coverage else {}),
+            "seconds": {"view_selection": round(view_seconds, 3), **{k: round(v, 3) for k, v in timings.items()}}}
