@@ -831,3 +831,13 @@ def test_taut_path_wraps_a_disk_like_the_exact_geodesic():
     assert lo <= length <= hi, (length, lo, hi)
     ref = VisibilityReference(cm, valid).distance(s, g)
     assert lo <= ref <= hi, (ref, lo, hi)
+
+
+def test_first_episodes_benchmark_watches_the_layouts_paths(episode_run):
+    """benchmarks.usage.first_episodes times the outputs a user waits for by the data layout's own
+    paths: on a finished root every one of them is found."""
+    from benchmarks.usage.first_episodes import patterns
+
+    root = episode_run[0]
+    for name, pattern in patterns():
+        assert "{" not in pattern and list(root.glob(pattern)), (name, pattern)

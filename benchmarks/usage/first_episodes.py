@@ -24,21 +24,38 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
 
-WATCHED = (  # what a user looks for, in the order it is made (data root layout: navcore/io/layout.yaml)
-    ("screening picture", "03_costmaps/screen/*.png"),
-    ("costmap picture", "03_costmaps/*.png"),
-    ("pointnav episodes", "05_episodes/task=pointnav/*/part-0.parquet"),
-    ("imagenav episodes", "05_episodes/task=imagenav/*/part-0.parquet"),
-    ("objectnav episodes", "05_episodes/task=objectnav/*/part-0.parquet"),
+WATCHED = (  # what a user looks for, in the order it is made: (name, layout entry, its placeholders)
+    ("costmap picture", "costmap_picture", {}),
+    ("screening picture", "quality_picture", {}),
+    ("pointnav episodes", "episodes", {"task": "pointnav"}),
+    ("imagenav episodes", "episodes", {"task": "imagenav"}),
+    ("objectnav episodes", "episodes", {"task": "objectnav"}),
 )
+
+
+def patterns() -> list[tuple[str, str]]:
+    """(name, glob under the data root) of WATCHED, from the data layout (navcore/io/layout.yaml)."""
+    import yaml
+
+    from navcore.io.catalog import LAYOUT_FILE
+
+    layout = yaml.safe_load(LAYOUT_FILE.read_text())
+    out = []
+    for name, entry, values in WATCHED:
+        path = layout[entry]["path"].replace("{root}/", "")
+        for key, value in {**values, "scene_id": "*"}.items():
+            path = path.replace("{" + key + "}", value)
+        out.append((name, path))
+    return out
 
 
 def watch(root: Path, proc: subprocess.Popen, scenes: int, until: str, limit: float, t0: float) -> dict[str, float]:
     """Seconds from t0 at which each WATCHED output existed for every scene, polling once a second;
     stops the run (SIGINT, then SIGTERM) when `until` has appeared or at `limit`."""
     seen: dict[str, float] = {}
+    watched = patterns()
     while proc.poll() is None and time.monotonic() - t0 < limit:
-        for name, pattern in WATCHED:
+        for name, pattern in watched:
             if name not in seen and len(list(root.glob(pattern))) >= scenes:
                 seen[name] = round(time.monotonic() - t0, 1)
                 print(f"{seen[name]:8.1f} s  {name}", flush=True)
