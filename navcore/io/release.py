@@ -50,8 +50,9 @@ def parse_version(v: str) -> tuple[int, int, int]:
 KEY_COLUMNS = ("task", "split", "scene_id")
 """Columns every episode and trajectory file of a release holds, equal to its path's
 `{task}/{split}/{scene_id}`: any reader (pandas, pyarrow, polars, duckdb, `datasets`, which adds no
-path columns) gets them from the files themselves. An episode is (task, scene_id, episode_id);
-its expert steps join on those columns. The folders are plain names, not hive `key=value`
+path columns) gets them from the files themselves. An episode is unique by (task, split, scene_id,
+episode_id): episode ids repeat across scenes, and the evaluation set's split repeats test episodes
+under its own name; its expert steps join on those four columns. The folders are plain names, not hive `key=value`
 partitions: a hive folder beside the same column in the file makes readers disagree on its type."""
 
 
@@ -66,7 +67,7 @@ def with_keys(table, task: str, split: str, scene_id: str):
 
 
 def release_episode_schema():
-    """The schema of a release's episode files: KEY_COLUMNS, then EPISODE_SCHEMA less split."""
+    """The schema of a release's episode files: KEY_COLUMNS, then EPISODE_SCHEMA less them (its split)."""
     import pyarrow as pa
 
     from navcore.io.episode_schema import EPISODE_SCHEMA
