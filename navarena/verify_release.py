@@ -158,11 +158,12 @@ def _check_table(path: Path, name: str, kind: str, expected: dict, report: Repor
         report.bad("tables", name, f"schema differs from release.json's {kind} schema (e.g. {diff})")
         return
     report.checked[f"{kind} files"] += 1
-    t = pq.read_table(path, columns=list(KEY_COLUMNS))
-    for col in KEY_COLUMNS:  # the key columns must say what the path says
-        wrong = set(t[col].to_pylist()) - {keys[col]}
+    checks = {**{c: c for c in KEY_COLUMNS}, **({"task_type": "task"} if kind == "episodes" else {})}
+    t = pq.read_table(path, columns=list(checks))
+    for col, key in checks.items():  # the key columns (and an episode's task_type) must say what the path says
+        wrong = {str(v) for v in t[col].to_pylist()} - {keys[key]}
         if wrong:
-            report.bad("tables", name, f"rows of {col} {sorted(wrong)[:3]} in the file of {col} {keys[col]!r}")
+            report.bad("tables", name, f"rows of {col} {sorted(wrong)[:3]} in the file of {key} {keys[key]!r}")
     if kind == "episodes":
         counts[(keys["task"], keys["split"])] += meta.num_rows
         files[(keys["task"], keys["split"])].append(name)

@@ -292,7 +292,7 @@ def _rehash(folder: Path, rel: str) -> None:
     write_manifest(folder / MANIFEST, m)
 
 
-@pytest.mark.parametrize("damage", ["flip", "truncate", "delete", "extra", "schema", "edit"])
+@pytest.mark.parametrize("damage", ["flip", "truncate", "delete", "extra", "schema", "edit", "misplaced", "task"])
 def test_verify_release_names_every_damaged_file(release, tmp_path, damage):
     from navarena.verify_release import verify
 
@@ -320,6 +320,14 @@ def test_verify_release_names_every_damaged_file(release, tmp_path, damage):
         pq.write_table(t, p)
         _rehash(d, rel)  # even with a consistent manifest the schema check names it
         want = "schema differs"
+    elif damage in ("misplaced", "task"):  # rows that say another split (or task) than their file's path
+        t = pq.read_table(p)
+        col = "split" if damage == "misplaced" else "task_type"
+        t = t.set_column(t.schema.get_field_index(col), t.schema.field(col), pa.array(["train" if col == "split" else "imagenav"]
+                                                                                  * t.num_rows, pa.string()))
+        pq.write_table(t, p)
+        _rehash(d, rel)
+        want = "rows of split ['train']" if damage == "misplaced" else "rows of task_type ['imagenav']"
     else:  # an edited episode whose manifest line was updated too: the re-check against the map finds it
         t = pq.read_table(p).to_pandas()
         t.loc[0, "geodesic_distance"] = np.float32(t.loc[0, "geodesic_distance"] * 0.7)
