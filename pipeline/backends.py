@@ -259,7 +259,7 @@ def run_on_dask(cfg, catalog: Catalog, chain, record, console: Console, run: dic
                 return done
         if not dask:
             dask["client"], dask["cluster"], dask["placement"] = dask_client(cfg.executor)
-            if dask["client"].dashboard_link:
+            if cfg.executor.get("dashboard", True) and dask["client"].dashboard_link:  # off: dask still names a link
                 console.print(f"Dask dashboard: {dask['client'].dashboard_link}")
             # the config and the catalog go to every worker once, restarted ones included
             dask["client"].register_plugin(RunContext(run_id, cfg, catalog))
