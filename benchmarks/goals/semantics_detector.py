@@ -45,9 +45,10 @@ def per_category(pred: list[dict], truth: list[dict], categories, tol: float) ->
 def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int = 320, model: Path | None = None,
                transfer_radius: float = 0.05, spacing: float | None = None, yaw_step: float | None = None,
                camera_height: float | None = None, pitch: float | None = None, robot_camera: bool = False,
-               views: str = "coverage", overrides: tuple[str, ...] = ()) -> dict:
+               overrides: tuple[str, ...] = ()) -> dict:
     """The measures of the module doc on the scan (or, with `model`, on a 3DGS trained in the scan's
-    frame, whose Gaussians take the instance of the nearest scanned point within transfer_radius)."""
+    frame, whose Gaussians take the instance of the nearest scanned point within transfer_radius).
+    `overrides`: more config overrides of both runs (e.g. semantics.view_selection=coverage)."""
     from omegaconf import OmegaConf
 
     from navcore.instances import shipped_instances, table_to_labels
@@ -84,7 +85,8 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
 
             from navcore.instances import transform_labels
 
-            catalog, scene, cfg = prepare_scan(model, Path(tmp) / "model", "scannet_trained", fmt=None, group="real_trained")
+            catalog, scene, cfg = prepare_scan(model, Path(tmp) / "model", "scannet_trained", fmt=None, group="real_trained",
+                                               overrides=overrides)
             gm, mattrs = catalog.dataset("aligned", scene).load()
             tm = np.asarray(mattrs["source_to_aligned"])
             to_src = lambda x, tf: (x - tf[:3, 3]) @ np.linalg.inv(tf[:3, :3]).T  # noqa: E731
@@ -100,7 +102,7 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
         oracle = OracleSegmenter(renderer, ids, gt_cats, "none", 0)
         coverage: dict = {}
         t_sel = time.perf_counter()
-        c2w, ks, _ = covering_cameras(scene, catalog, scfg, emb, t, cm, gs if views == "coverage" else None, coverage)
+        c2w, ks, _ = covering_cameras(scene, catalog, scfg, emb, t, cm, gs, coverage)  # semantics.view_selection decides
         select_s = time.perf_counter() - t_sel
         all_cats = sorted(set(COCO_TO_GOAL.values()))
         dcfg = DetectorConfig(categories=all_cats, confidence={}, default_confidence=min(THRESHOLDS), input_size=input_size)
@@ -133,7 +135,7 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
                "spacing_m": scfg.detector.spacing,
                "yaw_step_deg": scfg.detector.yaw_step_deg,
                "gaussians": int(renderer.num_gaussians), "views": len(views), "input": input_size,
-               "view_selection": views, "coverage": coverage,
+               "view_selection": scfg.view_selection, "coverage": coverage,
                "resolution": [width, height], "renderer": renderer.backend, "tolerance_m": tol,
                "ground_truth": {c: sum(1 for x in truth if x["category"] == c) for c in all_cats},
                "seconds": {"pipeline_to_costmap": round(prep_s, 1), "view_selection": round(select_s, 1),

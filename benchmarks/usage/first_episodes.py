@@ -40,13 +40,8 @@ def patterns() -> list[tuple[str, str]]:
     from navcore.io.catalog import LAYOUT_FILE
 
     layout = yaml.safe_load(LAYOUT_FILE.read_text())
-    out = []
-    for name, entry, values in WATCHED:
-        path = layout[entry]["path"].replace("{root}/", "")
-        for key, value in {**values, "scene_id": "*"}.items():
-            path = path.replace("{" + key + "}", value)
-        out.append((name, path))
-    return out
+    # as Catalog.find fills a template: every scene's path, relative to the root
+    return [(name, layout[entry]["path"].format(root=".", scene_id="*", **values)[2:]) for name, entry, values in WATCHED]
 
 
 def watch(root: Path, proc: subprocess.Popen, scenes: int, until: str, limit: float, t0: float) -> dict[str, float]:

@@ -56,13 +56,20 @@ under its own name; its expert steps join on those four columns. The folders are
 partitions: a hive folder beside the same column in the file makes readers disagree on its type."""
 
 
+def key_fields() -> list:
+    """The KEY_COLUMNS' Arrow fields (non-null strings), first in every release table file."""
+    import pyarrow as pa
+
+    return [pa.field(k, pa.string(), nullable=False) for k in KEY_COLUMNS]
+
+
 def with_keys(table, task: str, split: str, scene_id: str):
     """A data root's episode or trajectory table as a release file holds it: its KEY_COLUMNS first."""
     import pyarrow as pa
 
     table = table.drop_columns([c for c in KEY_COLUMNS if c in table.column_names])
-    for i, (name, value) in enumerate(zip(KEY_COLUMNS, (task, split, scene_id))):
-        table = table.add_column(i, pa.field(name, pa.string(), nullable=False), pa.array([value] * table.num_rows, pa.string()))
+    for i, (field, value) in enumerate(zip(key_fields(), (task, split, scene_id))):
+        table = table.add_column(i, field, pa.array([value] * table.num_rows, pa.string()))
     return table
 
 
@@ -72,8 +79,7 @@ def release_episode_schema():
 
     from navcore.io.episode_schema import EPISODE_SCHEMA
 
-    return pa.schema([pa.field(k, pa.string(), nullable=False) for k in KEY_COLUMNS] +
-                     [f for f in EPISODE_SCHEMA if f.name not in KEY_COLUMNS])
+    return pa.schema(key_fields() + [f for f in EPISODE_SCHEMA if f.name not in KEY_COLUMNS])
 
 
 def release_trajectory_schema():
@@ -82,7 +88,7 @@ def release_trajectory_schema():
 
     from navcore.io.episode_schema import TRAJECTORY_SCHEMA
 
-    return pa.schema([pa.field(k, pa.string(), nullable=False) for k in KEY_COLUMNS] + list(TRAJECTORY_SCHEMA))
+    return pa.schema(key_fields() + list(TRAJECTORY_SCHEMA))
 
 
 def episodes_file(task: str, split: str, scene_id: str) -> str:
