@@ -28,7 +28,9 @@ stopped when started again:
 
 make setup-gpu first (WHEELS=dir offline). Paths: ROOT (data/baselines), RUNS (data/runs), EVAL
 (data/baseline_eval); WORKERS (CPU cores - 2); SCENE_IDS (only these of the SCENES: the zero-shot
-set's scenes for a call that only evaluates finished runs).
+set's scenes for a call that only evaluates finished runs); SPLIT (the eval phase's split, eval_zeroshot; empty:
+every episode of ROOT). The learned policies on real captures, from a release folder of them (no baseline was trained
+on a real scene): ROOT=RELEASE SPLIT= TASKS=pointnav,imagenav TRAIN_TASKS=imagenav ... reference eval.
 """
 from __future__ import annotations
 
@@ -75,6 +77,9 @@ DATA = [f"data_root={ROOT}", f"scenes.count={SCENES}", f"task=[{','.join(TASKS)}
 # SCENE_IDS=a,b,...: only these scenes of the SCENES (an evaluation-only call builds just the zero-shot set's scenes:
 # a scene's split is a hash of its id, its episodes its own seed's, so they come out as in the whole set)
 SCENE_IDS = [s for s in os.environ.get("SCENE_IDS", "").split(",") if s]
+# the split the eval phase measures; SPLIT= (empty): every episode of ROOT, e.g. a release of real captures, whose
+# scenes no baseline was trained on (their split names only the scene's share of a dataset made from them)
+SPLIT = os.environ.get("SPLIT", "eval_zeroshot")
 DATA += [f"scenes.ids=[{','.join(SCENE_IDS)}]"] if SCENE_IDS else []
 RENDERED = [("{task}_bc", "distance"), ("{task}_bc", "explicit_stop"), ("depth_reactive", "distance")]
 UNRENDERED = [("random", "distance"), ("oracle", "distance")]
@@ -192,7 +197,8 @@ def train(deadline: Deadline, which: str) -> int:
 def test_scenes() -> list[str]:
     from navarena.dataset import NavDataset
 
-    return sorted(set(NavDataset(ROOT).eval_set("eval_zeroshot")["scene_id"]))
+    ds = NavDataset(ROOT)
+    return sorted(set(ds.eval_set(SPLIT)["scene_id"])) if SPLIT == "eval_zeroshot" else ds.scene_ids()
 
 
 def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
@@ -233,7 +239,7 @@ def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
         out = EVAL / "parts" / name / (sid or "all")
         out.parent.mkdir(parents=True, exist_ok=True)
         t = time.perf_counter()
-        rc = run([PY, "-m", "navarena", "eval", str(ROOT), *agent, "--protocol", proto, "--split", "eval_zeroshot",
+        rc = run([PY, "-m", "navarena", "eval", str(ROOT), *agent, "--protocol", proto, *(["--split", SPLIT] if SPLIT else []),
                   "--tasks", task, "--quiet", *extra, *EVAL_ARGS, "--out", str(out)], deadline,
                  log=out.with_suffix(".log"), env={"CUDA_VISIBLE_DEVICES": str(k % n_gpu), **threads(per_gpu * n_gpu)})
         return k, rc, time.perf_counter() - t
