@@ -142,3 +142,56 @@ def test_the_stage_runs_the_detector_end_to_end(tmp_path, make_cfg):
     assert all(v >= 4 for v in table["views"].to_pylist())  # detector.min_views
     assert set(table["category"].to_pylist()) <= set(DetectorConfig().categories)
     assert info["status"] == "done"
+
+
+def _nanodet_outputs(size: int = 416, classes: int = 80, bins: int = 11) -> dict[str, np.ndarray]:
+    """NanoDet-shaped outputs (3 strides), all cells empty."""
+    out = {}
+    for k, stride in enumerate((8, 16, 32)):
+        n = (size // stride) ** 2
+        out[f"score{k}"] = np.zeros((1, n, classes), np.float32)
+        out[f"reg{k}"] = np.zeros((1, n, 4 * bins), np.float32)
+    return out
+
+
+def test_nanodet_decoding_known_box():
+    """A cell whose distributions peak at known bins decodes to the box they put around its centre,
+    in a YOLO-like row the rest of the detector reads unchanged."""
+    from stages.semantics.detector import nanodet_raw
+
+    outs = _nanodet_outputs()
+    cell = 5 * 26 + 7  # stride 16 (26 x 26): row 5, column 7 -> centre (120, 88) pixels
+    peaks = (2, 3, 4, 1)  # left, top, right, bottom in strides
+    reg = np.full((4, 11), -50.0, np.float32)
+    reg[np.arange(4), peaks] = 50.0
+    outs["reg1"][0, cell] = reg.ravel()
+    outs["score1"][0, cell, 59] = 0.8  # bed
+    raw = nanodet_raw(outs, 416)
+    assert raw.shape == (52 * 52 + 26 * 26 + 13 * 13, 85)
+    row = raw[52 * 52 + cell]
+    x0, y0, x1, y1 = 120 - 2 * 16, 88 - 3 * 16, 120 + 4 * 16, 88 + 1 * 16
+    np.testing.assert_allclose(row[:4] * 416, [(x0 + x1) / 2, (y0 + y1) / 2, x1 - x0, y1 - y0], atol=1e-3)
+    assert row[4] == 1.0 and row[5 + 59] == pytest.approx(0.8)
+    names = [f"c{i}" for i in range(80)]
+    names[59] = "bed"
+    (cat, box, score), = boxes_of(raw, names, DetectorConfig(), 416, 416)
+    assert cat == "bed" and score == pytest.approx(0.8)
+    np.testing.assert_allclose(box, [x0, y0, x1, y1], atol=1e-3)
+    outs.pop("reg2")
+    with pytest.raises(ValueError, match="pair up"):
+        nanodet_raw(outs, 416)
+
+
+def test_model_spec_reads_the_json_beside_an_onnx(tmp_path):
+    import json
+
+    from navcore.io.models import model_spec
+
+    assert model_spec(None) == {"family": "yolo", "input_size": None}
+    m = tmp_path / "det.onnx"
+    assert model_spec(str(m))["family"] == "yolo"  # an ONNX with no JSON: a YOLO export
+    m.with_suffix(".json").write_text(json.dumps({"family": "nanodet", "input_size": 416}))
+    assert model_spec(str(m)) == {"family": "nanodet", "input_size": 416}
+    m.with_suffix(".json").write_text(json.dumps({"family": "ssd"}))
+    with pytest.raises(ValueError, match="ssd"):
+        model_spec(str(m))

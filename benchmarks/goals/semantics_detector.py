@@ -45,10 +45,11 @@ def per_category(pred: list[dict], truth: list[dict], categories, tol: float) ->
 def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int = 320, model: Path | None = None,
                transfer_radius: float = 0.05, spacing: float | None = None, yaw_step: float | None = None,
                camera_height: float | None = None, pitch: float | None = None, robot_camera: bool = False,
-               overrides: tuple[str, ...] = ()) -> dict:
+               overrides: tuple[str, ...] = (), detector: str | None = None) -> dict:
     """The measures of the module doc on the scan (or, with `model`, on a 3DGS trained in the scan's
     frame, whose Gaussians take the instance of the nearest scanned point within transfer_radius).
-    `overrides`: more config overrides of both runs (e.g. semantics.view_selection=coverage)."""
+    `overrides`: more config overrides of both runs (e.g. semantics.view_selection=coverage);
+    `detector`: the detector model (semantics.detector.model: None is the shipped default)."""
     from omegaconf import OmegaConf
 
     from navcore.instances import shipped_instances, table_to_labels
@@ -105,7 +106,8 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
         c2w, ks, _ = covering_cameras(scene, catalog, scfg, emb, t, cm, gs, coverage)  # semantics.view_selection decides
         select_s = time.perf_counter() - t_sel
         all_cats = sorted(set(COCO_TO_GOAL.values()))
-        dcfg = DetectorConfig(categories=all_cats, confidence={}, default_confidence=min(THRESHOLDS), input_size=input_size)
+        dcfg = DetectorConfig(categories=all_cats, confidence={}, default_confidence=min(THRESHOLDS), input_size=input_size,
+                              model=detector)
         det = DetectorSegmenter(dcfg, {c: scfg.prompt(c) for c in all_cats})
         box_cfg = DetectorConfig(mask="box")
         views, render_s, detect_s = [], 0.0, 0.0
@@ -134,7 +136,8 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
                "camera_pitch_deg": emb.camera_pitch_deg if d.camera_pitch_deg is None else d.camera_pitch_deg,
                "spacing_m": scfg.detector.spacing,
                "yaw_step_deg": scfg.detector.yaw_step_deg,
-               "gaussians": int(renderer.num_gaussians), "views": len(views), "input": input_size,
+               "gaussians": int(renderer.num_gaussians), "views": len(views), "input": det.input_size,
+               "detector": detector or "yolo_fastest_1.1 (shipped)",
                "view_selection": scfg.view_selection, "coverage": coverage,
                "resolution": [width, height], "renderer": renderer.backend, "tolerance_m": tol,
                "ground_truth": {c: sum(1 for x in truth if x["category"] == c) for c in all_cats},

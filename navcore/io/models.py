@@ -55,3 +55,19 @@ def load_net(model: str | None):
     if not names.is_file():
         raise FileNotFoundError(f"detector model {folder}: class names file {names} is missing")
     return net, [n.strip() for n in names.read_text().splitlines() if n.strip()]
+
+
+def model_spec(model: str | None) -> dict:
+    """How to run a detector model: {"family": "yolo" | "nanodet", "input_size": int | None}. A
+    Darknet folder or the shipped model is a YOLO; an ONNX file says what it is in a JSON beside it
+    (<name>.json, written by scripts/convert_detectors.py), else it is taken for a YOLO export."""
+    import json
+
+    if model is None or Path(model).suffix != ".onnx":
+        return {"family": "yolo", "input_size": None}
+    side = Path(model).with_suffix(".json")
+    spec = json.loads(side.read_text()) if side.is_file() else {}
+    family = spec.get("family", "yolo")
+    if family not in ("yolo", "nanodet"):
+        raise ValueError(f"detector model {model}: {side} names family {family!r}; known: yolo, nanodet")
+    return {"family": family, "input_size": spec.get("input_size")}

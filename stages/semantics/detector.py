@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from navcore.io.models import load_net
+from navcore.io.models import load_net, model_spec
 from stages.semantics.segmenters import Segmenter
 
 COCO_TO_GOAL = {
@@ -83,7 +83,8 @@ class DetectorConfig:
     camera_pitch_deg: float | None = -15.0
     """Pitch of the free-space views' camera, degrees, negative looks down (null: the embodiment's)."""
     input_size: int = 320
-    """Network input side, pixels (a multiple of 32; the model's cfg says 320)."""
+    """Network input side, pixels (a multiple of 32; the model's cfg says 320). A fixed-size ONNX
+    model's own size (its JSON beside it) takes precedence."""
     nms: float = 0.45
     """Non-maximum suppression IoU, per category."""
     threads: int = 0
@@ -110,14 +111,44 @@ class DetectorConfig:
     scan's renders 3 views kept a false bed beside the real one, 4 only the real one."""
 
 
-def detect(net, rgb: np.ndarray, size: int) -> np.ndarray:
-    """Raw detections of one frame: [M, 4 + 1 + C] (cx, cy, w, h normalised, objectness, class scores)."""
+def detect(net, rgb: np.ndarray, size: int, family: str = "yolo") -> np.ndarray:
+    """Raw detections of one frame: [M, 4 + 1 + C] (cx, cy, w, h normalised, objectness, class scores),
+    whichever the model's family (navcore.io.models.model_spec)."""
     import cv2
 
     blob = cv2.dnn.blobFromImage(rgb, 1 / 255.0, (size, size), swapRB=False, crop=False)  # rgb is RGB already
     net.setInput(blob)
-    outs = net.forward(net.getUnconnectedOutLayersNames())
+    names = net.getUnconnectedOutLayersNames()
+    outs = net.forward(names)
+    if family == "nanodet":
+        return nanodet_raw(dict(zip(names, outs)), size)
     return np.concatenate([o.reshape(-1, o.shape[-1]) for o in outs])
+
+
+def nanodet_raw(outs: dict[str, np.ndarray], size: int) -> np.ndarray:
+    """NanoDet's outputs (per stride: class scores [1, n, C] after the sigmoid, and box distributions
+    [1, n, 4 (reg_max + 1)]: generalized focal loss) as [n, 4 + 1 + C] rows like a YOLO's: each
+    side's distance from its cell's centre is the expectation of its softmaxed distribution, in
+    strides; objectness 1."""
+    scores = sorted((o.reshape(o.shape[-2], o.shape[-1]) for o in outs.values() if o.shape[-1] != 44),
+                    key=len, reverse=True)
+    regs = sorted((o.reshape(o.shape[-2], o.shape[-1]) for o in outs.values() if o.shape[-1] == 44),
+                  key=len, reverse=True)
+    if len(scores) != len(regs) or any(len(a) != len(b) for a, b in zip(scores, regs)):
+        raise ValueError(f"NanoDet outputs do not pair up by stride: {[o.shape for o in outs.values()]}")
+    rows = []
+    for sc, rg in zip(scores, regs):
+        side = int(round(np.sqrt(len(sc))))
+        stride = size / side
+        d = rg.reshape(len(rg), 4, -1)
+        d = np.exp(d - d.max(-1, keepdims=True))
+        dist = (d / d.sum(-1, keepdims=True)) @ np.arange(d.shape[-1], dtype=np.float32) * stride  # l, t, r, b pixels
+        iy, ix = np.divmod(np.arange(len(sc)), side)
+        cx, cy = (ix + 0.5) * stride, (iy + 0.5) * stride
+        x0, y0, x1, y1 = cx - dist[:, 0], cy - dist[:, 1], cx + dist[:, 2], cy + dist[:, 3]
+        rows.append(np.column_stack([(x0 + x1) / 2 / size, (y0 + y1) / 2 / size, (x1 - x0) / size, (y1 - y0) / size,
+                                     np.ones(len(sc), np.float32), sc]))
+    return np.concatenate(rows).astype(np.float32)
 
 
 def boxes_of(raw: np.ndarray, names: list[str], cfg: DetectorConfig, width: int, height: int
@@ -210,6 +241,8 @@ class DetectorSegmenter(Segmenter):
         if cfg.threads:
             cv2.setNumThreads(int(cfg.threads))
         self.net, self.names = load_net(cfg.model)
+        spec = model_spec(cfg.model)
+        self.family, self.input_size = spec["family"], spec["input_size"] or cfg.input_size
         self.prompts_of = prompts_of  # goal category -> the stage's prompt string
         self.last_boxes: list = []  # the boxes of the last frame (category, box, score): benchmarks read them
 
@@ -222,8 +255,8 @@ class DetectorSegmenter(Segmenter):
             raise ValueError("the detector segmenter needs the view's rendered depth and camera pose in its context")
         h, w = rgb.shape[:2]
         out: dict[str, list] = {p: [] for p in prompts}
-        self.last_boxes = boxes_of(detect(self.net, np.ascontiguousarray(rgb), self.cfg.input_size), self.names,
-                                   self.cfg, w, h)
+        self.last_boxes = boxes_of(detect(self.net, np.ascontiguousarray(rgb), self.input_size, self.family),
+                                   self.names, self.cfg, w, h)
         for cat, box, score in self.last_boxes:
             p = self.prompts_of.get(cat)
             if p not in out:
