@@ -130,11 +130,11 @@ def nanodet_raw(outs: dict[str, np.ndarray], size: int) -> np.ndarray:
     [1, n, 4 (reg_max + 1)]: generalized focal loss) as [n, 4 + 1 + C] rows like a YOLO's: each
     side's distance from its cell's centre is the expectation of its softmaxed distribution, in
     strides; objectness 1."""
-    scores = sorted((o.reshape(o.shape[-2], o.shape[-1]) for o in outs.values() if o.shape[-1] != 44),
-                    key=len, reverse=True)
-    regs = sorted((o.reshape(o.shape[-2], o.shape[-1]) for o in outs.values() if o.shape[-1] == 44),
-                  key=len, reverse=True)
-    if len(scores) != len(regs) or any(len(a) != len(b) for a, b in zip(scores, regs)):
+    widths = sorted({o.shape[-1] for o in outs.values()})  # the box outputs' 4 (reg_max + 1) < COCO's 80 classes
+    flat = [o.reshape(o.shape[-2], o.shape[-1]) for o in outs.values()]
+    scores = sorted((o for o in flat if o.shape[-1] == widths[-1]), key=len, reverse=True)
+    regs = sorted((o for o in flat if o.shape[-1] == widths[0]), key=len, reverse=True)
+    if len(widths) != 2 or widths[0] % 4 or len(scores) != len(regs) or any(len(a) != len(b) for a, b in zip(scores, regs)):
         raise ValueError(f"NanoDet outputs do not pair up by stride: {[o.shape for o in outs.values()]}")
     rows = []
     for sc, rg in zip(scores, regs):
