@@ -76,7 +76,7 @@ PAGES: dict[str, Page] = {
     "bench_semantics_real.md": Page("make bench-semantics", ("benchmarks/goals/semantics_real.py",), ("semantics",)),
     "bench_semantics_detector.md": Page("make bench-semantics", ("benchmarks/goals/semantics_detector.py",
                                                                  "benchmarks/goals/semantics_real.py"), ("semantics",)),
-    "bench_semantics_views.md": Page("python -m benchmarks.goals.semantics_views --data DATA",
+    "bench_semantics_views.md": Page("python -m benchmarks.goals.semantics_views --data DATA --docs",
                                      ("benchmarks/goals/semantics_views.py",), ("semantics",)),
     "bench_blind_views.md": Page("python -m benchmarks.dataset.blind_views --docs docs/bench_blind_views.md",
                                  ("benchmarks/dataset/blind_views.py", *_RENDER), ("episodes",)),

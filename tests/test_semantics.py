@@ -363,3 +363,23 @@ def test_coverage_views_see_every_wall_of_a_room_with_few_views():
     pts = np.array([[2.0, 0.0, 1.0], [3.0, 0.0, 1.0], [3.0, 1.0, 1.0]])
     vis = visible_targets(pts, camera_to_world(0.0, 0.0, 0.0, 1.0), intrinsics(64, 48, 90.0), 64, 48, 8.0, cell)
     assert vis.tolist() == [0, 2]
+
+
+def test_coverage_wanting_fewer_sightings_than_the_lifting_votes_is_refused():
+    """A surface seen k times cannot gather min_support votes: the run says so, naming the scene
+    and both keys, before any view is rendered."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    from stages.semantics.config import CoverageConfig, SemanticsConfig
+    from stages.semantics.stage import covering_cameras
+
+    scene = SimpleNamespace(scene_id="abc123", name="my_flat")
+    scfg = SemanticsConfig(poses="free_space", view_selection="coverage", coverage=CoverageConfig(k=2))
+    assert scfg.lifting.min_support == 3 and CoverageConfig().k >= 3  # the defaults agree
+    with pytest.raises(ValueError, match=r"my_flat.*coverage\.k=2.*min_support=3"):
+        covering_cameras(scene, None, scfg, None, np.eye(4))
+    with pytest.raises(ValueError, match="min_support=2"):  # and the lifting's side of the same rule
+        covering_cameras(scene, None, dataclasses.replace(scfg, coverage=CoverageConfig(k=1),
+                                                          lifting=dataclasses.replace(scfg.lifting, min_support=2)),
+                         None, np.eye(4))

@@ -40,6 +40,10 @@ def covering_cameras(scene, catalog, scfg: SemanticsConfig, emb, to_aligned: np.
     "free_space_coverage"). With the aligned Gaussians `gs` and view_selection=coverage, the
     free-space lattice is thinned to the views that cover the scene's surfaces (its figures into
     `report`)."""
+    if scfg.view_selection == "coverage" and scfg.poses != "source" and scfg.coverage.k < scfg.lifting.min_support:
+        raise ValueError(f"scene {scene.scene_id!r} ({scene.name}): semantics.coverage.k={scfg.coverage.k} is under "
+                         f"semantics.lifting.min_support={scfg.lifting.min_support}: a surface seen k times cannot "
+                         f"gather the votes the lifting needs; raise k")
     cams = camera_file(scene, catalog) if scfg.poses in ("auto", "source") else None
     if scfg.poses == "source" and cams is None:
         raise FileNotFoundError(f"scene {scene.scene_id!r} ({scene.name}): semantics.poses=source but the scene has "
