@@ -195,3 +195,16 @@ def test_model_spec_reads_the_json_beside_an_onnx(tmp_path):
     m.with_suffix(".json").write_text(json.dumps({"family": "ssd"}))
     with pytest.raises(ValueError, match="ssd"):
         model_spec(str(m))
+
+
+def test_an_opencv_without_the_darknet_reader_gets_a_clear_error(monkeypatch):
+    """OpenCV 5 removed readNetFromDarknet; a GPU image that brings it (the device's did, shadowing
+    the pinned 4.x) must get the fix named, not an AttributeError from inside the semantics stage."""
+    import cv2
+
+    class Dnn:  # cv2.dnn as OpenCV 5 has it: an ONNX reader, no Darknet one
+        readNetFromONNX = staticmethod(cv2.dnn.readNetFromONNX)
+
+    monkeypatch.setattr(cv2, "dnn", Dnn)
+    with pytest.raises(RuntimeError, match=r"no Darknet reader.*opencv-python-headless>=4.8,<5"):
+        load_net(None)

@@ -51,6 +51,11 @@ def load_net(model: str | None):
         if not (cfgs and weights and namess):
             raise FileNotFoundError(f"detector model {folder}: needs a Darknet *.cfg, *.weights and *.names (or an *.onnx)")
         names = namess[0]
+        if not hasattr(cv2.dnn, "readNetFromDarknet"):  # OpenCV 5 removed it (a GPU image may bring one)
+            raise RuntimeError(f"detector model {folder}: OpenCV {cv2.__version__} ({Path(cv2.__file__).parent}) "
+                               "has no Darknet reader, which OpenCV 5 removed; install the one the project pins: "
+                               "pip install 'opencv-python-headless>=4.8,<5' (offline: put its wheel in the "
+                               "WHEELS folder of make setup-gpu), or give semantics.detector.model an ONNX model")
         net = cv2.dnn.readNetFromDarknet(str(cfgs[0]), str(weights[0]))
     if not names.is_file():
         raise FileNotFoundError(f"detector model {folder}: class names file {names} is missing")
