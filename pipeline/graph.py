@@ -48,6 +48,7 @@ class Stage:
         storage: (section, key, default) of config keys that decide only what this stage keeps
             on disk beside its outputs, never what a later stage reads (`config_hashes`).
         added: (section, key, default) of config keys added to the stage after data roots were made
+            (key may be dotted, e.g. detector.models, for a key added inside a nested section)
             with it: left out of its hash while at their default, so that those roots stay valid
             (a value other than the default is hashed: the stage and what follows recompute).
         package: its package stages/<package>/ when it shares one with another stage (None: its name).
@@ -160,9 +161,13 @@ def stage_config(cfg, name: str) -> dict:
         for sec, key, _ in storage:
             if sec == k and isinstance(part[k], dict):
                 part[k].pop(key, None)
-        for sec, key, default in s.added:
-            if sec == k and isinstance(part[k], dict) and part[k].get(key) == default:
-                part[k].pop(key)
+        for sec, key, default in s.added:  # key may be dotted: a key added inside a nested section
+            *inner, leaf = key.split(".")
+            node = part[k] if sec == k else None
+            for name_ in inner:
+                node = node.get(name_) if isinstance(node, dict) else None
+            if isinstance(node, dict) and leaf in node and node[leaf] == default:
+                node.pop(leaf)
     if s.inputs and (extra := s.inputs(cfg)) is not None:  # None: nothing read beyond the sections
         part["_inputs"] = extra
     return part

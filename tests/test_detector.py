@@ -208,3 +208,40 @@ def test_an_opencv_without_the_darknet_reader_gets_a_clear_error(monkeypatch):
     monkeypatch.setattr(cv2, "dnn", Dnn)
     with pytest.raises(RuntimeError, match=r"no Darknet reader.*opencv-python-headless>=4.8,<5"):
         load_net(None)
+
+
+def test_categories_given_to_another_model_are_boxed_by_it_alone(monkeypatch, tmp_path):
+    """semantics.detector.models: each model runs once a view and keeps only its own categories;
+    the view's boxes are the union (a chair from the second model, a bed from the default)."""
+    import stages.semantics.detector as det
+    from navcore.io.models import MODEL_DIR
+
+    second = tmp_path / "second"  # another Darknet folder (the shipped files, copied)
+    second.mkdir()
+    for f in MODEL_DIR.iterdir():
+        (second / f.name).write_bytes(f.read_bytes())
+    names = [n.strip() for n in (MODEL_DIR / "coco.names").read_text().splitlines() if n.strip()]
+
+    def row(cls: str) -> np.ndarray:  # one confident detection of a class in the middle of the frame
+        r = np.zeros(85, np.float32)
+        r[:5] = [0.5, 0.5, 0.2, 0.2, 1.0]
+        r[5 + names.index(cls)] = 0.9
+        return r
+
+    seen = []
+
+    def fake_detect(net, rgb, size, family="yolo"):  # both models "see" a bed and a chair
+        seen.append(id(net))
+        return np.stack([row("bed"), row("chair")])
+
+    monkeypatch.setattr(det, "detect", fake_detect)
+    cfg = det.DetectorConfig(categories=["bed", "chair"], models={"chair": str(second)})
+    seg = det.DetectorSegmenter(cfg, {"bed": "bed", "chair": "chair"})
+    assert [sorted(r[4].categories) for r in seg.runs] == [["bed"], ["chair"]]
+    depth = np.full((240, 320), 2.0, np.float32)
+    K = np.array([[160.0, 0, 160], [0, 160.0, 120], [0, 0, 1]])
+    c2w = np.eye(4)
+    c2w[2, 3] = 1.0
+    seg.segment(np.zeros((240, 320, 3), np.uint8), ["bed", "chair"], {"depth": depth, "K": K, "cam_to_world": c2w})
+    assert sorted(b[0] for b in seg.last_boxes) == ["bed", "chair"]  # one of each, not two of each
+    assert len(set(seen)) == 2  # each model ran once

@@ -120,8 +120,9 @@ def test_full_run_then_cached_then_partial_recompute(tmp_path, make_cfg, capsys)
 
 
 def test_keys_added_to_a_stage_leave_its_hash_at_their_defaults(tmp_path, make_cfg):
-    """Stage.added (semantics.view_selection, semantics.coverage): a root made before the keys
-    existed stays valid at their defaults; another value recomputes the stage and what follows."""
+    """Stage.added (semantics.view_selection, semantics.coverage, semantics.detector.models, a key
+    inside a nested section): a root made before the keys existed stays valid at their defaults;
+    another value recomputes the stage and what follows."""
     from omegaconf import OmegaConf
 
     from pipeline.graph import config_hashes
@@ -129,7 +130,7 @@ def test_keys_added_to_a_stage_leave_its_hash_at_their_defaults(tmp_path, make_c
     cfg = make_cfg(tmp_path)
     old = cfg.copy()  # the config as before the keys existed
     sem = OmegaConf.to_container(old.semantics)
-    del sem["view_selection"], sem["coverage"]
+    del sem["view_selection"], sem["coverage"], sem["detector"]["models"]
     OmegaConf.set_struct(old, False)
     old._set_value({**{k: old[k] for k in old}, "semantics": OmegaConf.create(sem)})
     h, h_old = config_hashes(cfg), config_hashes(old)
@@ -137,6 +138,8 @@ def test_keys_added_to_a_stage_leave_its_hash_at_their_defaults(tmp_path, make_c
     h_cov = config_hashes(make_cfg(tmp_path, "semantics.view_selection=coverage"))
     changed = {k for k in h if h[k] != h_cov[k]}
     assert "semantics" in changed and "costmap" not in changed and "objectnav_episodes" in changed
+    h_mix = config_hashes(make_cfg(tmp_path, "+semantics.detector.models.chair=/m/nanodet.onnx"))
+    assert {k for k in h if h[k] != h_mix[k]} == changed  # the nested key counts once it is set
 
 
 def test_voxel_opacity_field_is_a_storage_key(tmp_path, make_cfg, costmap_root):

@@ -45,11 +45,15 @@ def per_category(pred: list[dict], truth: list[dict], categories, tol: float) ->
 def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int = 320, model: Path | None = None,
                transfer_radius: float = 0.05, spacing: float | None = None, yaw_step: float | None = None,
                camera_height: float | None = None, pitch: float | None = None, robot_camera: bool = False,
-               overrides: tuple[str, ...] = (), detector: str | None = None) -> dict:
+               overrides: tuple[str, ...] = (), detector: str | None = None,
+               detector_models: dict[str, str] | None = None, final=None) -> dict:
     """The measures of the module doc on the scan (or, with `model`, on a 3DGS trained in the scan's
     frame, whose Gaussians take the instance of the nearest scanned point within transfer_radius).
     `overrides`: more config overrides of both runs (e.g. semantics.view_selection=coverage);
-    `detector`: the detector model (semantics.detector.model: None is the shipped default)."""
+    `detector`: the detector model (semantics.detector.model: None is the shipped default);
+    `detector_models`: categories boxed by other models (semantics.detector.models); `final`: the
+    DetectorConfig whose thresholds, allow-list and min_views make the "defaults" figures (None:
+    the shipped defaults)."""
     from omegaconf import OmegaConf
 
     from navcore.instances import shipped_instances, table_to_labels
@@ -107,7 +111,7 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
         select_s = time.perf_counter() - t_sel
         all_cats = sorted(set(COCO_TO_GOAL.values()))
         dcfg = DetectorConfig(categories=all_cats, confidence={}, default_confidence=min(THRESHOLDS), input_size=input_size,
-                              model=detector)
+                              model=detector, models=dict(detector_models or {}))
         det = DetectorSegmenter(dcfg, {c: scfg.prompt(c) for c in all_cats})
         box_cfg = DetectorConfig(mask="box")
         views, render_s, detect_s = [], 0.0, 0.0
@@ -137,7 +141,7 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
                "spacing_m": scfg.detector.spacing,
                "yaw_step_deg": scfg.detector.yaw_step_deg,
                "gaussians": int(renderer.num_gaussians), "views": len(views), "input": det.input_size,
-               "detector": detector or "yolo_fastest_1.1 (shipped)",
+               "detector": detector or "yolo_fastest_1.1 (shipped)", "detector_models": dict(detector_models or {}),
                "view_selection": scfg.view_selection, "coverage": coverage,
                "resolution": [width, height], "renderer": renderer.backend, "tolerance_m": tol,
                "ground_truth": {c: sum(1 for x in truth if x["category"] == c) for c in all_cats},
@@ -174,7 +178,7 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
                         "objects": s["objects"], "found": s["found"], "centre_error_m": s["centre_error_m"],
                         "per_category": per_category(pred, truth, all_cats, tol)}
         # the defaults: per-category thresholds (detector.confidence), the allow-list, detector.min_views
-        d0 = DetectorConfig()
+        d0 = final or DetectorConfig()
         frames = []
         for d, k, c, bs in views:
             masks = {}

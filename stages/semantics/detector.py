@@ -21,7 +21,7 @@ see docs/bench_semantics_detector.md.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -50,6 +50,11 @@ class DetectorConfig:
     model: str | None = None
     """Folder of a Darknet model (*.cfg, *.weights, *.names) or an ONNX file (*.onnx with a
     *.names beside it); null = the shipped Yolo-Fastest-1.1-XL (COCO)."""
+    models: dict[str, str] = field(default_factory=dict)
+    """Goal category -> the model that boxes it (a path, as `model`), for categories another
+    detector sees better; the others are `model`'s. Each model runs once a view. E.g.
+    {chair: .../nanodet.onnx}: NanoDet-g boxed the ScanNet room's chairs, which Yolo-Fastest never
+    did (docs/own-capture.md, "Other COCO detectors")."""
     class_map: dict[str, str] = field(default_factory=lambda: dict(COCO_TO_GOAL))
     """Detector class name -> goal category (COCO_TO_GOAL); classes not in it are ignored."""
     categories: list[str] = field(default_factory=lambda: ["bed", "sofa", "table", "tv_monitor", "plant"])
@@ -240,9 +245,18 @@ class DetectorSegmenter(Segmenter):
         self.cfg = cfg
         if cfg.threads:
             cv2.setNumThreads(int(cfg.threads))
-        self.net, self.names = load_net(cfg.model)
-        spec = model_spec(cfg.model)
-        self.family, self.input_size = spec["family"], spec["input_size"] or cfg.input_size
+        # one entry per distinct model: (net, class names, family, input side, the categories it boxes)
+        own = {m: [c for c in cfg.categories if cfg.models.get(c) == m] for m in set(cfg.models.values())}
+        rest = [c for c in cfg.categories if c not in cfg.models]
+        self.runs = []
+        for model, cats in [(cfg.model, rest), *sorted(own.items())]:
+            if not cats:
+                continue
+            net, names = load_net(model)
+            spec = model_spec(model)
+            self.runs.append((net, names, spec["family"], spec["input_size"] or cfg.input_size,
+                              replace(cfg, categories=cats)))
+        self.input_size = self.runs[0][3] if self.runs else cfg.input_size
         self.prompts_of = prompts_of  # goal category -> the stage's prompt string
         self.last_boxes: list = []  # the boxes of the last frame (category, box, score): benchmarks read them
 
@@ -255,8 +269,9 @@ class DetectorSegmenter(Segmenter):
             raise ValueError("the detector segmenter needs the view's rendered depth and camera pose in its context")
         h, w = rgb.shape[:2]
         out: dict[str, list] = {p: [] for p in prompts}
-        self.last_boxes = boxes_of(detect(self.net, np.ascontiguousarray(rgb), self.input_size, self.family),
-                                   self.names, self.cfg, w, h)
+        frame = np.ascontiguousarray(rgb)
+        self.last_boxes = [b for net, names, family, size, cfg in self.runs
+                           for b in boxes_of(detect(net, frame, size, family), names, cfg, w, h)]
         for cat, box, score in self.last_boxes:
             p = self.prompts_of.get(cat)
             if p not in out:

@@ -23,7 +23,8 @@ from stages.semantics.lifting import lift
 from stages.semantics.poses import coverage_poses, free_space_poses, surface_targets
 from stages.semantics.segmenters import SEGMENTERS, SegmenterUnavailable
 
-ADDED_KEYS = (("semantics", "view_selection", "grid"), ("semantics", "coverage", asdict(CoverageConfig())))
+ADDED_KEYS = (("semantics", "view_selection", "grid"), ("semantics", "coverage", asdict(CoverageConfig())),
+              ("semantics", "detector.models", {}))
 """Keys added after data roots were made with this stage: at their defaults they leave its hash
 as it was (pipeline.graph.Stage.added)."""
 
