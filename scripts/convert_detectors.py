@@ -75,6 +75,15 @@ def extract(data: bytes, member: str, out: Path) -> tuple[dict, bytes]:
     return model, b"".join(shards)
 
 
+DTYPES = {"float32": np.float32, "int32": np.int32, "bool": np.bool_}
+"""The graph-model manifest's dtype names."""
+
+
+def port(name: str) -> str:
+    """A tensor's name from a signature's, which may name its node only (tf2onnx names tensors)."""
+    return name if ":" in name else name + ":0"
+
+
 def weights(model: dict, blob: bytes) -> dict[str, np.ndarray]:
     """The graph model's weights by name (float16 / uint8 quantisation undone)."""
     out, pos = {}, 0
@@ -89,10 +98,10 @@ def weights(model: dict, blob: bytes) -> dict[str, np.ndarray]:
             a = np.frombuffer(blob, dt, n, pos).astype(np.float32) * q["scale"] + q["min"]
             pos += np.dtype(dt).itemsize * n
         else:
-            dt = {"float32": np.float32, "int32": np.int32, "bool": np.bool_}[spec["dtype"]]
+            dt = DTYPES[spec["dtype"]]
             a = np.frombuffer(blob, dt, n, pos)
             pos += np.dtype(dt).itemsize * n
-        out[spec["name"]] = a.reshape(shape).astype({"float32": np.float32, "int32": np.int32, "bool": np.bool_}[spec["dtype"]])
+        out[spec["name"]] = a.reshape(shape).astype(DTYPES[spec["dtype"]])
     if pos != len(blob):
         raise SystemExit(f"weights: read {pos} of {len(blob)} bytes; the manifest and the shards disagree")
     return out
@@ -159,7 +168,6 @@ def to_onnx(gd, model: dict, path: Path, opset: int = 13) -> list[str]:
     import tf2onnx
 
     sig = model["signature"]
-    port = lambda n: n if ":" in n else n + ":0"  # noqa: E731 (tf2onnx names tensors, the signature may name nodes)
     inputs, outputs = [port(n) for n in sig["inputs"]], sorted(sig["outputs"])
     tf2onnx.convert.from_graph_def(gd, input_names=inputs, output_names=[port(n) for n in outputs], opset=opset,
                                    output_path=str(path))
@@ -282,7 +290,7 @@ def main(argv=None) -> int:
             ref = tfjs_outputs(a.out / name, src, x, outputs)
             got = dict(zip([o.name for o in sess.get_outputs()], sess.run(None, {sess.get_inputs()[0].name: x})))
             for n in outputs:
-                d = float(np.abs(got[n if ":" in n else n + ":0"].ravel() - ref[n].ravel()).max())
+                d = float(np.abs(got[port(n)].ravel() - ref[n].ravel()).max())
                 worst[n] = max(worst.get(n, 0.0), d)
                 print(f"{name} frame {i} {n}: max |onnx - tfjs| {d:.2e} (range {ref[n].min():.3g}..{ref[n].max():.3g})", flush=True)
         report["models"][name] = {"upstream": c["upstream"], "onnx": onnx_path.name, "sha256": sha256(onnx_path.read_bytes()),
