@@ -14,9 +14,10 @@ beta^round), and every state it visits is labelled with the expert's action ther
 field gives the oracle's action at any pose, so the learner is taught to recover from its own
 mistakes. The rounds' data are aggregated and the network is trained on all of it.
 Episodes run under explicit_stop, so the expert's STOP inside the goal region is learned.
-ObjectNav's expert searches (navcore.nav.search; --expert): until an instance of the category has
-been in its camera's view it drives to the nearest unseen free space, then it is the oracle. The
-oracle alone knows where the goal is, which a policy that sees only its camera cannot imitate.
+ObjectNav's and ImageNav's expert searches (navcore.nav.search; --expert): until the goal (an
+instance of the category, the goal image's place) has been in its camera's view it drives to the
+nearest unseen free space, then it is the oracle. The oracle alone knows where the goal is, which a
+policy that sees only its camera cannot imitate.
 
 After each round the checkpoint is evaluated in closed loop on held-out episodes (the val_unseen
 split's scenes, else the test split's), and the run folder gets:
@@ -55,10 +56,14 @@ from navcore.nav.oracle import DiscreteOracle
 from navcore.nav.search import SearchingExpert
 from navcore.seeds import stream_seed
 
+SEARCHING_TRACKS = ("objectnav", "imagenav")
+"""The tracks whose default (auto) labelling expert searches: their goal need not be in view."""
+
 
 def searches(task: str, expert: str | None) -> bool:
-    """Whether a run's labelling expert searches: expert=search, or auto on ObjectNav (a run from
-    before --expert, expert None, used the geodesic oracle)."""
+    """Whether a run's labelling expert searches: expert=search. A run's config records the expert
+    `auto` resolved to; cards written before that hold `auto`, which then searched on ObjectNav
+    alone, and a run from before --expert (None) used the geodesic oracle."""
     return expert == "search" or (expert == "auto" and task == "objectnav")
 
 
@@ -77,7 +82,9 @@ class TrainConfig:
     expert: str = "auto"
     """geodesic | search | auto: the labelling expert. geodesic: the oracle that knows where the goal
     is; search (navcore.nav.search): looks for the goal until it has been in view, then the oracle,
-    so its actions follow from what the camera saw. auto: search for ObjectNav, else geodesic."""
+    so its actions follow from what the camera saw. auto: search for ObjectNav and ImageNav,
+    geodesic for PointNav (whose goal vector says where to go); resolved when the config is made,
+    so the model card names the expert used."""
     max_learner_steps: int = 400
     """A learner-driven episode is cut after this many steps (its labels are kept)."""
     grad_steps: int = 2000
@@ -114,10 +121,12 @@ class TrainConfig:
         return searches(self.task, self.expert)
 
     def __post_init__(self):
-        if self.spec is None:
-            self.spec = NavSpec(task=self.task)
+        if self.spec is None:  # ImageNav reads depth too: without it the learner drove into walls (CR 0.48)
+            self.spec = NavSpec(task=self.task, rgbd=self.task == "imagenav")
         if self.expert not in ("auto", "geodesic", "search"):
             raise ValueError(f"expert={self.expert!r}: choose auto, geodesic or search")
+        if self.expert == "auto":
+            self.expert = "search" if self.task in SEARCHING_TRACKS else "geodesic"
         if self.keep not in ("best", "last"):
             raise ValueError(f"keep={self.keep!r}: choose best or last")
         if self.spec.task != self.task:
@@ -527,7 +536,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
              "lr": None, "weight_decay": None, "train_split": None, "val_split": None,
              "renderer": "auto|cpu|gsplat", "device": "auto|cpu|cuda"}
     for name, text in helps.items():
-        default = getattr(d, name)
+        default = "auto" if name == "expert" else getattr(d, name)  # d's auto is resolved for its task
         if name == "task":
             ap.add_argument("--task", default=default, choices=list(TRACKS), metavar="T",
                             help=f"{'|'.join(TRACKS)} ({default})")

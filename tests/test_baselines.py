@@ -91,8 +91,9 @@ def test_collection_workers_give_the_same_run_and_check(episode_run, tmp_path):
 
 @pytest.mark.parametrize("task", ["imagenav", "objectnav"])
 def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
-    """ImageNav (RGB + the goal image, one encoder) and ObjectNav (RGB-D + the goal category): the
-    loss falls, the checkpoint is of the track and its agent acts on the track's observations."""
+    """ImageNav (RGB-D + the goal image, one encoder) and ObjectNav (RGB-D + the goal category): the
+    loss falls, the checkpoint is of the track and its agent acts on the track's observations; both
+    are labelled by the searching expert, and the card names it (auto resolved)."""
     from navarena.dataset import NavDataset
     from navarena.train import main
     from navcore.eval.loop import InProcessBatch, run_episodes_batched
@@ -104,7 +105,8 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     ck = load_checkpoint(tmp_path / "model.pt", kind=task)
     assert NavSpec(**ck["spec"]).task == task
     z = np.load(tmp_path / "rounds" / "round_0.npz")
-    assert z["obs"].shape[1] == (3 if task == "imagenav" else 4) and z["seq_goal"].shape[1] == (3 if task == "imagenav" else 0)
+    assert z["obs"].shape[1] == 4 and z["seq_goal"].shape[1] == (3 if task == "imagenav" else 0)
+    assert card["config"]["expert"] == "search" and ck["spec"].get("rgbd", False) == (task == "imagenav")
     ds = NavDataset(root)
     sid = next(s for s in ds.scene_ids(task) if len(ds.episodes(s, task, None)))
     eps = ds.episodes(sid, task, None)[:2]
@@ -115,11 +117,11 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     rows = run_episodes_batched(ctx, eps, InProcessBatch(lambda: agent_for("learned", checkpoint=str(tmp_path / "model.pt"),
                                                                            device="cpu")), 2, cfg)
     assert len(rows) == 2 and not any(r["error"] for r in rows), rows
-    if task == "objectnav":  # its expert searches until the goal is in view: longer episodes than the oracle's
+    if task == "objectnav":  # the searching expert: longer episodes than the oracle's
         assert main([str(root), "--out", str(tmp_path / "geo"), "--task", task, *TINY, "--rounds", "1",
                      "--expert", "geodesic"]) == 0
         geo = np.load(tmp_path / "geo" / "rounds" / "round_0.npz")
-        assert card["config"]["expert"] == "auto" and z["lengths"].sum() > geo["lengths"].sum(), \
+        assert z["lengths"].sum() > geo["lengths"].sum(), \
             (z["lengths"], geo["lengths"])
         from benchmarks.baselines.cards import card_markdown  # the card names the expert that labelled it
 
@@ -189,6 +191,25 @@ def test_inputs_are_resolution_independent():
     assert float(a.max()) == 1.0 and float(a[0, 0, 0, 0]) == 1.0
     g = goal_input([[2.0, np.pi / 2]])
     assert torch.allclose(g, torch.tensor([[np.log1p(2.0), 0.0, 1.0]], dtype=torch.float32), atol=1e-6)
+
+
+def test_imagenav_specs_from_before_depth_keep_their_network():
+    """A spec written before `rgbd` (the first ImageNav network: RGB + goal image, 6 channels) loads
+    as that network, and writes the same dict back; the RGB-D one reads depth first."""
+    from navcore.baselines.model import NavNet, observation_input
+
+    old = NavSpec(task="imagenav")
+    assert "rgbd" not in old.to_dict() and NavSpec(**old.to_dict()) == old
+    assert NavNet(old).cnn[0].in_channels == 6
+    new = NavSpec(task="imagenav", rgbd=True)
+    assert NavSpec(**new.to_dict()) == new and NavNet(new).cnn[0].in_channels == 7
+    obs = {"depth": np.full((24, 32), 2.5, np.float32), "rgb": np.full((24, 32, 3), 51, np.uint8),
+           "goal_image": np.full((24, 32, 3), 255, np.uint8)}
+    frames, goal = observation_input([obs], new, "cpu")
+    assert frames.shape == (1, 7, 48, 64) and goal.shape == (1, 0)
+    assert torch.allclose(frames[0, :, 0, 0], torch.tensor([0.5, 0.2, 0.2, 0.2, 1.0, 1.0, 1.0]))
+    with pytest.raises(ValueError, match="rgbd applies to the imagenav network"):
+        NavSpec(task="pointnav", rgbd=True)
 
 
 SHIPPED_OBS = {  # an observation of each shipped track at 160 x 120

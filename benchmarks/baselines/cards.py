@@ -276,7 +276,9 @@ def network(spec: dict) -> str:
     if task == "pointnav":
         inputs = f"depth ({size}, clipped at {spec['max_depth']} m), the goal as (log(1 + distance), cos, sin of the bearing)"
     elif task == "imagenav":
-        inputs = f"RGB and the goal image ({size}) stacked as channels into one encoder (early fusion, as GNM does)"
+        seen = (f"depth and RGB ({size}, depth clipped at {spec['max_depth']} m)" if spec.get("rgbd")
+                else f"RGB ({size})")
+        inputs = f"{seen} and the goal image stacked as channels into one encoder (early fusion, as GNM does)"
     else:
         cats = spec.get("categories", ())
         inputs = (f"depth and RGB ({size}, depth clipped at {spec['max_depth']} m), the goal category as a learned "

@@ -29,8 +29,10 @@ stopped when started again:
 make setup-gpu first (WHEELS=dir offline). Paths: ROOT (data/baselines), RUNS (data/runs), EVAL
 (data/baseline_eval); WORKERS (CPU cores - 2); SCENE_IDS (only these of the SCENES: the zero-shot
 set's scenes for a call that only evaluates finished runs); SPLIT (the eval phase's split, eval_zeroshot; empty:
-every episode of ROOT). The learned policies on real captures, from a release folder of them (no baseline was trained
-on a real scene): ROOT=RELEASE SPLIT= TASKS=pointnav,imagenav TRAIN_TASKS=imagenav ... reference eval.
+every episode of ROOT); EVAL_TASKS and AGENTS (which tracks and agents the eval phase measures: a new
+ImageNav run alone is TRAIN_TASKS=imagenav EVAL_TASKS=imagenav AGENTS=learned, its table completed with
+an earlier call's other agents on the same episodes). The learned policies on real captures, from a
+release folder of them (no baseline was trained on a real scene): ROOT=RELEASE SPLIT= TASKS=pointnav,imagenav TRAIN_TASKS=imagenav ... reference eval.
 """
 from __future__ import annotations
 
@@ -71,6 +73,10 @@ PY = sys.executable
 TASKS = os.environ.get("TASKS", "pointnav,imagenav,objectnav").split(",")
 # the tracks whose reference run trains here; a track left out is evaluated with its shipped model
 TRAIN_TASKS = os.environ.get("TRAIN_TASKS", ",".join(TASKS)).split(",")
+# the tracks (default TASKS) and agents (learned, depth_reactive, random, oracle; default all) the eval phase
+# measures: a new run of one track against the other agents' tables of an earlier call on the same episodes
+EVAL_TASKS = os.environ.get("EVAL_TASKS", ",".join(TASKS)).split(",")
+AGENTS = [a for a in os.environ.get("AGENTS", "learned,depth_reactive,random,oracle").split(",") if a]
 DATA = [f"data_root={ROOT}", f"scenes.count={SCENES}", f"task=[{','.join(TASKS)}]",
         f"semantics.enabled={'true' if 'objectnav' in TASKS else 'false'}", "episodes.scene_splits.test=0.1",
         "executor.dashboard=false"]
@@ -207,7 +213,8 @@ def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
     from benchmarks.baselines.cards import MODELS
 
     trained = [t for t in TRAIN_TASKS if finished(RUNS / f"{t}_bc", rounds(t))]
-    tracks = [t for t in TASKS if t in trained or (t not in TRAIN_TASKS and (MODELS / f"{t}_bc").is_dir())]
+    tracks = [t for t in TASKS if t in EVAL_TASKS and
+              (t in trained or (t not in TRAIN_TASKS and (MODELS / f"{t}_bc").is_dir()))]
     if not tracks:
         print("eval: no reference run has finished its rounds and no track uses a shipped model", flush=True)
         return 1
@@ -220,12 +227,16 @@ def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
         learned = ["--agent", "learned", "--agent-arg", f"checkpoint={model}"]
         for agent, proto in RENDERED:
             name = agent.format(task=task)
+            if ("learned" if name == f"{task}_bc" else name) not in AGENTS:
+                continue
             args = learned if name == f"{task}_bc" else ["--agent", name]
             for sid in scenes:
                 parts.append((f"{name}_{task}_{proto}", args, task, proto, sid,
                               ["--scenes", sid, "--width", "640", "--height", "480", "--renderer", "gsplat",
                                "--batch-slots", "64"]))
         for agent, proto in UNRENDERED:
+            if agent not in AGENTS:
+                continue
             parts.append((f"{agent}_{task}_{proto}", ["--agent", agent], task, proto, None,
                           ["--no-render", "--batch-slots", "64"]))
     # unrendered first, then the learned policies scene by scene, then depth_reactive (its failures run the whole

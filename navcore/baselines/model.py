@@ -1,8 +1,8 @@
 """The baselines' network and what it reads from an observation, one per track:
 
 - PointNav: depth plus the goal in the robot frame (distance, bearing);
-- ImageNav: RGB plus the goal image, stacked as channels into one encoder (early fusion, as GNM
-  does), the GRU giving the context of past frames;
+- ImageNav: RGB (RGB-D with `rgbd`, the training default) plus the goal image, stacked as channels
+  into one encoder (early fusion, as GNM does), the GRU giving the context of past frames;
 - ObjectNav: RGB-D plus the goal category (an embedding).
 
 Each: a small CNN encoder, the previous action, a GRU over the episode, logits of the four
@@ -48,15 +48,20 @@ class NavSpec:
     """pointnav | imagenav | objectnav: which inputs (TRACKS)."""
     categories: tuple[str, ...] = GOAL_CATEGORIES
     """ObjectNav's goal categories, in the embedding's order."""
+    rgbd: bool = False
+    """ImageNav: depth as well as RGB (navarena train's ImageNav default; False is the first ImageNav
+    network's RGB alone, and a spec written before the field). Other tracks: False."""
 
     def __post_init__(self):
         if self.task not in TRACKS:
             raise ValueError(f"no baseline network for task {self.task!r} (one of {sorted(TRACKS)})")
+        if self.rgbd and self.task != "imagenav":
+            raise ValueError(f"rgbd applies to the imagenav network, not {self.task!r} (its inputs are fixed: TRACKS)")
         object.__setattr__(self, "categories", tuple(self.categories))
 
     @property
     def depth(self) -> bool:
-        return TRACKS[self.task][0]
+        return TRACKS[self.task][0] or self.rgbd
 
     @property
     def rgb(self) -> bool:
@@ -83,6 +88,8 @@ class NavSpec:
             d.pop("task"), d.pop("categories")
         else:
             d["categories"] = list(self.categories)
+            if not self.rgbd:  # the fields of a spec written before rgbd (the same network)
+                d.pop("rgbd")
         return d
 
 

@@ -1,4 +1,6 @@
-"""An ObjectNav expert a student can imitate: search until the goal has been in view, then go.
+"""An ObjectNav (and ImageNav) expert a student can imitate: search until the goal has been in view,
+then go. ImageNav's success region is the disk around the goal image's position: the expert has
+found it once its camera has seen that place (not necessarily from the goal image's heading).
 
 The geodesic oracle (navcore.nav.oracle) knows where every instance of the category is and never
 searches. A policy that sees only its camera cannot tell where to go while no instance has been in
