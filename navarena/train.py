@@ -49,10 +49,11 @@ from torch import nn
 from navarena.dataset import NavDataset
 from navcore.baselines.agent import default_device
 from navcore.baselines.checkpoint import load_checkpoint, save_checkpoint
-from navcore.baselines.model import NO_ACTION, TRACKS, NavNet, NavSpec, observation_input, parameter_count
+from navcore.baselines.model import NO_ACTION, TRACKS, NavNet, NavSpec, goal_input, observation_input, parameter_count
 from navcore.io.atomic import atomic_path, write_text_atomic
 from navcore.nav.actions import STOP
 from navcore.nav.oracle import DiscreteOracle
+from navcore.nav.poses import goal_in_robot_frame
 from navcore.nav.search import SearchingExpert
 from navcore.seeds import stream_seed
 
@@ -93,6 +94,9 @@ class TrainConfig:
     """Episodes (whole sequences) per gradient step."""
     lr: float = 5e-4
     weight_decay: float = 1e-5
+    aux_weight: float = 1.0
+    """Weight of the aux_goal head's loss (mean squared error of the goal's encoded position) beside
+    the actions' cross-entropy; a network without the head ignores it."""
     slots: int = 64
     """Episodes stepped together per scene (one render call per step)."""
     width: int = 160
@@ -121,8 +125,9 @@ class TrainConfig:
         return searches(self.task, self.expert)
 
     def __post_init__(self):
-        if self.spec is None:  # ImageNav reads depth too: without it the learner drove into walls (CR 0.48)
-            self.spec = NavSpec(task=self.task, rgbd=self.task == "imagenav")
+        if self.spec is None:  # ImageNav reads depth too (without it the learner drove into walls, CR 0.48)
+            image = self.task == "imagenav"  # and learns where the goal image was taken (aux_goal)
+            self.spec = NavSpec(task=self.task, rgbd=image, aux_goal=image)
         if self.expert not in ("auto", "geodesic", "search"):
             raise ValueError(f"expert={self.expert!r}: choose auto, geodesic or search")
         if self.expert == "auto":
@@ -135,13 +140,17 @@ class TrainConfig:
 
 class Steps:
     """Labelled sequences of one or more rounds: per step the frame (uint8 [C, h, w]: depth and/or
-    RGB in [0, 255]), the goal values, the previous action and the label; per sequence its goal
-    image (uint8 [3, h, w]; ImageNav, else no channels); `starts` index each sequence."""
+    RGB in [0, 255]), the goal values, the previous action, the label and the goal's encoded
+    position in the robot frame (float32 [3], goal_input's encoding: the aux_goal target; NaN where
+    the task has no goal point); per sequence its goal image (uint8 [3, h, w]; ImageNav, else no
+    channels); `starts` index each sequence."""
 
-    FIELDS = ("obs", "goal", "prev", "label", "lengths", "seq_goal")
+    FIELDS = ("obs", "goal", "prev", "label", "lengths", "seq_goal", "aux")
 
-    def __init__(self, obs, goal, prev, label, lengths, seq_goal):
+    def __init__(self, obs, goal, prev, label, lengths, seq_goal, aux=None):
         self.obs, self.goal, self.prev, self.label, self.seq_goal = obs, goal, prev, label, seq_goal
+        # rounds saved before the aux target have none: NaN, which the aux loss skips
+        self.aux = np.full((len(label), 3), np.nan, np.float32) if aux is None else aux
         self.lengths = np.asarray(lengths, np.int64)
         self.starts = np.concatenate([[0], np.cumsum(self.lengths)[:-1]]).astype(np.int64)
 
@@ -156,7 +165,7 @@ class Steps:
     @classmethod
     def load(cls, path: Path) -> "Steps":
         z = np.load(path)
-        return cls(*(z[k] for k in cls.FIELDS))
+        return cls(*(z[k] for k in cls.FIELDS if k in z.files))
 
     def __len__(self) -> int:
         return int(self.lengths.sum())
@@ -217,11 +226,13 @@ class Trainer:
         return Steps.concat(parts)
 
     # ------------------------------------------------------------------ training
-    def fit(self, data: Steps, rnd: int) -> tuple[float, float]:
+    def fit(self, data: Steps, rnd: int) -> tuple[float, float, tuple[float, float] | None]:
+        """The round's gradient steps: (loss over the first and the last 10 % of the steps, and the
+        aux_goal loss's the same way, or None without the head)."""
         cfg, dev = self.cfg, self.device
         rng = np.random.default_rng(stream_seed(cfg.seed, "train-fit", str(rnd)) % 2**32)
         self.net.train()
-        losses, t0 = [], time.perf_counter()
+        losses, aux_losses, t0 = [], [], time.perf_counter()
         for step in range(cfg.grad_steps):
             pick = rng.integers(0, len(data.lengths), cfg.batch_episodes)
             lens = data.lengths[pick]
@@ -237,9 +248,19 @@ class Trainer:
             prev = torch.from_numpy(data.prev[rows].astype(np.int64)).to(dev)
             label = torch.from_numpy(data.label[rows].astype(np.int64)).to(dev)
             m = torch.from_numpy(mask).to(dev)
-            logits, _ = self.net(frames, goal, prev)
+            if cfg.spec.aux_goal:
+                logits, _, pred = self.net(frames, goal, prev, aux=True)
+            else:
+                logits, _ = self.net(frames, goal, prev)
             loss = (nn.functional.cross_entropy(logits.flatten(0, 1), label.flatten(), reduction="none")
                     * m.flatten()).sum() / m.sum()
+            if cfg.spec.aux_goal:  # the goal's position, where the step has one (rounds from before: NaN)
+                target = torch.from_numpy(data.aux[rows]).to(dev)
+                ok = m & torch.isfinite(target).all(-1)
+                err = ((pred - torch.nan_to_num(target)) ** 2).sum(-1) * ok
+                aux_loss = err.sum() / ok.sum().clamp(min=1)
+                loss = loss + cfg.aux_weight * aux_loss
+                aux_losses.append(aux_loss.item())
             self.opt.zero_grad()
             loss.backward()
             nn.utils.clip_grad_norm_(self.net.parameters(), 1.0)
@@ -251,7 +272,8 @@ class Trainer:
                          f"{(cfg.grad_steps - step - 1) * dt / (step + 1):.0f} s left")
         self.net.eval()
         k = max(1, len(losses) // 10)
-        return float(np.mean(losses[:k])), float(np.mean(losses[-k:]))
+        aux = (float(np.mean(aux_losses[:k])), float(np.mean(aux_losses[-k:]))) if aux_losses else None
+        return float(np.mean(losses[:k])), float(np.mean(losses[-k:])), aux
 
     # ------------------------------------------------------------------ evaluation
     def evaluate(self, model: Path, sha: str, split: str, n: int, width: int | None = None,
@@ -308,13 +330,15 @@ class Trainer:
             t_collect = time.perf_counter() - t0
             data = Steps.concat(parts)
             t1 = time.perf_counter()
-            loss_first, loss = self.fit(data, rnd)
+            loss_first, loss, aux = self.fit(data, rnd)
             t_fit = time.perf_counter() - t1
             sha = self.save_model(final=False)
             entry = {"round": rnd, "kind": "bc" if rnd == 0 else "dagger", "beta": cfg.beta ** rnd if rnd else 1.0,
                      "new_frames": len(new), "frames": len(data), "episodes": int(len(data.lengths)),
                      "loss_first": round(loss_first, 4), "loss": round(loss, 4), "collect_s": round(t_collect, 1), "fit_s": round(t_fit, 1),
                      "collect_frames_per_s": round(len(new) / t_collect, 1)}
+            if aux is not None:
+                entry.update({"aux_loss_first": round(aux[0], 4), "aux_loss": round(aux[1], 4)})
             if self.val_split and cfg.val_episodes:
                 t2 = time.perf_counter()
                 m = self.evaluate(out / "model.pt", sha, self.val_split, cfg.val_episodes)
@@ -442,7 +466,7 @@ class Collector:
             if cfg.searching:  # the same oracle once the goal has been in view
                 oracle[i] = SearchingExpert(ctx.graph, oracle[i], ep.regions, ep.success_radius, ctx.emb.hfov_deg,
                                             cfg.spec.max_depth, env_cfg.actions.forward_step, env_cfg.actions.turn)
-            slot_seq[i] = {"obs": [], "goal": [], "prev": [], "label": [], "goal_image": None}
+            slot_seq[i] = {"obs": [], "goal": [], "prev": [], "label": [], "aux": [], "goal_image": None}
             h[:, i] = 0
             prev[i] = NO_ACTION
             obs[i] = benv.reset_slot(i, ep)
@@ -472,6 +496,7 @@ class Collector:
                 seq["goal"].append(gn[k])
                 seq["prev"].append(pv[k])
                 seq["label"].append(label)
+                seq["aux"].append(aux_target(s.x, s.y, s.yaw, slot_ep[i]) if cfg.spec.aux_goal else NO_AUX)
                 a = label if beta >= 1.0 or rng.random() < beta else int(learner[k])
                 actions[i] = a
                 prev[i] = a
@@ -488,7 +513,18 @@ class Collector:
                      np.concatenate([np.stack(s["goal"]) for s in seqs]).astype(np.float32),
                      np.concatenate([np.asarray(s["prev"], np.int8) for s in seqs]),
                      np.concatenate([np.asarray(s["label"], np.int8) for s in seqs]),
-                     [len(s["label"]) for s in seqs], np.stack([s["goal_image"] for s in seqs]))
+                     [len(s["label"]) for s in seqs], np.stack([s["goal_image"] for s in seqs]),
+                     np.concatenate([np.stack(s["aux"]) for s in seqs]).astype(np.float32))
+
+
+NO_AUX = np.full(3, np.nan, np.float32)
+
+
+def aux_target(x: float, y: float, yaw: float, ep) -> np.ndarray:
+    """The aux_goal head's target at a pose: the episode's goal point in the robot frame, encoded as
+    the point goal is (goal_input)."""
+    gx, gy = goal_in_robot_frame(x, y, yaw, ep.goal_xy)
+    return goal_input([math.hypot(gx, gy), math.atan2(gy, gx)]).numpy()[0]
 
 
 _WORKER: dict = {}
@@ -533,7 +569,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
              "val_episodes": "held-out check", "keep": "best|last round into model.pt", "scenes": "first N train scenes", "seed": None,
              "max_learner_steps": None, "expert": "auto|geodesic|search: the labelling expert",
              "workers": "collection processes", "beta": "DAgger mixing",
-             "lr": None, "weight_decay": None, "train_split": None, "val_split": None,
+             "lr": None, "weight_decay": None, "aux_weight": "ImageNav's goal-position loss", "train_split": None, "val_split": None,
              "renderer": "auto|cpu|gsplat", "device": "auto|cpu|cuda"}
     for name, text in helps.items():
         default = "auto" if name == "expert" else getattr(d, name)  # d's auto is resolved for its task

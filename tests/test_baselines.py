@@ -107,6 +107,13 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     z = np.load(tmp_path / "rounds" / "round_0.npz")
     assert z["obs"].shape[1] == 4 and z["seq_goal"].shape[1] == (3 if task == "imagenav" else 0)
     assert card["config"]["expert"] == "search" and ck["spec"].get("rgbd", False) == (task == "imagenav")
+    aux = z["aux"]
+    assert aux.shape == (len(z["label"]), 3)
+    if task == "imagenav":  # the goal-position head's targets: goal_input's encoding, on every step
+        assert np.isfinite(aux).all() and np.allclose(aux[:, 1] ** 2 + aux[:, 2] ** 2, 1, atol=1e-5)
+        assert ck["spec"]["aux_goal"] and {"aux_loss_first", "aux_loss"} <= set(card["curve"][0])
+    else:
+        assert np.isnan(aux).all() and "aux_loss" not in card["curve"][0]
     ds = NavDataset(root)
     sid = next(s for s in ds.scene_ids(task) if len(ds.episodes(s, task, None)))
     eps = ds.episodes(sid, task, None)[:2]
@@ -140,6 +147,46 @@ def test_resume_after_the_last_round_changes_nothing(trained, episode_run, tmp_p
     before = (out / "model.pt").read_bytes()
     assert main([str(episode_run[0]), "--out", str(out), "--resume", *TINY]) == 0
     assert (out / "model.pt").read_bytes() == before
+
+
+def test_a_sampling_agent_draws_moves_by_the_policy_and_stops_only_when_stop_leads(tmp_path):
+    """sample=true: moves drawn in the network's proportions (known logits), STOP only when it is the
+    argmax, the same seed and episode give the same actions; the greedy agent takes the argmax every
+    time; stop_threshold moves the STOP decision to a probability."""
+    from navcore.baselines.agent import LearnedNavAgent
+
+    net = NavNet(NavSpec(hidden=16, embed=16))
+    f = tmp_path / "p.pt"
+    save_checkpoint(f, "pointnav", net.spec.to_dict(), net.state_dict(), {})
+    logits = torch.log(torch.tensor([[0.1, 0.5, 0.3, 0.1]]))  # STOP, FORWARD, LEFT, RIGHT
+
+    def agents(sample, seed=7, **kw):
+        a = LearnedNavAgent(checkpoint=str(f), device="cpu", sample=sample, seed=seed, **kw)
+        a.net.step = lambda frames, goal, prev, h: (logits.expand(len(prev), 4), h)
+        a.reset({"episode_id": 3})
+        return a
+
+    obs = {"depth": np.full((24, 32), 2.0, np.float32), "pointgoal": np.array([2.0, 0.1], np.float32)}
+    a = agents(True)
+    drawn = np.array([a.act(obs) for _ in range(6000)])
+    freq = np.bincount(drawn, minlength=4) / len(drawn)
+    assert freq[0] == 0 and np.allclose(freq[1:], [0.5 / 0.9, 0.3 / 0.9, 0.1 / 0.9], atol=0.02), freq
+    b = agents(True)
+    assert [b.act(obs) for _ in range(50)] == drawn[:50].tolist()  # seeded by (seed, episode)
+    c = agents(True, seed=8)
+    assert [c.act(obs) for _ in range(50)] != drawn[:50].tolist()
+    greedy = agents(False)
+    assert {greedy.act(obs) for _ in range(50)} == {1}
+    logits = torch.log(torch.tensor([[0.4, 0.3, 0.2, 0.1]]))  # STOP leads: a sampling agent stops too
+    assert agents(True).act(obs) == 0
+    # stop_threshold: STOP at p(STOP) >= it, else the most likely move (0.4 < 0.5: FORWARD; 0.4 >= 0.3: STOP)
+    assert agents(False, stop_threshold=0.5).act(obs) == 1 and agents(False, stop_threshold=0.3).act(obs) == 0
+    logits = torch.log(torch.tensor([[0.35, 0.4, 0.2, 0.05]]))
+    assert agents(False).act(obs) == 1 and agents(False, stop_threshold=0.35).act(obs) == 0
+    with pytest.raises(ValueError, match="stop_threshold=1.5"):
+        agents(False, stop_threshold=1.5)
+    with pytest.raises(ValueError, match="sample='yes'"):
+        LearnedNavAgent(checkpoint=str(f), device="cpu", sample="yes")
 
 
 def test_checkpoint_round_trip_and_refusals(tmp_path):
@@ -203,6 +250,12 @@ def test_imagenav_specs_from_before_depth_keep_their_network():
     assert NavNet(old).cnn[0].in_channels == 6
     new = NavSpec(task="imagenav", rgbd=True)
     assert NavSpec(**new.to_dict()) == new and NavNet(new).cnn[0].in_channels == 7
+    assert not hasattr(NavNet(new), "aux") and "aux_goal" not in new.to_dict()
+    aux = NavSpec(task="imagenav", rgbd=True, aux_goal=True)
+    assert NavSpec(**aux.to_dict()) == aux and NavNet(aux).aux.out_features == 3
+    t = torch.zeros(2, 1, 7, 48, 64)
+    logits, _, pred = NavNet(aux)(t, torch.zeros(2, 1, 0), torch.zeros(2, 1, dtype=torch.long), aux=True)
+    assert logits.shape == (2, 1, 4) and pred.shape == (2, 1, 3)
     obs = {"depth": np.full((24, 32), 2.5, np.float32), "rgb": np.full((24, 32, 3), 51, np.uint8),
            "goal_image": np.full((24, 32, 3), 255, np.uint8)}
     frames, goal = observation_input([obs], new, "cpu")
@@ -210,6 +263,31 @@ def test_imagenav_specs_from_before_depth_keep_their_network():
     assert torch.allclose(frames[0, :, 0, 0], torch.tensor([0.5, 0.2, 0.2, 0.2, 1.0, 1.0, 1.0]))
     with pytest.raises(ValueError, match="rgbd applies to the imagenav network"):
         NavSpec(task="pointnav", rgbd=True)
+    with pytest.raises(ValueError, match="aux_goal applies to the imagenav network"):
+        NavSpec(task="objectnav", aux_goal=True)
+
+
+def test_the_goal_in_the_robot_frame_and_rounds_saved_before_the_aux_target(tmp_path):
+    """goal_in_robot_frame on known poses; a round file without `aux` (saved before it) loads with
+    NaN targets, which the aux loss skips."""
+    from navarena.train import Steps, aux_target
+    from navcore.nav.poses import goal_in_robot_frame
+
+    assert np.allclose(goal_in_robot_frame(1.0, 1.0, np.pi / 2, (1.0, 3.0)), (2.0, 0.0))   # straight ahead
+    assert np.allclose(goal_in_robot_frame(1.0, 1.0, np.pi / 2, (0.0, 1.0)), (0.0, 1.0))   # to the left
+    assert np.allclose(goal_in_robot_frame(0.0, 0.0, 0.0, (-2.0, 0.0)), (-2.0, 0.0))       # behind
+
+    class Ep:
+        goal_xy = (0.0, 3.0)
+    assert np.allclose(aux_target(0.0, 0.0, 0.0, Ep), [np.log1p(3.0), 0.0, 1.0], atol=1e-6)  # 3 m on the left
+    f = tmp_path / "round_0.npz"
+    old = {"obs": np.zeros((5, 4, 2, 2), np.uint8), "goal": np.zeros((5, 0), np.float32), "prev": np.zeros(5, np.int8),
+           "label": np.ones(5, np.int8), "lengths": np.array([2, 3]), "seq_goal": np.zeros((2, 3, 2, 2), np.uint8)}
+    np.savez(f, **old)
+    steps = Steps.load(f)
+    assert steps.aux.shape == (5, 3) and np.isnan(steps.aux).all()
+    steps.save(tmp_path / "again.npz")
+    assert np.isnan(Steps.load(tmp_path / "again.npz").aux).all()
 
 
 SHIPPED_OBS = {  # an observation of each shipped track at 160 x 120

@@ -207,6 +207,9 @@ def scaling_plot(data: dict, png: Path = SCALING_PNG) -> None:
 ORDER = ["overall", "easy", "medium", "hard"]
 COLUMNS = [("SR", "sr"), ("SPL", "spl"), ("NE m", "ne"), ("CR", "collision_rate"), ("AvgSteps", "steps"),
            ("Stop SR", "stop_sr")]
+TRACK_COLUMNS = {"imagenav": [("Pose SR", "pose_sr"), ("Pose Ret.", "pose_retention")]}
+"""A track's termination diagnostics beside COLUMNS (ImageNav: the final heading within tolerance of
+the goal image's, and Pose SR / SR)."""
 
 
 def _num(v, digits: int = 3) -> str:
@@ -220,15 +223,16 @@ def results_table(card: dict, ev: dict | None = None) -> str:
     runs = ev.get("runs") or {}
     if not runs:
         return "_No closed-loop evaluation recorded yet._\n"
-    lines = ["| agent | protocol | rendered | group | n | " + " | ".join(c for c, _ in COLUMNS) + " |",
-             "|---|---|---|---|---:|" + "---:|" * len(COLUMNS)]
+    columns = COLUMNS + TRACK_COLUMNS.get(card["task"], [])
+    lines = ["| agent | protocol | rendered | group | n | " + " | ".join(c for c, _ in columns) + " |",
+             "|---|---|---|---|---:|" + "---:|" * len(columns)]
     for run, summ in runs.items():
         groups = summ["tasks"][card["task"]]
         r = summ.get("render")
         shown = f"{r['width'] or ''}x{r['height'] or ''} {r['renderer']}" if r else "no"
         for group in sorted(groups, key=lambda g: ORDER.index(g) if g in ORDER else len(ORDER)):
             m = groups[group]
-            cells = [_num(m.get(k), 0 if k == "steps" else 2 if k == "ne" else 3) for _, k in COLUMNS]
+            cells = [_num(m.get(k), 0 if k == "steps" else 2 if k == "ne" else 3) for _, k in columns]
             lines.append(f"| {summ.get('label') or summ['agent']} | {summ['protocol']} | {shown} | {group} | {m['episodes']} | "
                          + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
@@ -239,8 +243,9 @@ def curve_table(card: dict) -> str:
              "|---:|---|---:|---:|---:|---|---:|---:|---:|---:|"]
     for e in card["curve"]:
         lf = f"{e['loss_first']:.3f} -> " if "loss_first" in e else ""
+        aux = f" (goal position {e['aux_loss_first']:.3f} -> {e['aux_loss']:.3f})" if "aux_loss" in e else ""
         lines.append(f"| {e['round']} | {e['kind']} | {e['beta']:.2f} | {e['new_frames']} | {e['frames']} | "
-                     f"{lf}{e['loss']:.3f} | {_num(e.get('val_sr'))} | {_num(e.get('val_spl'))} | "
+                     f"{lf}{e['loss']:.3f}{aux} | {_num(e.get('val_sr'))} | {_num(e.get('val_spl'))} | "
                      f"{_num(e.get('collect_s'), 1)} | {_num(e.get('fit_s'), 1)} |")
     return "\n".join(lines) + "\n"
 
@@ -279,6 +284,9 @@ def network(spec: dict) -> str:
         seen = (f"depth and RGB ({size}, depth clipped at {spec['max_depth']} m)" if spec.get("rgbd")
                 else f"RGB ({size})")
         inputs = f"{seen} and the goal image stacked as channels into one encoder (early fusion, as GNM does)"
+        if spec.get("aux_goal"):
+            inputs += (" (an auxiliary head, trained and not used to act, predicts the goal's position in the "
+                       "robot frame from the GRU state)")
     else:
         cats = spec.get("categories", ())
         inputs = (f"depth and RGB ({size}, depth clipped at {spec['max_depth']} m), the goal category as a learned "

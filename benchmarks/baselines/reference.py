@@ -32,7 +32,8 @@ set's scenes for a call that only evaluates finished runs); SPLIT (the eval phas
 every episode of ROOT); EVAL_TASKS and AGENTS (which tracks and agents the eval phase measures: a new
 ImageNav run alone is TRAIN_TASKS=imagenav EVAL_TASKS=imagenav AGENTS=learned, its table completed with
 an earlier call's other agents on the same episodes). The learned policies on real captures, from a
-release folder of them (no baseline was trained on a real scene): ROOT=RELEASE SPLIT= TASKS=pointnav,imagenav TRAIN_TASKS=imagenav ... reference eval.
+release folder of them (no baseline was trained on a real scene): ROOT=RELEASE SPLIT= TASKS=pointnav,imagenav
+TRAIN_TASKS=imagenav ... reference eval.
 """
 from __future__ import annotations
 

@@ -4,7 +4,12 @@
     agent = LearnedNavAgent()                               # the shipped pointnav_bc
     agent = LearnedNavAgent(checkpoint="runs/on/model.pt", device="cuda")   # any track's navarena train run
 
-The policy acts greedily (argmax). Agents of one checkpoint and device share one network; the
+The policy acts greedily (argmax) by default. With `sample=True` its move is drawn from the
+network's distribution over the three moves (seeded per episode: the same seed and episode give
+the same actions), and it stops only when STOP is the most likely action, so a sampled STOP never
+ends an explicit_stop episode. `stop_threshold` sets when it stops instead: when the policy gives
+STOP at least that probability. Sampling breaks the loops a greedy recurrent policy falls into when
+it is unsure (turning in place). Agents of one checkpoint and device share one network; the
 batched evaluator steps all of its slots in one forward pass (act_batch).
 """
 from __future__ import annotations
@@ -14,10 +19,13 @@ from functools import lru_cache
 from importlib import resources
 from pathlib import Path
 
+import numpy as np
 import torch
 
 from navcore.baselines.checkpoint import CheckpointError, load_checkpoint
 from navcore.baselines.model import NO_ACTION, NavNet, NavSpec, observation_input
+from navcore.nav.actions import STOP
+from navcore.seeds import stream_seed
 
 MODELS = Path(str(resources.files("navcore") / "models"))
 
@@ -63,19 +71,34 @@ class LearnedNavAgent:
         name: the shipped baseline read when no checkpoint is given.
         sha256: the checkpoint's expected sha256 (checked on load when given).
         device: auto (CUDA when there) | cpu | cuda[:i].
+        sample: draw the move from the policy's distribution instead of argmax (see the module docstring).
+        stop_threshold: STOP when the policy gives it at least this probability (None: when it is the
+            argmax); else the most likely (or a sampled) move. Above 0.5 it stops less eagerly.
+        seed: the sampling stream's seed (the evaluator passes one per scene; each episode's stream is
+            derived from it and the episode id).
     """
 
     def __init__(self, checkpoint: str | None = None, name: str = "pointnav_bc", device: str | None = "auto",
-                 sha256: str | None = None, **_):
+                 sha256: str | None = None, sample: bool = False, stop_threshold: float | None = None, seed: int = 0,
+                 **_):
         path, digest = (Path(checkpoint), sha256) if checkpoint else shipped(name)
+        if not isinstance(sample, bool):
+            raise ValueError(f"sample={sample!r}: true or false")
+        if stop_threshold is not None and not (isinstance(stop_threshold, (int, float)) and 0 < stop_threshold <= 1):
+            raise ValueError(f"stop_threshold={stop_threshold!r}: a probability in (0, 1], or none for the argmax")
         self.device = default_device(device)
         self.net = _load_net(str(path), digest, self.device)
         self.task = self.net.spec.task
+        self.sample, self.seed = sample, int(seed)
+        self.stop_threshold = None if stop_threshold is None else float(stop_threshold)
+        self.rng = np.random.default_rng(stream_seed(self.seed, "", "learned-sample")) if sample else None
         self.h = None
         self.prev = NO_ACTION
 
     def reset(self, task: dict) -> None:
         self.h, self.prev = self.net.initial_state(1, self.device), NO_ACTION
+        if self.sample:
+            self.rng = np.random.default_rng(stream_seed(self.seed, str(task.get("episode_id", "")), "learned-sample"))
 
     def act(self, obs: dict):
         return type(self).act_batch([self], [obs])[0]
@@ -90,6 +113,15 @@ class LearnedNavAgent:
         h = torch.cat([a.h if a.h is not None else net.initial_state(1, dev) for a in agents], 1)
         logits, h = net.step(frames, goal, prev, h)
         acts = logits.argmax(1).tolist()
+        if any(a.sample or a.stop_threshold is not None for a in agents):
+            probs = torch.softmax(logits.double(), 1).cpu().numpy()
+            for i, a in enumerate(agents):
+                stop = acts[i] == STOP if a.stop_threshold is None else probs[i, STOP] >= a.stop_threshold
+                if stop:
+                    acts[i] = STOP
+                    continue
+                moves = probs[i, STOP + 1:] / probs[i, STOP + 1:].sum()  # FORWARD, LEFT, RIGHT
+                acts[i] = STOP + 1 + (int(a.rng.choice(len(moves), p=moves)) if a.sample else int(moves.argmax()))
         for i, a in enumerate(agents):
             a.h, a.prev = h[:, i:i + 1], int(acts[i])
         return [int(x) for x in acts]

@@ -51,12 +51,18 @@ class NavSpec:
     rgbd: bool = False
     """ImageNav: depth as well as RGB (navarena train's ImageNav default; False is the first ImageNav
     network's RGB alone, and a spec written before the field). Other tracks: False."""
+    aux_goal: bool = False
+    """ImageNav: a head that predicts the goal's position in the robot frame (log(1 + distance), cos,
+    sin of the bearing: goal_input's encoding) from the GRU state, trained as an auxiliary loss
+    (navarena train's ImageNav default), so that the encoder learns to compare the view with the goal
+    image; acting never reads it. Other tracks: False."""
 
     def __post_init__(self):
         if self.task not in TRACKS:
             raise ValueError(f"no baseline network for task {self.task!r} (one of {sorted(TRACKS)})")
-        if self.rgbd and self.task != "imagenav":
-            raise ValueError(f"rgbd applies to the imagenav network, not {self.task!r} (its inputs are fixed: TRACKS)")
+        for name in ("rgbd", "aux_goal"):
+            if getattr(self, name) and self.task != "imagenav":
+                raise ValueError(f"{name} applies to the imagenav network, not {self.task!r} (its inputs are fixed: TRACKS)")
         object.__setattr__(self, "categories", tuple(self.categories))
 
     @property
@@ -88,8 +94,9 @@ class NavSpec:
             d.pop("task"), d.pop("categories")
         else:
             d["categories"] = list(self.categories)
-            if not self.rgbd:  # the fields of a spec written before rgbd (the same network)
-                d.pop("rgbd")
+            for name in ("rgbd", "aux_goal"):  # the fields of a spec written before them (the same network)
+                if not d[name]:
+                    d.pop(name)
         return d
 
 
@@ -120,7 +127,8 @@ def rgb_input(rgb, spec: NavSpec) -> torch.Tensor:
 
 
 def goal_input(pointgoal) -> torch.Tensor:
-    """[B, 2] (distance m, bearing rad; or [2]) -> float32 [B, 3]: log(1 + distance), cos, sin."""
+    """[B, 2] (distance m, bearing rad; or [2]) -> float32 [B, 3]: log(1 + distance), cos, sin (also
+    the aux_goal head's target)."""
     g = torch.as_tensor(np.asarray(pointgoal, np.float32)).reshape(-1, 2)
     return torch.stack([torch.log1p(g[:, 0].clamp(min=0)), torch.cos(g[:, 1]), torch.sin(g[:, 1])], 1)
 
@@ -183,6 +191,8 @@ class NavNet(nn.Module):
         self.prev = nn.Embedding(NUM_ACTIONS + 1, 16)
         self.gru = nn.GRU(spec.embed + goal_width + 16, spec.hidden)
         self.head = nn.Linear(spec.hidden, NUM_ACTIONS)
+        if spec.aux_goal:
+            self.aux = nn.Linear(spec.hidden, 3)
 
     def features(self, frames: torch.Tensor, goal: torch.Tensor, prev: torch.Tensor) -> torch.Tensor:
         """[N, C, h, w], [N, goal_size], [N] long -> [N, F] (the GRU's input)."""
@@ -194,13 +204,14 @@ class NavNet(nn.Module):
         parts.append(self.prev(prev))
         return torch.cat(parts, 1)
 
-    def forward(self, frames, goal, prev, h0=None):
+    def forward(self, frames, goal, prev, h0=None, aux: bool = False):
         """Sequences: frames [T, B, C, h, w], goal [T, B, goal_size], prev [T, B] -> logits [T, B, 4]
-        and the last state [1, B, hidden]."""
+        and the last state [1, B, hidden]; with aux (an aux_goal network) also the goal predictions
+        [T, B, 3]."""
         t, b = prev.shape
         x = self.features(frames.flatten(0, 1), goal.flatten(0, 1), prev.flatten(0, 1)).view(t, b, -1)
         out, h = self.gru(x, h0)
-        return self.head(out), h
+        return (self.head(out), h, self.aux(out)) if aux else (self.head(out), h)
 
     def step(self, frames, goal, prev, h):
         """One step of B episodes: [B, C, h, w], [B, goal_size], [B], state [1, B, hidden] or None."""

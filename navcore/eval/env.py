@@ -34,7 +34,7 @@ from navcore.eval.episode import Episode
 from navcore.nav.actions import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT, ActionSpace
 from navcore.nav.dynamics import BLOCKED_MODES, blocked_motion
 from navcore.nav.oracle import geodesic_potential
-from navcore.nav.poses import wrap_angle
+from navcore.nav.poses import goal_in_robot_frame, wrap_angle
 
 PROTOCOLS = ("distance", "explicit_stop")
 MAX_WAYPOINTS = 64
@@ -306,9 +306,7 @@ class NavEnv:
             return {"goal_category": ep.category}
         if ep.task == "imagenav":
             return {"goal_image": self._goal_image} if self._goal_image is not None else {}
-        dxw, dyw = ep.goal_xy[0] - s.x, ep.goal_xy[1] - s.y
-        c, sn = math.cos(s.yaw), math.sin(s.yaw)
-        gx, gy = c * dxw + sn * dyw, -sn * dxw + c * dyw
+        gx, gy = goal_in_robot_frame(s.x, s.y, s.yaw, ep.goal_xy)
         return {"pointgoal": np.array([math.hypot(gx, gy), math.atan2(gy, gx)], np.float32),
                 "pointgoal_xy": np.array([gx, gy], np.float32)}
 

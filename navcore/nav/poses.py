@@ -12,6 +12,13 @@ def wrap_angle(a):
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
 
+def goal_in_robot_frame(x: float, y: float, yaw: float, goal_xy) -> tuple[float, float]:
+    """The goal's position (forward, left) in metres in the frame of a robot at (x, y, yaw)."""
+    dxw, dyw = float(goal_xy[0]) - x, float(goal_xy[1]) - y
+    c, s = math.cos(yaw), math.sin(yaw)
+    return c * dxw + s * dyw, -s * dxw + c * dyw
+
+
 def integrate(x0: float, y0: float, yaw0: float, v: np.ndarray, w: np.ndarray, dt: float):
     """Poses [N+1] from per-step (v, omega) held for dt each (turn-then-drive steps are exact:
     no step both moves and turns)."""
