@@ -496,7 +496,7 @@ class Collector:
                 seq["goal"].append(gn[k])
                 seq["prev"].append(pv[k])
                 seq["label"].append(label)
-                seq["aux"].append(aux_target(s.x, s.y, s.yaw, slot_ep[i]) if cfg.spec.aux_goal else NO_AUX)
+                seq["aux"].append(goal_polar(s.x, s.y, s.yaw, slot_ep[i]) if cfg.spec.aux_goal else NO_AUX)
                 a = label if beta >= 1.0 or rng.random() < beta else int(learner[k])
                 actions[i] = a
                 prev[i] = a
@@ -514,17 +514,18 @@ class Collector:
                      np.concatenate([np.asarray(s["prev"], np.int8) for s in seqs]),
                      np.concatenate([np.asarray(s["label"], np.int8) for s in seqs]),
                      [len(s["label"]) for s in seqs], np.stack([s["goal_image"] for s in seqs]),
-                     np.concatenate([np.stack(s["aux"]) for s in seqs]).astype(np.float32))
+                     goal_input(np.concatenate([s["aux"] for s in seqs])).numpy())  # encoded once, NaN kept
 
 
-NO_AUX = np.full(3, np.nan, np.float32)
+NO_AUX = (math.nan, math.nan)
+"""A step's aux target where the network has no aux_goal head (NaN: the loss skips it)."""
 
 
-def aux_target(x: float, y: float, yaw: float, ep) -> np.ndarray:
-    """The aux_goal head's target at a pose: the episode's goal point in the robot frame, encoded as
-    the point goal is (goal_input)."""
+def goal_polar(x: float, y: float, yaw: float, ep) -> tuple[float, float]:
+    """The aux_goal head's target at a pose before encoding (goal_input): the episode's goal point
+    in the robot frame as (distance, bearing)."""
     gx, gy = goal_in_robot_frame(x, y, yaw, ep.goal_xy)
-    return goal_input([math.hypot(gx, gy), math.atan2(gy, gx)]).numpy()[0]
+    return math.hypot(gx, gy), math.atan2(gy, gx)
 
 
 _WORKER: dict = {}

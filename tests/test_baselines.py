@@ -270,7 +270,8 @@ def test_imagenav_specs_from_before_depth_keep_their_network():
 def test_the_goal_in_the_robot_frame_and_rounds_saved_before_the_aux_target(tmp_path):
     """goal_in_robot_frame on known poses; a round file without `aux` (saved before it) loads with
     NaN targets, which the aux loss skips."""
-    from navarena.train import Steps, aux_target
+    from navarena.train import Steps, goal_polar
+    from navcore.baselines.model import goal_input
     from navcore.nav.poses import goal_in_robot_frame
 
     assert np.allclose(goal_in_robot_frame(1.0, 1.0, np.pi / 2, (1.0, 3.0)), (2.0, 0.0))   # straight ahead
@@ -279,7 +280,8 @@ def test_the_goal_in_the_robot_frame_and_rounds_saved_before_the_aux_target(tmp_
 
     class Ep:
         goal_xy = (0.0, 3.0)
-    assert np.allclose(aux_target(0.0, 0.0, 0.0, Ep), [np.log1p(3.0), 0.0, 1.0], atol=1e-6)  # 3 m on the left
+    assert np.allclose(goal_input(goal_polar(0.0, 0.0, 0.0, Ep)), [[np.log1p(3.0), 0.0, 1.0]], atol=1e-6)  # 3 m on the left
+    assert np.isnan(goal_input([np.nan, np.nan]).numpy()).all()  # a step without a target stays NaN
     f = tmp_path / "round_0.npz"
     old = {"obs": np.zeros((5, 4, 2, 2), np.uint8), "goal": np.zeros((5, 0), np.float32), "prev": np.zeros(5, np.int8),
            "label": np.ones(5, np.int8), "lengths": np.array([2, 3]), "seq_goal": np.zeros((2, 3, 2, 2), np.uint8)}

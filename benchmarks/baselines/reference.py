@@ -228,9 +228,10 @@ def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
         learned = ["--agent", "learned", "--agent-arg", f"checkpoint={model}"]
         for agent, proto in RENDERED:
             name = agent.format(task=task)
-            if ("learned" if name == f"{task}_bc" else name) not in AGENTS:
+            is_learned = name == f"{task}_bc"
+            if ("learned" if is_learned else name) not in AGENTS:
                 continue
-            args = learned if name == f"{task}_bc" else ["--agent", name]
+            args = learned if is_learned else ["--agent", name]
             for sid in scenes:
                 parts.append((f"{name}_{task}_{proto}", args, task, proto, sid,
                               ["--scenes", sid, "--width", "640", "--height", "480", "--renderer", "gsplat",
