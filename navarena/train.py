@@ -86,6 +86,12 @@ class TrainConfig:
     so its actions follow from what the camera saw. auto: search for ObjectNav and ImageNav,
     geodesic for PointNav (whose goal vector says where to go); resolved when the config is made,
     so the model card names the expert used."""
+    view_overlap: float = 0.5
+    """ImageNav's searching expert counts the goal as found once its camera sees this share of what
+    the goal image shows (navcore.nav.search, goal_view), which a policy can recognise; 0: once it has
+    glimpsed the floor where the goal image was taken, as runs before this setting did (a median 6
+    steps into an episode: the rest of its labels then came from the geodesic oracle, which the
+    student cannot infer, and the trained policy turned in place)."""
     max_learner_steps: int = 400
     """A learner-driven episode is cut after this many steps (its labels are kept)."""
     grad_steps: int = 2000
@@ -125,9 +131,9 @@ class TrainConfig:
         return searches(self.task, self.expert)
 
     def __post_init__(self):
-        if self.spec is None:  # ImageNav reads depth too (without it the learner drove into walls, CR 0.48)
-            image = self.task == "imagenav"  # and learns where the goal image was taken (aux_goal)
-            self.spec = NavSpec(task=self.task, rgbd=image, aux_goal=image)
+        if self.spec is None:  # ImageNav reads depth too (without it the learner drove into walls, CR 0.48);
+            # its aux_goal head is left off: the trial that trained it lost to the one without (0.177 vs 0.231 SR)
+            self.spec = NavSpec(task=self.task, rgbd=self.task == "imagenav")
         if self.expert not in ("auto", "geodesic", "search"):
             raise ValueError(f"expert={self.expert!r}: choose auto, geodesic or search")
         if self.expert == "auto":
@@ -464,8 +470,11 @@ class Collector:
             oracle[i] = DiscreteOracle(ctx.field(ep).grid, ctx.costmap, ep.regions, ep.success_radius, ep.goal_yaw,
                                        ep.heading_tolerance, env_cfg.actions.forward_step, env_cfg.actions.turn)
             if cfg.searching:  # the same oracle once the goal has been in view
+                view = (float(ep.goal_xy[0]), float(ep.goal_xy[1]), ep.goal_yaw) \
+                    if cfg.task == "imagenav" and cfg.view_overlap > 0 and ep.goal_yaw is not None else None
                 oracle[i] = SearchingExpert(ctx.graph, oracle[i], ep.regions, ep.success_radius, ctx.emb.hfov_deg,
-                                            cfg.spec.max_depth, env_cfg.actions.forward_step, env_cfg.actions.turn)
+                                            cfg.spec.max_depth, env_cfg.actions.forward_step, env_cfg.actions.turn,
+                                            goal_view=view, overlap=cfg.view_overlap)
             slot_seq[i] = {"obs": [], "goal": [], "prev": [], "label": [], "aux": [], "goal_image": None}
             h[:, i] = 0
             prev[i] = NO_ACTION
@@ -569,6 +578,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
              "batch_episodes": None, "slots": "episodes stepped together", "width": "render size", "height": None,
              "val_episodes": "held-out check", "keep": "best|last round into model.pt", "scenes": "first N train scenes", "seed": None,
              "max_learner_steps": None, "expert": "auto|geodesic|search: the labelling expert",
+             "view_overlap": "ImageNav: goal image's share in view = found (0: a glimpse of its place)",
              "workers": "collection processes", "beta": "DAgger mixing",
              "lr": None, "weight_decay": None, "aux_weight": "ImageNav's goal-position loss", "train_split": None, "val_split": None,
              "renderer": "auto|cpu|gsplat", "device": "auto|cpu|cuda"}
@@ -582,6 +592,8 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
         ap.add_argument("--" + name.replace("_", "-"), type=kind, default=default,
                         metavar={int: "N", float: "X"}.get(kind, "S"),
                         help=f"{text + ' ' if text else ''}({default})")
+    ap.add_argument("--aux-goal", action="store_true",
+                    help="ImageNav: train a goal-position head beside the actions (NavSpec.aux_goal; off)")
     ap.add_argument("--quiet", action="store_true")
     return ap
 
@@ -589,6 +601,10 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     fields_ = {k: getattr(a, k) for k in TrainConfig.__dataclass_fields__ if k != "spec"}
+    if a.aux_goal:
+        if a.task != "imagenav":
+            build_parser().error("--aux-goal applies to --task imagenav")
+        fields_["spec"] = NavSpec(task="imagenav", rgbd=True, aux_goal=True)
     cfg = TrainConfig(**fields_)
     res = Trainer(a.root, a.out, cfg, quiet=a.quiet).run(resume=a.resume)
     print(f"wrote {res['model']} (sha256 {res['sha256'][:12]}...)")

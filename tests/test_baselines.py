@@ -99,7 +99,8 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
     root = episode_run[0]
-    assert main([str(root), "--out", str(tmp_path), "--task", task, *TINY]) == 0
+    extra = ["--aux-goal"] if task == "imagenav" else []  # the goal-position head, an option
+    assert main([str(root), "--out", str(tmp_path), "--task", task, *TINY, *extra]) == 0
     card = json.loads((tmp_path / "model_card.json").read_text())
     assert card["task"] == task and card["curve"][0]["loss"] < card["curve"][0]["loss_first"]
     ck = load_checkpoint(tmp_path / "model.pt", kind=task)
@@ -107,6 +108,7 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     z = np.load(tmp_path / "rounds" / "round_0.npz")
     assert z["obs"].shape[1] == 4 and z["seq_goal"].shape[1] == (3 if task == "imagenav" else 0)
     assert card["config"]["expert"] == "search" and ck["spec"].get("rgbd", False) == (task == "imagenav")
+    assert card["config"]["view_overlap"] == 0.5  # ImageNav's found criterion, recorded
     aux = z["aux"]
     assert aux.shape == (len(z["label"]), 3)
     if task == "imagenav":  # the goal-position head's targets: goal_input's encoding, on every step

@@ -80,3 +80,37 @@ def test_same_poses_same_actions(ctx, make_episode):
         ex, _ = expert_for(ctx, ep)
         runs.append(drive(ctx, ep, ex.action)[1])
     assert runs[0] == runs[1]
+
+
+def test_imagenav_found_means_the_goal_image_is_in_view(ctx, make_episode):
+    """ImageNav's goal view: the goal camera at (3.0, 1.5) faces the east wall. Standing on the goal's
+    floor facing the other way is not found (the region criterion says found: its own floor is
+    seen); facing east from 0.5 m behind it is; nothing of the east wall is visible through the
+    dividing wall from the left room."""
+    ep = make_episode(start=(1.0, 0.5, math.pi), goal=(3.0, 1.5), radius=0.3, max_steps=600, task="imagenav", goal_yaw=0.0)
+    regions = point_regions(np.asarray(ep.goal_sources))
+    goal = DiscreteOracle(ctx.field(ep).grid, ctx.costmap, regions, ep.success_radius)
+    view = SearchingExpert(ctx.graph, goal, regions, ep.success_radius, hfov_deg=90.0, goal_view=(3.0, 1.5, 0.0))
+    glimpse, _ = expert_for(ctx, ep)
+    wall = view.goal_points
+    assert len(wall) > 10 and np.allclose(wall[:, 0], 3.95, atol=0.1) and wall[:, 1].min() < 0.7 and wall[:, 1].max() > 2.3
+    assert not view.visible(1.0, 1.5, 0.0, wall).any()  # behind the dividing wall
+    assert view.visible(2.5, 1.5, 0.0, wall).mean() > 0.8
+    glimpse.look(3.0, 1.5, math.pi)
+    view.look(3.0, 1.5, math.pi)
+    assert glimpse.found and not view.found
+    view.look(2.5, 1.5, 0.0)
+    assert view.found
+
+
+def test_imagenav_expert_searches_until_the_view_matches_then_reaches_the_goal(ctx, make_episode):
+    ep = make_episode(start=(1.0, 0.5, math.pi), goal=(3.0, 1.5), radius=0.3, max_steps=600, task="imagenav", goal_yaw=0.0)
+    regions = point_regions(np.asarray(ep.goal_sources))
+    goal = DiscreteOracle(ctx.field(ep).grid, ctx.costmap, regions, ep.success_radius)
+    ex = SearchingExpert(ctx.graph, goal, regions, ep.success_radius, hfov_deg=90.0, goal_view=(3.0, 1.5, 0.0))
+    found = []
+    s, trace = drive(ctx, ep, lambda x, y, yaw: (ex.action(x, y, yaw), found.append((ex.found, yaw)))[0])
+    assert s.success and trace[-1][2] == STOP
+    first = [f for f, _ in found].index(True)
+    x, _, _ = trace[first]
+    assert x > 1.8 and math.cos(found[first][1]) > 0  # at the door or beyond it, looking east

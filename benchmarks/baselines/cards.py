@@ -270,8 +270,13 @@ def expert(card: dict) -> str:
     """The labelling expert of a card's run (navarena train --expert; cards from before it: geodesic)."""
     from navarena.train import searches
 
-    return ("the searching expert: it looks for the goal until it has been in view, then the geodesic oracle"
-            if searches(card["task"], card["config"].get("expert")) else "the geodesic oracle")
+    if not searches(card["task"], card["config"].get("expert")):
+        return "the geodesic oracle"
+    overlap = card["config"].get("view_overlap", 0.0)  # cards from before it: a glimpse of the goal's place
+    if card["task"] == "imagenav" and overlap > 0:
+        return (f"the searching expert: it looks for the goal until its camera sees {overlap:.0%} of what the goal image "
+                "shows, then the geodesic oracle")
+    return "the searching expert: it looks for the goal until it has been in view, then the geodesic oracle"
 
 
 def network(spec: dict) -> str:

@@ -18,6 +18,13 @@ along the trajectory, which a recurrent policy also has:
   or can make no progress towards it.
 - **Going.** Once found, its action is the geodesic oracle's (which stops inside the region).
 
+ImageNav (`goal_view`): a glimpse of the floor where the goal image was taken says nothing a policy
+can recognise: the image shows what the goal camera faces, not where it stands. So with a goal
+view, found means the camera now sees at least `overlap` of what the goal image shows: the points
+where the goal camera's rays meet an obstacle (its walls and furniture), each visible when it lies
+in the field of view, within range, and no obstacle stands in front of it. The student then learns
+to search until its view looks like the goal image, and to go from there.
+
 Deterministic: the same poses give the same actions.
 """
 from __future__ import annotations
@@ -40,11 +47,14 @@ class SearchingExpert:
         regions, radius: the episode's success regions [k, 4] and success radius (metres).
         hfov_deg: the camera's horizontal field of view. max_range: how far it sees (metres).
         forward, turn: the action space (metres, radians), as the oracle's.
+        goal_view: ImageNav's goal camera (x, y, yaw): found once `overlap` of the surface it sees is
+            in view (module docstring); None: once a success region has been seen.
     """
 
     def __init__(self, graph, goal: DiscreteOracle, regions: np.ndarray, radius: float, hfov_deg: float,
                  max_range: float = 5.0, forward: float = 0.25, turn: float = math.radians(15), rays: int = 31,
-                 min_hop: float = 1.0, reach: float = 0.5, horizon: float = 6.0):
+                 min_hop: float = 1.0, reach: float = 0.5, horizon: float = 6.0,
+                 goal_view: tuple[float, float, float] | None = None, overlap: float = 0.5):
         self.graph, self.costmap, self.goal = graph, graph.costmap, goal
         self.regions, self.radius = np.asarray(regions, np.float64).reshape(-1, 4), float(radius)
         self.half_fov, self.max_range, self.rays = math.radians(hfov_deg) / 2, float(max_range), int(rays)
@@ -56,17 +66,48 @@ class SearchingExpert:
         self._to_target: DiscreteOracle | None = None
         res = self.costmap.resolution
         self._steps = np.arange(0.0, self.max_range + res, res / 2)  # samples along a ray
+        self.overlap = float(overlap)
+        self.goal_points = None if goal_view is None else self._surface(*goal_view)
+
+    def _surface(self, x: float, y: float, yaw: float) -> np.ndarray:
+        """[K, 2] the points a camera at (x, y, yaw) sees on the obstacle layer: where its rays end
+        on an obstacle (all ray ends when fewer than a quarter of them hit one: an open view)."""
+        angles = yaw + np.linspace(-self.half_fov, self.half_fov, self.rays)
+        depth = self.costmap.view_depths((x, y), angles, max_range=self.max_range)
+        hit = depth < self.max_range - 1e-6
+        if hit.sum() < max(1, len(angles) // 4):
+            hit[:] = True
+        return np.array([x, y])[None] + depth[hit, None] * np.column_stack([np.cos(angles[hit]), np.sin(angles[hit])])
+
+    def visible(self, x: float, y: float, yaw: float, pts: np.ndarray, tol: float = 0.15) -> np.ndarray:
+        """[K] whether each point is in view of the camera at (x, y, yaw): inside its horizontal
+        field of view, within range, and nothing on the obstacle layer in front of it (a ray towards
+        it runs at least its distance less `tol`)."""
+        d = np.hypot(pts[:, 0] - x, pts[:, 1] - y)
+        ang = np.arctan2(pts[:, 1] - y, pts[:, 0] - x)
+        off = np.abs((ang - yaw + np.pi) % (2 * np.pi) - np.pi)
+        cand = (off <= self.half_fov) & (d <= self.max_range + tol)
+        out = np.zeros(len(pts), bool)
+        if cand.any():
+            free = self.costmap.view_depths((x, y), ang[cand], max_range=self.max_range + tol)
+            out[cand] = free >= d[cand] - tol
+        return out
 
     # ------------------------------------------------------------------ seeing
     def look(self, x: float, y: float, yaw: float) -> None:
-        """Mark what the camera at (x, y, yaw) sees; set `found` when it sees a success region."""
+        """Mark what the camera at (x, y, yaw) sees; set `found` when it sees a success region (with a
+        goal view: `overlap` of the goal image's surface)."""
         angles = yaw + np.linspace(-self.half_fov, self.half_fov, self.rays)
         depth = self.costmap.view_depths((x, y), angles, max_range=self.max_range)
         dirs = np.column_stack([np.cos(angles), np.sin(angles)])
         keep = self._steps[None, :] <= depth[:, None]
         pts = (np.array([x, y])[None, None, :] + self._steps[None, :, None] * dirs[:, None, :])[keep]
         self._mark(pts)
-        if not self.found and len(self.regions) and (region_distance(pts, self.regions) <= self.radius).any():
+        if self.found:
+            return
+        if self.goal_points is not None:  # ImageNav: the goal image's surface in view
+            self.found = bool(self.visible(x, y, yaw, self.goal_points).mean() >= self.overlap)
+        elif len(self.regions) and (region_distance(pts, self.regions) <= self.radius).any():
             self.found = True
 
     def _mark(self, pts: np.ndarray) -> None:
