@@ -70,6 +70,41 @@ def test_model_keeps_the_best_checked_round(keep, episode_run, tmp_path, monkeyp
         TrainConfig(keep="first")
 
 
+def test_objectnav_check_also_measures_stop_sr(episode_run, tmp_path, monkeypatch):
+    """ObjectNav's held-out check after a round runs under distance and explicit_stop (scripted here:
+    SR 0.5 and Stop SR 0.25); the card's curve and its table carry both. The check passes its
+    protocol on: a policy that always stops ends each explicit_stop episode at its first step."""
+    from benchmarks.baselines.cards import curve_table
+    from navarena.dataset import NavDataset
+    from navarena.train import Collector, TrainConfig, Trainer, main
+    from navcore.baselines.checkpoint import save_checkpoint
+
+    calls = []
+
+    def check(self, model, sha, split, n, width=None, height=None, protocol="distance"):
+        calls.append(protocol)
+        return {"episodes": n, "sr": 0.5 if protocol == "distance" else 0.25, "spl": 0.4}
+
+    monkeypatch.setattr(Trainer, "evaluate", check)
+    args = [a for a in TINY if a not in ("--val-episodes", "0", "--rounds", "2")]
+    assert main([str(episode_run[0]), "--out", str(tmp_path / "run"), *args, "--rounds", "1", "--task", "objectnav",
+                 "--val-episodes", "2", "--val-split", "train"]) == 0
+    card = json.loads((tmp_path / "run" / "model_card.json").read_text())
+    assert calls == ["distance", "explicit_stop"]
+    assert (card["curve"][0]["val_sr"], card["curve"][0]["val_stop_sr"]) == (0.5, 0.25)
+    assert "| val Stop SR |" in curve_table(card) and "| 0.250 |" in curve_table(card)
+
+    cfg = TrainConfig(task="pointnav", slots=2, width=32, height=24, renderer="cpu")
+    col = Collector(episode_run[0], cfg, "cpu")
+    state = {k: v.clone() for k, v in col.net.state_dict().items()}
+    state["head.weight"].zero_()
+    state["head.bias"].copy_(torch.tensor([10.0, 0.0, 0.0, 0.0]))  # STOP, whatever it sees
+    sha = save_checkpoint(tmp_path / "stop.pt", "pointnav", cfg.spec.to_dict(), state, {})
+    sid = NavDataset(episode_run[0]).scene_ids("pointnav")[0]
+    rows = col.check((sid, "train", 2, str(tmp_path / "stop.pt"), sha, 32, 24, "explicit_stop"))
+    assert len(rows) == 2 and all(r["steps"] == 1 and r["end_reason"] == "stop" for r in rows)
+
+
 def test_collection_workers_give_the_same_run_and_check(episode_run, tmp_path):
     """Collection and the held-out check spread over worker processes (one scene each) give the
     same checkpoint and the same check as this process alone."""
@@ -137,6 +172,35 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
         geo_card = json.loads((tmp_path / "geo" / "model_card.json").read_text())
         assert "labelled by the searching expert" in card_markdown(card, shipped=False)
         assert "labelled by the geodesic oracle)" in card_markdown(geo_card, shipped=False)
+
+
+@pytest.mark.parametrize("veto", [True, False])
+def test_a_learners_false_stop_is_labelled_and_the_expert_goes_on(veto, episode_run):
+    """DAgger with a learner that always stops (beta 0): without the veto each episode ends at its
+    first step, labelled with the expert's move; with it the expert's moves are executed instead,
+    so the episodes go on and every one of the learner's false stops is labelled."""
+    from navarena.dataset import NavDataset
+    from navarena.train import Collector, TrainConfig
+    from navcore.nav.actions import STOP
+
+    root = episode_run[0]
+    cfg = TrainConfig(task="pointnav", slots=4, width=32, height=24, renderer="cpu", max_learner_steps=30,
+                      stop_veto=veto)
+    col = Collector(root, cfg, "cpu")
+    with torch.no_grad():
+        col.net.head.weight.zero_()
+        col.net.head.bias.copy_(torch.tensor([10.0, 0.0, 0.0, 0.0]))  # STOP, whatever it sees
+    ds = NavDataset(root)
+    sid = ds.scene_ids("pointnav")[0]
+    eps = [e for e in ds.episodes(sid, "pointnav", "train") if e.geodesic > 1.0][:4]
+    steps = col.rollouts(sid, eps, 0.0, np.random.default_rng(0))
+    assert len(steps.lengths) == len(eps) and STOP not in set(steps.label[steps.starts].tolist())
+    if veto:
+        assert (steps.lengths > 4).all()
+        executed = np.concatenate([steps.prev[a + 1:a + n] for a, n in zip(steps.starts, steps.lengths)])
+        assert STOP not in set(executed.tolist())  # the learner's stops were never executed
+    else:
+        assert (steps.lengths == 1).all()
 
 
 def test_resume_after_the_last_round_changes_nothing(trained, episode_run, tmp_path):

@@ -239,14 +239,17 @@ def results_table(card: dict, ev: dict | None = None) -> str:
 
 
 def curve_table(card: dict) -> str:
-    lines = ["| round | kind | beta | new frames | frames | loss (first -> last 10 %) | val SR | val SPL | collect s | fit s |",
-             "|---:|---|---:|---:|---:|---|---:|---:|---:|---:|"]
+    stop = any("val_stop_sr" in e for e in card["curve"])  # ObjectNav's check under explicit_stop too
+    lines = ["| round | kind | beta | new frames | frames | loss (first -> last 10 %) | val SR | val SPL |"
+             + (" val Stop SR |" if stop else "") + " collect s | fit s |",
+             "|---:|---|---:|---:|---:|---|---:|---:|" + ("---:|" if stop else "") + "---:|---:|"]
     for e in card["curve"]:
         lf = f"{e['loss_first']:.3f} -> " if "loss_first" in e else ""
         aux = f" (goal position {e['aux_loss_first']:.3f} -> {e['aux_loss']:.3f})" if "aux_loss" in e else ""
         lines.append(f"| {e['round']} | {e['kind']} | {e['beta']:.2f} | {e['new_frames']} | {e['frames']} | "
                      f"{lf}{e['loss']:.3f}{aux} | {_num(e.get('val_sr'))} | {_num(e.get('val_spl'))} | "
-                     f"{_num(e.get('collect_s'), 1)} | {_num(e.get('fit_s'), 1)} |")
+                     + (f"{_num(e.get('val_stop_sr'))} | " if stop else "")
+                     + f"{_num(e.get('collect_s'), 1)} | {_num(e.get('fit_s'), 1)} |")
     return "\n".join(lines) + "\n"
 
 

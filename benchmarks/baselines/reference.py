@@ -31,7 +31,8 @@ make setup-gpu first (WHEELS=dir offline). Paths: ROOT (data/baselines), RUNS (d
 set's scenes for a call that only evaluates finished runs); SPLIT (the eval phase's split, eval_zeroshot; empty:
 every episode of ROOT); EVAL_TASKS and AGENTS (which tracks and agents the eval phase measures: a new
 ImageNav run alone is TRAIN_TASKS=imagenav EVAL_TASKS=imagenav AGENTS=learned, its table completed with
-an earlier call's other agents on the same episodes). The learned policies on real captures, from a
+an earlier call's other agents on the same episodes); PROTOCOLS (the learned policies', default
+distance,explicit_stop; the distance protocol's scenes run first). The learned policies on real captures, from a
 release folder of them (no baseline was trained on a real scene): ROOT=RELEASE SPLIT= TASKS=pointnav,imagenav
 TRAIN_TASKS=imagenav ... reference eval.
 """
@@ -78,6 +79,8 @@ TRAIN_TASKS = os.environ.get("TRAIN_TASKS", ",".join(TASKS)).split(",")
 # measures: a new run of one track against the other agents' tables of an earlier call on the same episodes
 EVAL_TASKS = os.environ.get("EVAL_TASKS", ",".join(TASKS)).split(",")
 AGENTS = [a for a in os.environ.get("AGENTS", "learned,depth_reactive,random,oracle").split(",") if a]
+# the learned policies' protocols (default both): distance alone is the tracks' SR and ImageNav's Pose SR
+PROTOCOLS = [p for p in os.environ.get("PROTOCOLS", "distance,explicit_stop").split(",") if p]
 DATA = [f"data_root={ROOT}", f"scenes.count={SCENES}", f"task=[{','.join(TASKS)}]",
         f"semantics.enabled={'true' if 'objectnav' in TASKS else 'false'}", "episodes.scene_splits.test=0.1",
         "executor.dashboard=false"]
@@ -229,7 +232,7 @@ def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
         for agent, proto in RENDERED:
             name = agent.format(task=task)
             is_learned = name == f"{task}_bc"
-            if ("learned" if is_learned else name) not in AGENTS:
+            if ("learned" if is_learned else name) not in AGENTS or (is_learned and proto not in PROTOCOLS):
                 continue
             args = learned if is_learned else ["--agent", name]
             for sid in scenes:
@@ -241,9 +244,10 @@ def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
                 continue
             parts.append((f"{agent}_{task}_{proto}", ["--agent", agent], task, proto, None,
                           ["--no-render", "--batch-slots", "64"]))
-    # unrendered first, then the learned policies scene by scene, then depth_reactive (its failures run the whole
-    # budget: the dearest part); a cut keeps whole scenes
-    parts.sort(key=lambda p: (p[4] is not None, p[0].startswith("depth_reactive"), p[4] or ""))
+    # unrendered first, then the learned policies scene by scene, the distance protocol's every scene before
+    # explicit_stop's, then depth_reactive (its failures run the whole budget: the dearest part); a cut keeps whole
+    # scenes, and the distance table whole first
+    parts.sort(key=lambda p: (p[4] is not None, p[0].startswith("depth_reactive"), p[3] != "distance", p[4] or ""))
     todo = [p for p in parts if not (EVAL / "parts" / p[0] / (p[4] or "all") / "summary.json").is_file()]
     timing: dict = json.loads((EVAL / "timing.json").read_text()) if (EVAL / "timing.json").is_file() else {}
 
