@@ -600,9 +600,9 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
              "batch_episodes": None, "slots": "episodes stepped together", "width": "render size", "height": None,
              "val_episodes": "held-out check", "keep": "best|last round into model.pt", "scenes": "first N train scenes", "seed": None,
              "max_learner_steps": None, "expert": "auto|geodesic|search: the labelling expert",
-             "view_overlap": "ImageNav: goal image's share in view = found (0: a glimpse of its place)",
+             "view_overlap": "ImageNav: goal image's share in view that counts as found",
              "workers": "collection processes", "beta": "DAgger mixing",
-             "stop_veto": "DAgger: a learner's false STOP is labelled and the expert goes on (true|false)",
+             "stop_veto": "DAgger: label a false STOP, the expert goes on",
              "lr": None, "weight_decay": None, "aux_weight": "ImageNav's goal-position loss", "train_split": None, "val_split": None,
              "renderer": "auto|cpu|gsplat", "device": "auto|cpu|cuda"}
     for name, text in helps.items():
@@ -616,7 +616,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
                         metavar={int: "N", float: "X", _flag: "B"}.get(kind, "S"),
                         help=f"{text + ' ' if text else ''}({default})")
     ap.add_argument("--aux-goal", action="store_true",
-                    help="ImageNav: train a goal-position head beside the actions (NavSpec.aux_goal; off)")
+                    help="ImageNav: also train a goal-position head (off)")
     ap.add_argument("--quiet", action="store_true")
     return ap
 

@@ -88,7 +88,8 @@ def test_objectnav_check_also_measures_stop_sr(episode_run, tmp_path, monkeypatc
     monkeypatch.setattr(Trainer, "evaluate", check)
     args = [a for a in TINY if a not in ("--val-episodes", "0", "--rounds", "2")]
     assert main([str(episode_run[0]), "--out", str(tmp_path / "run"), *args, "--rounds", "1", "--task", "objectnav",
-                 "--val-episodes", "2", "--val-split", "train"]) == 0
+                 "--val-episodes", "2", "--val-split", "train", "--episodes-per-round", "2", "--max-learner-steps", "10",
+                 "--grad-steps", "2"]) == 0
     card = json.loads((tmp_path / "run" / "model_card.json").read_text())
     assert calls == ["distance", "explicit_stop"]
     assert (card["curve"][0]["val_sr"], card["curve"][0]["val_stop_sr"]) == (0.5, 0.25)
@@ -184,7 +185,7 @@ def test_a_learners_false_stop_is_labelled_and_the_expert_goes_on(veto, episode_
     from navcore.nav.actions import STOP
 
     root = episode_run[0]
-    cfg = TrainConfig(task="pointnav", slots=4, width=32, height=24, renderer="cpu", max_learner_steps=30,
+    cfg = TrainConfig(task="pointnav", slots=3, width=32, height=24, renderer="cpu", max_learner_steps=12,
                       stop_veto=veto)
     col = Collector(root, cfg, "cpu")
     with torch.no_grad():
@@ -192,7 +193,7 @@ def test_a_learners_false_stop_is_labelled_and_the_expert_goes_on(veto, episode_
         col.net.head.bias.copy_(torch.tensor([10.0, 0.0, 0.0, 0.0]))  # STOP, whatever it sees
     ds = NavDataset(root)
     sid = ds.scene_ids("pointnav")[0]
-    eps = [e for e in ds.episodes(sid, "pointnav", "train") if e.geodesic > 1.0][:4]
+    eps = [e for e in ds.episodes(sid, "pointnav", "train") if e.geodesic > 1.0][:3]
     steps = col.rollouts(sid, eps, 0.0, np.random.default_rng(0))
     assert len(steps.lengths) == len(eps) and STOP not in set(steps.label[steps.starts].tolist())
     if veto:
