@@ -355,13 +355,14 @@ class Trainer:
             if self.val_split and cfg.val_episodes:
                 t2 = time.perf_counter()
                 m = self.evaluate(out / "model.pt", sha, self.val_split, cfg.val_episodes)
+                # ObjectNav: whether it stops on purpose, the same episodes under explicit_stop
+                ms = self.evaluate(out / "model.pt", sha, self.val_split, cfg.val_episodes, protocol="explicit_stop") \
+                    if cfg.task == "objectnav" else None
                 entry["val_s"] = round(time.perf_counter() - t2, 1)
                 entry.update({"val_split": self.val_split, "val_episodes": m["episodes"],
                               "val_sr": round(m["sr"], 4), "val_spl": round(m["spl"], 4)})
-                if cfg.task == "objectnav":  # whether it stops on purpose: the same episodes under explicit_stop
-                    ms = self.evaluate(out / "model.pt", sha, self.val_split, cfg.val_episodes, protocol="explicit_stop")
+                if ms is not None:
                     entry["val_stop_sr"] = round(ms["sr"], 4)
-                    entry["val_s"] = round(time.perf_counter() - t2, 1)
                 if self.best is None or (entry["val_sr"], entry["val_spl"]) >= self.best[:2]:
                     self.best = (entry["val_sr"], entry["val_spl"], rnd)
                     with atomic_path(out / "rounds" / "best.pt") as tmp:
@@ -481,11 +482,10 @@ class Collector:
             oracle[i] = DiscreteOracle(ctx.field(ep).grid, ctx.costmap, ep.regions, ep.success_radius, ep.goal_yaw,
                                        ep.heading_tolerance, env_cfg.actions.forward_step, env_cfg.actions.turn)
             if cfg.searching:  # the same oracle once the goal has been in view
-                view = (float(ep.goal_xy[0]), float(ep.goal_xy[1]), ep.goal_yaw) \
-                    if cfg.task == "imagenav" and cfg.view_overlap > 0 and ep.goal_yaw is not None else None
                 oracle[i] = SearchingExpert(ctx.graph, oracle[i], ep.regions, ep.success_radius, ctx.emb.hfov_deg,
                                             cfg.spec.max_depth, env_cfg.actions.forward_step, env_cfg.actions.turn,
-                                            goal_view=view, overlap=cfg.view_overlap)
+                                            goal_view=ep.goal_pose if ep.goal_yaw is not None else None,  # ImageNav
+                                            overlap=cfg.view_overlap)
             slot_seq[i] = {"obs": [], "goal": [], "prev": [], "label": [], "aux": [], "goal_image": None}
             h[:, i] = 0
             prev[i] = NO_ACTION

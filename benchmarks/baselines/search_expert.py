@@ -28,12 +28,10 @@ def measure(root: str, split: str = "train", per_scene: int = 25, task: str = "o
     for sid in ds.scene_ids(task):
         ctx = ds.scene_context(sid, renderer="cpu")
         for ep in ds.episodes(sid, task, split)[:per_scene]:
-            goal = DiscreteOracle(ctx.field(ep).grid, ctx.costmap, ep.regions, ep.success_radius, ep.goal_yaw,
-                                  ep.heading_tolerance)
-            view = (float(ep.goal_xy[0]), float(ep.goal_xy[1]), ep.goal_yaw) if overlap > 0 and ep.goal_yaw is not None else None
-            ex = SearchingExpert(ctx.graph, goal, ep.regions, ep.success_radius, ctx.emb.hfov_deg, goal_view=view,
-                                 overlap=overlap)
-            left = ctx.field(ep).grid
+            left = ctx.field(ep).grid  # geodesic metres to the goal
+            goal = DiscreteOracle(left, ctx.costmap, ep.regions, ep.success_radius, ep.goal_yaw, ep.heading_tolerance)
+            ex = SearchingExpert(ctx.graph, goal, ep.regions, ep.success_radius, ctx.emb.hfov_deg,
+                                 goal_view=ep.goal_pose if ep.goal_yaw is not None else None, overlap=overlap)
             env = NavEnv(ctx, EnvConfig(render=False, protocol="explicit_stop"))
             env.reset(ep)
             s, found, found_m, t = env.state, None, None, time.perf_counter()

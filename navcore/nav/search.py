@@ -48,7 +48,7 @@ class SearchingExpert:
         hfov_deg: the camera's horizontal field of view. max_range: how far it sees (metres).
         forward, turn: the action space (metres, radians), as the oracle's.
         goal_view: ImageNav's goal camera (x, y, yaw): found once `overlap` of the surface it sees is
-            in view (module docstring); None: once a success region has been seen.
+            in view (module docstring); None, or overlap 0: once a success region has been seen.
     """
 
     def __init__(self, graph, goal: DiscreteOracle, regions: np.ndarray, radius: float, hfov_deg: float,
@@ -67,13 +67,17 @@ class SearchingExpert:
         res = self.costmap.resolution
         self._steps = np.arange(0.0, self.max_range + res, res / 2)  # samples along a ray
         self.overlap = float(overlap)
-        self.goal_points = None if goal_view is None else self._surface(*goal_view)
+        self.goal_points = None if goal_view is None or self.overlap <= 0 else self._surface(*goal_view)
+
+    def _rays(self, x: float, y: float, yaw: float) -> tuple[np.ndarray, np.ndarray]:
+        """The camera's rays at (x, y, yaw): their angles and free depths on the obstacle layer."""
+        angles = yaw + np.linspace(-self.half_fov, self.half_fov, self.rays)
+        return angles, self.costmap.view_depths((x, y), angles, max_range=self.max_range)
 
     def _surface(self, x: float, y: float, yaw: float) -> np.ndarray:
         """[K, 2] the points a camera at (x, y, yaw) sees on the obstacle layer: where its rays end
         on an obstacle (all ray ends when fewer than a quarter of them hit one: an open view)."""
-        angles = yaw + np.linspace(-self.half_fov, self.half_fov, self.rays)
-        depth = self.costmap.view_depths((x, y), angles, max_range=self.max_range)
+        angles, depth = self._rays(x, y, yaw)
         hit = depth < self.max_range - 1e-6
         if hit.sum() < max(1, len(angles) // 4):
             hit[:] = True
@@ -97,8 +101,7 @@ class SearchingExpert:
     def look(self, x: float, y: float, yaw: float) -> None:
         """Mark what the camera at (x, y, yaw) sees; set `found` when it sees a success region (with a
         goal view: `overlap` of the goal image's surface)."""
-        angles = yaw + np.linspace(-self.half_fov, self.half_fov, self.rays)
-        depth = self.costmap.view_depths((x, y), angles, max_range=self.max_range)
+        angles, depth = self._rays(x, y, yaw)
         dirs = np.column_stack([np.cos(angles), np.sin(angles)])
         keep = self._steps[None, :] <= depth[:, None]
         pts = (np.array([x, y])[None, None, :] + self._steps[None, :, None] * dirs[:, None, :])[keep]
