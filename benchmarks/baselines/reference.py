@@ -32,7 +32,8 @@ set's scenes for a call that only evaluates finished runs); SPLIT (the eval phas
 every episode of ROOT); EVAL_TASKS and AGENTS (which tracks and agents the eval phase measures: a new
 ImageNav run alone is TRAIN_TASKS=imagenav EVAL_TASKS=imagenav AGENTS=learned, its table completed with
 an earlier call's other agents on the same episodes); PROTOCOLS (the learned policies', default
-distance,explicit_stop; the distance protocol's scenes run first). The learned policies on real captures, from a
+distance,explicit_stop; the distance protocol's scenes run first); EVAL_PER_GPU (4: navarena eval processes side by side per
+GPU). The learned policies on real captures, from a
 release folder of them (no baseline was trained on a real scene): ROOT=RELEASE SPLIT= TASKS=pointnav,imagenav
 TRAIN_TASKS=imagenav ... reference eval.
 """
@@ -81,6 +82,8 @@ EVAL_TASKS = os.environ.get("EVAL_TASKS", ",".join(TASKS)).split(",")
 AGENTS = [a for a in os.environ.get("AGENTS", "learned,depth_reactive,random,oracle").split(",") if a]
 # the learned policies' protocols (default both): distance alone is the tracks' SR and ImageNav's Pose SR
 PROTOCOLS = [p for p in os.environ.get("PROTOCOLS", "distance,explicit_stop").split(",") if p]
+# navarena eval processes side by side per GPU in the eval phase (each with its share of the CPU cores)
+EVAL_PER_GPU = int(os.environ.get("EVAL_PER_GPU", "4"))
 DATA = [f"data_root={ROOT}", f"scenes.count={SCENES}", f"task=[{','.join(TASKS)}]",
         f"semantics.enabled={'true' if 'objectnav' in TASKS else 'false'}", "episodes.scene_splits.test=0.1",
         "executor.dashboard=false"]
@@ -211,7 +214,7 @@ def test_scenes() -> list[str]:
     return sorted(set(ds.eval_set(SPLIT)["scene_id"])) if SPLIT == "eval_zeroshot" else ds.scene_ids()
 
 
-def evaluate(deadline: Deadline, per_gpu: int = 4) -> int:
+def evaluate(deadline: Deadline, per_gpu: int = EVAL_PER_GPU) -> int:
     """Each track's zero-shot set for every agent (see the module docstring), merged per agent,
     track and protocol."""
     from benchmarks.baselines.cards import MODELS
