@@ -118,9 +118,10 @@ class TrainConfig:
     """Held-out episodes for the per-round closed-loop check (None: val_unseen if present, else test)."""
     val_episodes: int = 64
     keep: str = "best"
-    """best | last: the final model.pt is the round with the best held-out check (SR, then SPL; the
-    later round on a tie) or the last round. DAgger rounds need not improve: a round whose learner
-    drove lost for most of its episodes can be worse than the one before."""
+    """best | last: the final model.pt is the round with the best held-out check (check_score: SR,
+    with ObjectNav's Stop SR averaged in, then SPL; the later round on a tie) or the last round.
+    DAgger rounds need not improve: a round whose learner drove lost for most of its episodes can be
+    worse than the one before."""
     scenes: int | None = None
     """Use the first N training scenes (the scene-scaling runs); None: all."""
     workers: int = 0
@@ -363,8 +364,8 @@ class Trainer:
                               "val_sr": round(m["sr"], 4), "val_spl": round(m["spl"], 4)})
                 if ms is not None:
                     entry["val_stop_sr"] = round(ms["sr"], 4)
-                if self.best is None or (entry["val_sr"], entry["val_spl"]) >= self.best[:2]:
-                    self.best = (entry["val_sr"], entry["val_spl"], rnd)
+                if self.best is None or check_score(entry) >= self.best[:2]:
+                    self.best = (*check_score(entry), rnd)
                     with atomic_path(out / "rounds" / "best.pt") as tmp:
                         torch.save(self.net.state_dict(), tmp)
             self.curve.append(entry)
@@ -403,7 +404,7 @@ class Trainer:
             if meta["selected_round"] != self.curve[-1]["round"]:
                 state = torch.load(self.out / "rounds" / "best.pt", map_location=self.device, weights_only=True)
                 self.log(f"model.pt: round {meta['selected_round']}'s weights (the best held-out check, "
-                         f"SR {self.best[0]:.3f}), not the last round's")
+                         f"score {self.best[0]:.3f}), not the last round's")
         sha = save_checkpoint(self.out / "model.pt", self.cfg.task, self.cfg.spec.to_dict(), state, meta)
         if final:
             dev = torch.cuda.get_device_name() if self.device.startswith("cuda") else \
@@ -541,6 +542,14 @@ class Collector:
 
 NO_AUX = (math.nan, math.nan)
 """A step's aux target where the network has no aux_goal head (NaN: the loss skips it)."""
+
+
+def check_score(entry: dict) -> tuple[float, float]:
+    """What --keep best ranks a round's held-out check by: the mean SR over the protocols the check ran
+    (distance; ObjectNav's explicit_stop too, the track reports both and its policy must stop on
+    purpose), then SPL."""
+    srs = [entry["val_sr"]] + ([entry["val_stop_sr"]] if entry.get("val_stop_sr") is not None else [])
+    return round(sum(srs) / len(srs), 4), entry["val_spl"]
 
 
 def goal_polar(x: float, y: float, yaw: float, ep) -> tuple[float, float]:

@@ -106,6 +106,26 @@ def test_objectnav_check_also_measures_stop_sr(episode_run, tmp_path, monkeypatc
     assert len(rows) == 2 and all(r["steps"] == 1 and r["end_reason"] == "stop" for r in rows)
 
 
+def test_objectnav_keeps_the_round_that_also_stops(episode_run, tmp_path, monkeypatch):
+    """ObjectNav's --keep best ranks a round by the mean of its check's SR and Stop SR (check_score),
+    not SR alone: scripted, round 0 reads SR 0.5 and Stop SR 0.1 (mean 0.3), round 1 0.4 and 0.3
+    (mean 0.35), and round 1 is kept, where SR alone would keep round 0. Other tracks rank by SR."""
+    from navarena.train import Trainer, check_score, main
+
+    checks = iter([{"episodes": 2, "sr": 0.5, "spl": 0.4}, {"episodes": 2, "sr": 0.1, "spl": 0.1},
+                   {"episodes": 2, "sr": 0.4, "spl": 0.3}, {"episodes": 2, "sr": 0.3, "spl": 0.3}])
+    monkeypatch.setattr(Trainer, "evaluate", lambda self, *a, **k: next(checks))
+    args = [a for a in TINY if a not in ("--val-episodes", "0", "--rounds", "2")]
+    assert main([str(episode_run[0]), "--out", str(tmp_path / "run"), *args, "--rounds", "2", "--task", "objectnav",
+                 "--val-episodes", "2", "--val-split", "train", "--episodes-per-round", "2", "--max-learner-steps", "10",
+                 "--grad-steps", "2"]) == 0
+    card = json.loads((tmp_path / "run" / "model_card.json").read_text())
+    assert [(e["val_sr"], e["val_stop_sr"]) for e in card["curve"]] == [(0.5, 0.1), (0.4, 0.3)]
+    assert card["selected_round"] == 1
+    assert check_score({"val_sr": 0.5, "val_spl": 0.4}) == (0.5, 0.4)
+    assert check_score({"val_sr": 0.5, "val_stop_sr": 0.1, "val_spl": 0.4}) == (0.3, 0.4)
+
+
 def test_collection_workers_give_the_same_run_and_check(episode_run, tmp_path):
     """Collection and the held-out check spread over worker processes (one scene each) give the
     same checkpoint and the same check as this process alone."""

@@ -266,6 +266,12 @@ def kept(card: dict) -> str:
     if "selected_round" not in card:
         return ""
     how = "the best held-out check" if card["config"].get("keep", "last") == "best" else "the last round"
+    if how.startswith("the best") and any(e.get("val_stop_sr") is not None for e in card["curve"]):
+        from navarena.train import check_score
+
+        ranked = max(card["curve"], key=lambda e: (*check_score(e), e["round"]))["round"]  # the later round on a tie
+        how += (", by the mean of its SR and Stop SR" if ranked == card["selected_round"] else
+                ", by its SR alone: the rule before Stop SR was averaged in")
     return f" The file holds round {card['selected_round']}'s weights ({how})."
 
 
