@@ -5,6 +5,7 @@
     navarena train data --out runs/pn --rounds 1                # behaviour cloning only
     navarena train data --out runs/pn --resume                  # go on from the last finished round
     navarena train data --out runs/objectnav_bc --task objectnav   # RGB-D + the goal category
+    navarena train captures --out runs/pn_real --init pointnav_bc  # fine-tune a shipped baseline
 
 Round 0 (behaviour cloning): the expert (the costmap's geodesic oracle, navcore.nav.oracle: the
 same one that made the stored action sequences) drives the training episodes in the batched
@@ -39,6 +40,7 @@ import os
 import platform
 import sys
 import time
+from collections import Counter
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -124,6 +126,11 @@ class TrainConfig:
     worse than the one before."""
     scenes: int | None = None
     """Use the first N training scenes (the scene-scaling runs); None: all."""
+    init: str | None = None
+    """Start from these weights instead of random ones (fine-tuning): a checkpoint file of the same
+    track, or a shipped baseline's name (navcore/models, sha256-checked). The network takes the
+    checkpoint's spec; the card records it and its sha256. E.g. pointnav_bc on the training episodes
+    of real captures."""
     workers: int = 0
     """Collection processes (0: this one); on CUDA they share the GPUs round-robin."""
     renderer: str = "auto"
@@ -189,8 +196,19 @@ class Trainer:
         self.device = default_device(cfg.device)
         torch.manual_seed(cfg.seed)
         self.net = NavNet(cfg.spec).to(self.device)
+        self.init_sha256 = None
+        if cfg.init:
+            ck = init_checkpoint(cfg.init, cfg.task)
+            if NavSpec(**ck["spec"]) != cfg.spec:
+                raise SystemExit(f"navarena train: --init {cfg.init}: its network ({ck['spec']}) is not this run's "
+                                 f"({cfg.spec.to_dict()})")
+            self.net.load_state_dict(ck["state_dict"])
+            self.init_sha256 = ck["sha256"]
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
-        self.splits = {sid: set(self.ds.episode_table(sid, cfg.task)["split"]) for sid in self.ds.scene_ids(cfg.task)}
+        tables = {sid: self.ds.episode_table(sid, cfg.task) for sid in self.ds.scene_ids(cfg.task)}
+        self.splits = {sid: set(t["split"]) for sid, t in tables.items()}
+        # each scene's catalog group (scene_path is group/scene_id): the card says what kind of scenes taught it
+        self.groups = {sid: str(t["scene_path"].iloc[0]).split("/")[0] for sid, t in tables.items() if len(t)}
         self.train_scenes = self.scenes_of(cfg.train_split)
         if cfg.scenes:
             self.train_scenes = self.train_scenes[:cfg.scenes]
@@ -386,8 +404,11 @@ class Trainer:
         info = self.ds.info()
         return {"task": self.cfg.task, "data": {"root": str(self.ds.path), "kind": info["kind"],
                                                 "release": info.get("version"), "train_scenes": self.train_scenes,
+                                                "groups": dict(sorted(Counter(self.groups.get(sid, "?")
+                                                                              for sid in self.train_scenes).items())),
                                                 "split": self.cfg.train_split},
-                "config": {**{k: v for k, v in asdict(self.cfg).items() if k != "workers"}, "spec": self.cfg.spec.to_dict()},
+                "config": {**{k: v for k, v in asdict(self.cfg).items() if k != "workers"}, "spec": self.cfg.spec.to_dict(),
+                           **({"init_sha256": self.init_sha256} if self.init_sha256 else {})},
                 "seed": self.cfg.seed,
                 "curve": [{k: v for k, v in e.items() if k not in self.TIMING} for e in self.curve],
                 "parameters": parameter_count(self.net), "frames": self.frames}
@@ -544,6 +565,20 @@ NO_AUX = (math.nan, math.nan)
 """A step's aux target where the network has no aux_goal head (NaN: the loss skips it)."""
 
 
+def init_checkpoint(init: str, task: str) -> dict:
+    """The checkpoint --init names (a file, else a shipped baseline's name), with its "sha256"."""
+    from navcore.baselines.agent import shipped
+    from navcore.baselines.checkpoint import CheckpointError, sha256_of
+
+    try:
+        path, sha = (Path(init), None) if Path(init).is_file() or "/" in init or init.endswith(".pt") else shipped(init)
+        ck = load_checkpoint(path, kind=task, sha256=sha)
+    except (FileNotFoundError, CheckpointError) as e:
+        raise SystemExit(f"navarena train: --init {init}: {e}") from None
+    ck["sha256"] = sha or sha256_of(path)
+    return ck
+
+
 def check_score(entry: dict) -> tuple[float, float]:
     """What --keep best ranks a round's held-out check by: the mean SR over the protocols the check ran
     (distance; ObjectNav's explicit_stop too, the track reports both and its policy must stop on
@@ -597,9 +632,9 @@ def _flag(text: str) -> bool:
 
 def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
     ap = ap or argparse.ArgumentParser(prog="navarena train", usage="navarena train ROOT --out OUT [options]",
-                                       description="Train a learned PointNav, ImageNav or "
-                                       "ObjectNav baseline (behaviour cloning, then DAgger) on a data root or a "
-                                       "release; writes model.pt and model_card.json in --out.")
+                                       description="Train a PointNav, ImageNav or ObjectNav "
+                                       "baseline (behaviour cloning, then DAgger) on a data root or a release "
+                                       "into --out (model.pt, model_card.json).")
     ap.formatter_class = lambda prog: argparse.HelpFormatter(prog, max_help_position=30)  # one line an option
     ap.add_argument("root", help="a data root (make dataset) or a release folder")
     ap.add_argument("--out", required=True, help="the run folder (model.pt, model_card.json, rounds/)")
@@ -608,10 +643,11 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
     helps = {"task": None, "rounds": "0: behaviour cloning, then DAgger", "episodes_per_round": None, "grad_steps": None,
              "batch_episodes": None, "slots": "episodes stepped together", "width": "render size", "height": None,
              "val_episodes": "held-out check", "keep": "best|last round into model.pt", "scenes": "first N train scenes", "seed": None,
+             "init": "fine-tune: a model.pt or shipped name",
              "max_learner_steps": None, "expert": "auto|geodesic|search: the labelling expert",
-             "view_overlap": "ImageNav: goal image's share in view that counts as found",
+             "view_overlap": "ImageNav: goal view share that is found",
              "workers": "collection processes", "beta": "DAgger mixing",
-             "stop_veto": "DAgger: label a false STOP, the expert goes on",
+             "stop_veto": "DAgger: label false STOPs, run on",
              "lr": None, "weight_decay": None, "aux_weight": "ImageNav's goal-position loss", "train_split": None, "val_split": None,
              "renderer": "auto|cpu|gsplat", "device": "auto|cpu|cuda"}
     for name, text in helps.items():
@@ -637,6 +673,8 @@ def main(argv: list[str] | None = None) -> int:
         if a.task != "imagenav":
             build_parser().error("--aux-goal applies to --task imagenav")
         fields_["spec"] = NavSpec(task="imagenav", rgbd=True, aux_goal=True)
+    if a.init:  # the network is the checkpoint's
+        fields_["spec"] = NavSpec(**init_checkpoint(a.init, a.task)["spec"])
     cfg = TrainConfig(**fields_)
     res = Trainer(a.root, a.out, cfg, quiet=a.quiet).run(resume=a.resume)
     print(f"wrote {res['model']} (sha256 {res['sha256'][:12]}...)")

@@ -45,6 +45,41 @@ def test_tiny_training_loss_falls_and_one_seed_gives_one_checkpoint(trained):
     assert "collect_s" not in ck["meta"]["curve"][0]  # timings live in the card only
 
 
+def test_init_fine_tunes_from_a_checkpoint(trained, episode_run, tmp_path):
+    """--init starts from a checkpoint's weights: a 1-round run from the trained tiny model begins
+    at a lower loss than the same run from random weights, and its card records the checkpoint and
+    its sha256; a checkpoint of another track, a missing file and an unknown shipped name are refused
+    with the name in the message."""
+    from navarena.train import main
+
+    root, model = episode_run[0], trained[0] / "model.pt"
+    args = [a for a in TINY if a not in ("--rounds", "2")] + ["--rounds", "1"]
+    assert main([str(root), "--out", str(tmp_path / "fresh"), *args]) == 0
+    assert main([str(root), "--out", str(tmp_path / "tuned"), *args, "--init", str(model)]) == 0
+    fresh, tuned = (json.loads((tmp_path / r / "model_card.json").read_text()) for r in ("fresh", "tuned"))
+    assert tuned["curve"][0]["loss_first"] < fresh["curve"][0]["loss_first"]
+    assert tuned["config"]["init"] == str(model) and tuned["config"]["init_sha256"] == sha256_of(model)
+    assert "init_sha256" not in fresh["config"]
+    assert tuned["data"]["groups"] == {"synthetic": len(tuned["data"]["train_scenes"])}  # the generator's scenes
+    for bad, why in ((["--task", "objectnav"], "not 'objectnav'"), ([], "does not exist"), ([], "no shipped baseline")):
+        init = {"does not exist": str(tmp_path / "none.pt"), "no shipped baseline": "no_such_bc"}.get(why, str(model))
+        with pytest.raises(SystemExit, match=why):
+            main([str(root), "--out", str(tmp_path / "bad"), *args, *bad, "--init", init])
+
+
+def test_a_card_trained_on_real_captures_says_so():
+    """A card whose training scenes include real captures (a catalog group other than the generator's)
+    does not claim to be trained on generated scenes alone, and names the groups and the fine-tuning."""
+    from benchmarks.baselines.cards import licence_line, real_note
+
+    card = {"licence": "Apache-2.0", "config": {"init": "pointnav_bc"}, "data": {"groups": {"real_indoor": 2}}}
+    line = licence_line(card)
+    assert "2 of group `real_indoor`" in line and "generated scenes (Apache-2.0)" not in line
+    assert "Fine-tuned from `pointnav_bc`" in line and "real captures" in real_note(card)
+    plain = {"licence": "Apache-2.0", "config": {}, "data": {"groups": {"synthetic": 3}}}
+    assert "no third-party data" in licence_line(plain) and "generated scenes only" in real_note(plain)
+
+
 @pytest.mark.parametrize("keep", ["best", "last"])
 def test_model_keeps_the_best_checked_round(keep, episode_run, tmp_path, monkeypatch):
     """A DAgger round can be worse than the one before: with keep=best the final model.pt holds the

@@ -315,7 +315,30 @@ def more_tables(card: dict, level: str = "###") -> str:
                    f"Reproduce: `{m['command']}`\n" for m in card.get("more_evaluations", []))
 
 
+def groups(card: dict) -> str:
+    g = card["data"].get("groups")
+    return f" ({', '.join(f'{n} {k}' for k, n in g.items())})" if g else ""
+
+
+def real_groups(card: dict) -> dict[str, int]:
+    """Training scenes per catalog group other than the generator's (cards from before groups were
+    recorded: none, they were all generated)."""
+    return {g: n for g, n in card["data"].get("groups", {}).items() if g != "synthetic"}
+
+
+def licence_line(card: dict) -> str:
+    other = real_groups(card)
+    init = f" Fine-tuned from `{card['config']['init']}`." if card["config"].get("init") else ""
+    if not other:
+        return f"{card['licence']}. Trained on NavArena's own generated scenes (Apache-2.0), no third-party data.{init}"
+    named = ", ".join(f"{n} of group `{g}`" for g, n in other.items())
+    return (f"not settled by the project's {card['licence']}: trained on scenes that are not NavArena's generated ones "
+            f"({named}), whose sources' licences govern whether these weights may be published.{init}")
+
+
 def real_note(card: dict) -> str:
+    if real_groups(card):
+        return "Trained with real captures in its training split (see Data)."
     if any(m.get("real") for m in card.get("more_evaluations", [])):
         return "Trained on generated scenes only; also measured on real captures (above)."
     return "Trained and measured on generated scenes only: the gap to real captures is not measured yet."
@@ -328,7 +351,8 @@ def card_markdown(card: dict, shipped: bool = True) -> str:
     file_line = (f"`{card['file']}`, sha256 `{card['sha256']}` (checked on load)." if shipped else
                  f"not shipped (the run's `{card['file']}` had sha256 `{card['sha256']}`).")
     status = ("It is the interim baseline of its track (see docs/evaluation.md, \"Baselines\", for what is still "
-              "missing)." if shipped else "Its weights are not shipped: a baseline that loses to random is not one.")
+              "missing)." if shipped else "Its weights are not shipped: its training scenes' sources are not ours to "
+              "publish." if real_groups(card) else "Its weights are not shipped: a baseline that loses to random is not one.")
     title = f"the learned {card['task']} baseline" if shipped else \
         f"a reference run of the {card['task']} track, measured and not shipped"
     return f"""# {card['name']}: {title}
@@ -336,9 +360,9 @@ def card_markdown(card: dict, shipped: bool = True) -> str:
 Generated from model_card.json by `python -m benchmarks.baselines.cards docs`; do not edit.
 
 - **File:** {file_line} {card['parameters']:,} parameters.
-- **Licence:** {card['licence']}. Trained on NavArena's own generated scenes (Apache-2.0), no third-party data.
+- **Licence:** {licence_line(card)}
 - **Network:** {network(c['spec'])}
-- **Data:** data root `{card['data']['root']}`: {len(card['data']['train_scenes'])} training scenes (split
+- **Data:** data root `{card['data']['root']}`: {len(card['data']['train_scenes'])} training scenes{groups(card)} (split
   `{card['data']['split']}`), {card['frames']:,} labelled frames over {len(card['curve'])} rounds, rendered at
   {c['width']} x {c['height']}; closed-loop check after each round on `{val}`.
 - **Training:** round 0 behaviour cloning on the expert's rollouts, then DAgger (the learner drives, the expert's
