@@ -404,8 +404,7 @@ class Trainer:
         info = self.ds.info()
         return {"task": self.cfg.task, "data": {"root": str(self.ds.path), "kind": info["kind"],
                                                 "release": info.get("version"), "train_scenes": self.train_scenes,
-                                                "groups": dict(sorted(Counter(self.groups.get(sid, "?")
-                                                                              for sid in self.train_scenes).items())),
+                                                "groups": dict(sorted(Counter(self.groups[sid] for sid in self.train_scenes).items())),
                                                 "split": self.cfg.train_split},
                 "config": {**{k: v for k, v in asdict(self.cfg).items() if k != "workers"}, "spec": self.cfg.spec.to_dict(),
                            **({"init_sha256": self.init_sha256} if self.init_sha256 else {})},

@@ -265,8 +265,9 @@ def kept(card: dict) -> str:
     """Which round's weights the file holds (cards from before `keep` existed: the last)."""
     if "selected_round" not in card:
         return ""
-    how = "the best held-out check" if card["config"].get("keep", "last") == "best" else "the last round"
-    if how.startswith("the best") and any(e.get("val_stop_sr") is not None for e in card["curve"]):
+    best = card["config"].get("keep", "last") == "best"
+    how = "the best held-out check" if best else "the last round"
+    if best and any(e.get("val_stop_sr") is not None for e in card["curve"]):
         from navarena.train import check_score
 
         ranked = max(card["curve"], key=lambda e: (*check_score(e), e["round"]))["round"]  # the later round on a tie
