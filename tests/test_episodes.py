@@ -836,8 +836,16 @@ def test_taut_path_wraps_a_disk_like_the_exact_geodesic():
 def test_first_episodes_benchmark_watches_the_layouts_paths(episode_run):
     """benchmarks.usage.first_episodes times the outputs a user waits for by the data layout's own
     paths: on a finished root every one of them is found."""
-    from benchmarks.usage.first_episodes import patterns
+    import pandas as pd
+
+    from benchmarks.usage.first_episodes import episode_counts, patterns
 
     root = episode_run[0]
     for name, pattern in patterns():
         assert "{" not in pattern and list(root.glob(pattern)), (name, pattern)
+    # its episode counts are the rows of the tables a user would read (an empty file counts 0)
+    counts = episode_counts(root)
+    for task, n in counts.items():
+        files = list(root.glob(f"05_episodes/task={task}/scene_id=*/part-0.parquet"))
+        assert n == sum(len(pd.read_parquet(f)) for f in files), task
+    assert counts["pointnav"] > 0

@@ -6,7 +6,9 @@ the command's start. Writes data/08_reports/first_episodes.json.
     python -m benchmarks.usage.first_episodes my_scenes.yaml semantics.segmenter=detector   # the guide's table
 
 The run is stopped (Ctrl-C, as a user would) once the `--until` output exists for every scene of
-the catalog, or at `--limit` seconds; what it had made by then is reported.
+the catalog, or at `--limit` seconds; what it had made by then is reported, with each task's episode
+count: a scene whose ObjectNav found no goal (a `no_goal_category` shortfall) writes an empty
+episodes file, which is timed as it appears and counted as 0 episodes.
 """
 from __future__ import annotations
 
@@ -67,6 +69,17 @@ def watch(root: Path, proc: subprocess.Popen, scenes: int, until: str, limit: fl
     return seen
 
 
+def episode_counts(root: Path) -> dict[str, int]:
+    """Episodes per task under a data root, from the Parquet footers (an empty file counts 0)."""
+    import pyarrow.parquet as pq
+
+    counts = {}
+    for name, pattern in patterns():
+        if name.endswith(" episodes"):
+            counts[name.split()[0]] = sum(pq.ParquetFile(f).metadata.num_rows for f in root.glob(pattern))
+    return counts
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("catalog", type=Path)
@@ -94,7 +107,7 @@ def main(argv=None) -> int:
         proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
         seen = watch(a.root, proc, scenes, a.until, a.limit, t0)
     result = {"catalog": str(a.catalog), "scenes": scenes, "overrides": a.overrides, "until": a.until,
-              "seconds": seen, "stopped_at_s": round(time.monotonic() - t0, 1), "exit_status": proc.returncode,
+              "seconds": seen, "episodes": episode_counts(a.root), "stopped_at_s": round(time.monotonic() - t0, 1), "exit_status": proc.returncode,
               "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.system()}", "log": str(log)}
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(result, indent=1) + "\n")
