@@ -219,6 +219,10 @@ def markdown(r: dict) -> str:
              f"| oracle Distance SR / SPL (distance protocol) | {f('oracle_sr')} / {f('oracle_spl')} | >= 0.99 / >= 0.90 |",
              f"| oracle SR / SPL (explicit stop) | {f('oracle_stop_sr')} / {f('oracle_stop_spl')} | |",
              f"| random SR (distance / explicit stop) | {f('random_sr')} / {f('random_stop_sr')} | |", ""]
+    if r.get("gpu"):
+        lines += [f"The GPU rows and the CPU renderer against gsplat: {r['gpu'].get('device', 'a CUDA machine')}, by "
+                  "`python -m benchmarks.closed_loop.eval --gpu` there (its eval_gpu.json, merged here); the other rows "
+                  f"on {r.get('machine')}.", ""]
     return "\n".join(lines)
 
 

@@ -107,7 +107,8 @@ def main(argv=None) -> int:
         proc = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, start_new_session=True)
         seen = watch(a.root, proc, scenes, a.until, a.limit, t0)
     result = {"catalog": str(a.catalog), "scenes": scenes, "overrides": a.overrides, "until": a.until,
-              "seconds": seen, "episodes": episode_counts(a.root), "stopped_at_s": round(time.monotonic() - t0, 1), "exit_status": proc.returncode,
+              "seconds": seen, "episodes": episode_counts(a.root),
+              "stopped_at_s": round(time.monotonic() - t0, 1), "exit_status": proc.returncode,
               "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.system()}", "log": str(log)}
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(result, indent=1) + "\n")
