@@ -550,3 +550,24 @@ def test_shipped_baseline_behind_the_agent_server_acts_as_in_process(episode_run
     remote = pd.read_parquet(tmp_path / "remote" / "results.parquet")[cols].sort_values("episode_id", ignore_index=True)
     assert len(local) == 2 and (local["error"] == "").all()
     pd.testing.assert_frame_equal(local, remote)
+
+
+def test_a_one_gpu_run_keeps_the_whole_sets_held_out_scenes():
+    """TRAIN_SCENES=N of the reference run: every scene the episodes stage holds out of the SCENES (so the
+    zero-shot set is the full run's) and the first N of the others, as the stage splits them."""
+    from pathlib import Path
+
+    from benchmarks.baselines.reference import TEST_SHARE, held_out_and_first_train
+    from navcore.io.catalog import Catalog
+    from stages.episodes.config import EpisodesConfig
+    from stages.episodes.generate import scene_split
+
+    splits = {**EpisodesConfig().scene_splits, "test": TEST_SHARE}
+    catalog = Path(__file__).resolve().parents[1] / "catalogs/synthetic.yaml"
+    every = [s.scene_id for s in Catalog(catalog, "/nonexistent", synthetic_count=64).scenes]
+    kept = held_out_and_first_train(64, 5)
+    held = [s for s in every if scene_split(s, splits) is not None]
+    train = [s for s in every if scene_split(s, splits) is None]
+    assert held and set(held) <= set(kept) and len(kept) == len(held) + 5 == len(set(kept))
+    assert [s for s in kept if s not in held] == train[:5]
+    assert held_out_and_first_train(64, 10_000) == held + train  # more than there are: all of them

@@ -28,7 +28,8 @@ stopped when started again:
 
 make setup-gpu first (WHEELS=dir offline). Paths: ROOT (data/baselines), RUNS (data/runs), EVAL
 (data/baseline_eval); WORKERS (CPU cores - 2); SCENE_IDS (only these of the SCENES: the zero-shot
-set's scenes for a call that only evaluates finished runs); SPLIT (the eval phase's split, eval_zeroshot; empty:
+set's scenes for a call that only evaluates finished runs); TRAIN_SCENES (N: the held-out scenes and the first N
+training scenes, a run sized for one GPU on the same zero-shot episodes); SPLIT (the eval phase's split, eval_zeroshot; empty:
 every episode of ROOT); EVAL_TASKS and AGENTS (which tracks and agents the eval phase measures: a new
 ImageNav run alone is TRAIN_TASKS=imagenav EVAL_TASKS=imagenav AGENTS=learned, its table completed with
 an earlier call's other agents on the same episodes); PROTOCOLS (the learned policies', default
@@ -84,12 +85,33 @@ AGENTS = [a for a in os.environ.get("AGENTS", "learned,depth_reactive,random,ora
 PROTOCOLS = [p for p in os.environ.get("PROTOCOLS", "distance,explicit_stop").split(",") if p]
 # navarena eval processes side by side per GPU in the eval phase (each with its share of the CPU cores)
 EVAL_PER_GPU = int(os.environ.get("EVAL_PER_GPU", "4"))
+TEST_SHARE = 0.1  # the generated scenes held out for test (the zero-shot set's), beside val_unseen's default share
 DATA = [f"data_root={ROOT}", f"scenes.count={SCENES}", f"task=[{','.join(TASKS)}]",
-        f"semantics.enabled={'true' if 'objectnav' in TASKS else 'false'}", "episodes.scene_splits.test=0.1",
+        f"semantics.enabled={'true' if 'objectnav' in TASKS else 'false'}", f"episodes.scene_splits.test={TEST_SHARE}",
         "executor.dashboard=false"]
 # SCENE_IDS=a,b,...: only these scenes of the SCENES (an evaluation-only call builds just the zero-shot set's scenes:
 # a scene's split is a hash of its id, its episodes its own seed's, so they come out as in the whole set)
 SCENE_IDS = [s for s in os.environ.get("SCENE_IDS", "").split(",") if s]
+# TRAIN_SCENES=N: every held-out scene of the SCENES and their first N training scenes (a run sized for one GPU
+# with the whole set's zero-shot and val_unseen episodes: scene ids computed as the episodes stage splits them)
+TRAIN_SCENES = int(os.environ.get("TRAIN_SCENES", "0") or 0)
+
+
+def held_out_and_first_train(count: int, train: int) -> list[str]:
+    """The ids of the catalog's first `count` generated scenes that the episodes stage holds out (val_unseen and
+    test, with the data phase's test share) and of the first `train` of the others, in catalog order."""
+    from navcore.io.catalog import Catalog
+    from stages.episodes.config import EpisodesConfig
+    from stages.episodes.generate import scene_split
+
+    splits = {**EpisodesConfig().scene_splits, "test": TEST_SHARE}
+    scenes = Catalog(Path(__file__).resolve().parents[2] / "catalogs/synthetic.yaml", ROOT, synthetic_count=count).scenes
+    held = [s.scene_id for s in scenes if scene_split(s.scene_id, splits) is not None]
+    return held + [s.scene_id for s in scenes if scene_split(s.scene_id, splits) is None][:train]
+
+
+if TRAIN_SCENES and not SCENE_IDS:
+    SCENE_IDS = held_out_and_first_train(SCENES, TRAIN_SCENES)
 # the split the eval phase measures; SPLIT= (empty): every episode of ROOT, e.g. a release of real captures, whose
 # scenes no baseline was trained on (their split names only the scene's share of a dataset made from them)
 SPLIT = os.environ.get("SPLIT", "eval_zeroshot")
