@@ -49,11 +49,11 @@ def one_size(root: Path, n: int | None, out: Path, logs: Path) -> dict:
     folder = out / (f"sim-{n}" if n else "default")
     shutil.rmtree(folder, ignore_errors=True)
     over = [*SIM, f"scenes.count={n}"] if n else []
-    build = polled([sys.executable, "-m", "pipeline", "release", "--root", str(root), "--out", str(folder),
+    build = polled([sys.executable, "-m", "navarena", "release", "--root", str(root), "--out", str(folder),
                     "--version", "1.0.0", *over], logs / f"release_{n}.log")
-    if build["exit"]:
-        raise SystemExit(f"release of {n} scenes failed; see {logs / f'release_{n}.log'}")
-    verify = polled([sys.executable, "-m", "pipeline", "verify-release", str(folder), "--quiet",
+    if build["exit"] or not (folder / "release.json").is_file():
+        raise SystemExit(f"release of {n} scenes failed (exit {build['exit']}); see {logs / f'release_{n}.log'}")
+    verify = polled([sys.executable, "-m", "navarena", "verify-release", str(folder), "--quiet",
                      "--json", str(logs / f"verify_{n}.json")], logs / f"verify_{n}.log")
     info = json.loads((folder / "release.json").read_text())
     size = folder_bytes(folder / "MANIFEST.tsv")
