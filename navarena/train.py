@@ -191,14 +191,15 @@ class Steps:
 
 
 class Trainer:
-    def __init__(self, root, out, cfg: TrainConfig, quiet: bool = False):
+    def __init__(self, root, out, cfg: TrainConfig, quiet: bool = False, init: dict | None = None):
+        """init: cfg.init's checkpoint when the caller has loaded it already (init_checkpoint)."""
         self.ds, self.out, self.cfg, self.quiet = NavDataset(root), Path(out), cfg, quiet
         self.device = default_device(cfg.device)
         torch.manual_seed(cfg.seed)
         self.net = NavNet(cfg.spec).to(self.device)
         self.init_sha256 = None
         if cfg.init:
-            ck = init_checkpoint(cfg.init, cfg.task)
+            ck = init if init is not None else init_checkpoint(cfg.init, cfg.task)
             if NavSpec(**ck["spec"]) != cfg.spec:
                 raise SystemExit(f"navarena train: --init {cfg.init}: its network ({ck['spec']}) is not this run's "
                                  f"({cfg.spec.to_dict()})")
@@ -672,10 +673,11 @@ def main(argv: list[str] | None = None) -> int:
         if a.task != "imagenav":
             build_parser().error("--aux-goal applies to --task imagenav")
         fields_["spec"] = NavSpec(task="imagenav", rgbd=True, aux_goal=True)
-    if a.init:  # the network is the checkpoint's
-        fields_["spec"] = NavSpec(**init_checkpoint(a.init, a.task)["spec"])
+    init = init_checkpoint(a.init, a.task) if a.init else None  # read once: its network is this run's
+    if init is not None:
+        fields_["spec"] = NavSpec(**init["spec"])
     cfg = TrainConfig(**fields_)
-    res = Trainer(a.root, a.out, cfg, quiet=a.quiet).run(resume=a.resume)
+    res = Trainer(a.root, a.out, cfg, quiet=a.quiet, init=init).run(resume=a.resume)
     print(f"wrote {res['model']} (sha256 {res['sha256'][:12]}...)")
     return 0
 

@@ -45,17 +45,22 @@ def test_tiny_training_loss_falls_and_one_seed_gives_one_checkpoint(trained):
     assert "collect_s" not in ck["meta"]["curve"][0]  # timings live in the card only
 
 
-def test_init_fine_tunes_from_a_checkpoint(trained, episode_run, tmp_path):
+def test_init_fine_tunes_from_a_checkpoint(trained, episode_run, tmp_path, monkeypatch):
     """--init starts from a checkpoint's weights: a 1-round run from the trained tiny model begins
     at a lower loss than the same run from random weights, and its card records the checkpoint and
     its sha256; a checkpoint of another track, a missing file and an unknown shipped name are refused
     with the name in the message."""
+    import navarena.train as train
     from navarena.train import main
 
     root, model = episode_run[0], trained[0] / "model.pt"
     args = [a for a in TINY if a not in ("--rounds", "2")] + ["--rounds", "1"]
     assert main([str(root), "--out", str(tmp_path / "fresh"), *args]) == 0
+    reads = []
+    read = train.init_checkpoint
+    monkeypatch.setattr(train, "init_checkpoint", lambda *a: reads.append(a) or read(*a))
     assert main([str(root), "--out", str(tmp_path / "tuned"), *args, "--init", str(model)]) == 0
+    assert len(reads) == 1  # the checkpoint is read once, for its network and its weights
     fresh, tuned = (json.loads((tmp_path / r / "model_card.json").read_text()) for r in ("fresh", "tuned"))
     assert tuned["curve"][0]["loss_first"] < fresh["curve"][0]["loss_first"]
     assert tuned["config"]["init"] == str(model) and tuned["config"]["init_sha256"] == sha256_of(model)
