@@ -422,3 +422,35 @@ def test_licence_table_and_catalog_provenance(tmp_path):
     cat.write_text("scenes:\n  - {name: a, path: a.ply, format: inria_ply, license: 3}\n")
     with pytest.raises(ValueError, match="license must be a string"):
         Catalog(cat, tmp_path / "data")
+
+
+def test_verify_release_bounds_a_geodesic_from_both_sides_of_a_binary_map(tmp_path):
+    """A released map's wall with a pinch (two free cells meeting only at a corner) and a way round.
+    Cell by cell the geodesic goes through the pinch; with the clearance rebuilt with the robot's
+    radius (release.json's embodiment) it goes round. An episode planned on the stored clearance may
+    have either (the 500-scene simulation's release held one of 2.45 m whose map gives 1.09 m cell by
+    cell and 2.49 m with the radius), so both pass; a geodesic shorter than the first or longer than
+    the second is named."""
+    from navarena.verify_release import SceneMap, map_settings
+    from navcore.io.asset_files import write_pgm
+
+    occ = np.zeros((40, 40), bool)
+    occ[19:21, :] = True
+    occ[19, 10] = occ[20, 11] = False  # the pinch
+    occ[19:21, 34:] = False  # the way round, 0.3 m wide
+    write_pgm(tmp_path / "nav_map.pgm", occ)
+    (tmp_path / "nav_map.yaml").write_text("image: nav_map.pgm\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\nnegate: 0\n"
+                                           "occupied_thresh: 0.65\nfree_thresh: 0.25\n")
+    start, goal = np.array([0.575, 0.5]), [(0.525, 1.5)]
+    sm = SceneMap(tmp_path, *map_settings({"config": {"embodiment": {"radius": 0.18},
+                                                      "episodes": {"geodesic_neighbourhood": 6}}}))
+    through, round_ = sm.geodesic(start, goal), sm.geodesic(start, goal, "radius")
+    assert abs(through - 1.0) < 0.05 and round_ > 2.5 * through  # over to x > 1.7 m and back
+    for stored in (through, round_, (through + round_) / 2):
+        assert sm.check_geodesic(start, goal, stored) is None, stored
+    assert "recomputed on the map 1.0" in sm.check_geodesic(start, goal, 0.5 * through)
+    assert "with the robot's radius" in sm.check_geodesic(start, goal, 1.5 * round_)
+    # without the radius (a release.json that does not say, or says nonsense) only cell by cell
+    assert "recomputed on the map 1.0" in SceneMap(tmp_path).check_geodesic(start, goal, round_)
+    for info in ({}, {"config": None}, {"config": {"embodiment": {"radius": "x"}}}, {"config": {"embodiment": {"radius": True}}}):
+        assert map_settings(info) == (None, 6)
