@@ -73,11 +73,8 @@ def episode_counts(root: Path) -> dict[str, int]:
     """Episodes per task under a data root, from the Parquet footers (an empty file counts 0)."""
     import pyarrow.parquet as pq
 
-    counts = {}
-    for name, pattern in patterns():
-        if name.endswith(" episodes"):
-            counts[name.split()[0]] = sum(pq.ParquetFile(f).metadata.num_rows for f in root.glob(pattern))
-    return counts
+    return {values["task"]: sum(pq.ParquetFile(f).metadata.num_rows for f in root.glob(pattern))
+            for (_, entry, values), (_, pattern) in zip(WATCHED, patterns()) if entry == "episodes"}
 
 
 def main(argv=None) -> int:
