@@ -245,10 +245,14 @@ def corners_free(occ: np.ndarray, origin, res: float, xy: np.ndarray) -> np.ndar
     return ok
 
 
+DEFAULT_NEIGHBOURHOOD = 6
+"""The geodesic graph's neighbourhood where release.json does not say (the episodes stage's default)."""
+
+
 class SceneMap:
     """A released scene's ROS map with a geodesic graph over its free cells (built on first use)."""
 
-    def __init__(self, asset: Path, radius: float | None = None, neighbourhood: int = 6):
+    def __init__(self, asset: Path, radius: float | None = None, neighbourhood: int = DEFAULT_NEIGHBOURHOOD):
         """radius: the embodiment's (release.json's config; None where it does not say), for the
         upper bound of check_geodesic; neighbourhood: the episodes' geodesic graph's."""
         from navcore.io.asset_files import read_nav_map
@@ -338,17 +342,18 @@ def goal_points(row: dict) -> list:
 
 def map_settings(info: dict) -> tuple[float | None, int]:
     """(the embodiment's radius, the geodesic graph's neighbourhood) of the release's resolved config
-    (release.json); (None, 6) where it does not say (an older or damaged release.json)."""
+    (release.json); (None, DEFAULT_NEIGHBOURHOOD) where it does not say (an older or damaged release.json)."""
     cfg = info.get("config") if isinstance(info.get("config"), dict) else {}
     emb, eps = cfg.get("embodiment"), cfg.get("episodes")
     radius = emb.get("radius") if isinstance(emb, dict) else None
     hood = eps.get("geodesic_neighbourhood") if isinstance(eps, dict) else None
     ok = isinstance(radius, (int, float)) and not isinstance(radius, bool) and 0 < radius < 10
-    return (float(radius) if ok else None), (hood if isinstance(hood, int) and not isinstance(hood, bool) and 0 < hood <= 32 else 6)
+    hood_ok = isinstance(hood, int) and not isinstance(hood, bool) and 0 < hood <= 32
+    return (float(radius) if ok else None), (hood if hood_ok else DEFAULT_NEIGHBOURHOOD)
 
 
 def check_episodes(root: Path, files: dict, sample: int, seed: int, report: Report,
-                   settings: tuple[float | None, int] = (None, 6)) -> None:
+                   settings: tuple[float | None, int]) -> None:
     """Re-check `sample` episodes (0 = all), drawn evenly over the episode files; files and scene
     maps already found damaged are skipped (their damage is reported). settings: map_settings."""
     import pyarrow as pa

@@ -423,6 +423,8 @@ SHIPPED_OBS = {  # an observation of each shipped track at 160 x 120
     "pointnav_bc": {"depth": np.full((120, 160), 3.0, np.float32), "pointgoal": np.array([2.0, 0.0], np.float32)},
     "objectnav_bc": {"depth": np.full((120, 160), 3.0, np.float32), "rgb": np.full((120, 160, 3), 128, np.uint8),
                      "goal_category": "chair"},
+    "imagenav_bc": {"depth": np.full((120, 160), 3.0, np.float32), "rgb": np.full((120, 160, 3), 128, np.uint8),
+                    "goal_image": np.full((120, 160, 3), 90, np.uint8)},
 }
 
 
@@ -441,6 +443,24 @@ def test_shipped_baseline_is_checked_and_registered(name):
     assert agent.act(obs) in (0, 1, 2, 3)
     with pytest.raises(ValueError, match="needs the observations"):
         agent.act({k: v for k, v in obs.items() if k != "depth"})
+
+
+def test_a_shipped_baseline_decodes_as_its_card_says(tmp_path):
+    """The registry name uses the decoding the card's figures were measured with (imagenav_bc samples,
+    pointnav_bc and objectnav_bc act greedily); `sample` given overrides it; a checkpoint file is greedy
+    unless told; the card says which."""
+    from benchmarks.baselines.cards import card_markdown, cards
+    from navcore.baselines.agent import LearnedNavAgent, shipped
+    from navcore.eval.agents import agent_for
+
+    decoding = {name: bool(c.get("decoding", {}).get("sample")) for name, c in cards().items()}
+    assert decoding == {"pointnav_bc": False, "objectnav_bc": False, "imagenav_bc": True}
+    for name, sample in decoding.items():
+        assert agent_for(name, device="cpu").sample is sample
+        assert agent_for(name, device="cpu", sample=not sample).sample is (not sample)
+        text = card_markdown(cards()[name])
+        assert ("**Decoding:** sampled" in text) is sample and ("**Decoding:** greedy" in text) is (not sample)
+    assert LearnedNavAgent(checkpoint=str(shipped("imagenav_bc")[0]), device="cpu").sample is False
 
 
 def test_every_shipped_baseline_has_a_registry_name():

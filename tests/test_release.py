@@ -452,5 +452,8 @@ def test_verify_release_bounds_a_geodesic_from_both_sides_of_a_binary_map(tmp_pa
     assert "with the robot's radius" in sm.check_geodesic(start, goal, 1.5 * round_)
     # without the radius (a release.json that does not say, or says nonsense) only cell by cell
     assert "recomputed on the map 1.0" in SceneMap(tmp_path).check_geodesic(start, goal, round_)
+    from stages.episodes.config import EpisodesConfig
+
+    fallback = EpisodesConfig().geodesic_neighbourhood  # the episodes stage's default, where release.json is silent
     for info in ({}, {"config": None}, {"config": {"embodiment": {"radius": "x"}}}, {"config": {"embodiment": {"radius": True}}}):
-        assert map_settings(info) == (None, 6)
+        assert map_settings(info) == (None, fallback)

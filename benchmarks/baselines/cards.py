@@ -2,6 +2,7 @@
 Baselines section of docs/evaluation.md, generated from one source: the card's JSON.
 
     python -m benchmarks.baselines.cards ship RUN NAME            # a navarena train run folder -> navcore/models/NAME
+                     [--sample]   # its registry name samples its moves (the decoding its figures were measured with)
     python -m benchmarks.baselines.cards evaluation NAME SUMMARY.json ...   # closed-loop figures into the card
                      [--title T [--real]]   # a further table (another setting; --real: on real captures)
     python -m benchmarks.baselines.cards cost NAME                # CPU ms per step into the card
@@ -26,6 +27,7 @@ PROJECT = Path(__file__).resolve().parents[2]
 DOCS = PROJECT / "docs" / "evaluation.md"
 SCALING = Path(__file__).resolve().parent / "scaling.json"
 SCALING_PNG = PROJECT / "docs" / "images" / "baselines_scaling.png"
+DIFFICULTY_PNG = PROJECT / "docs" / "images" / "baselines_sr_difficulty.png"
 TRIALS = Path(__file__).resolve().parent / "trials"
 """Reference runs measured but not shipped (their cards and figures, no weights): a track's run that
 does not beat random stays here, recorded, until one does."""
@@ -40,9 +42,10 @@ def cards(models: Path = MODELS, weights: bool = True) -> dict[str, dict]:
             if "sha256" in c and (not weights or (models / name / c["file"]).is_file())}
 
 
-def ship(run: Path, name: str, models: Path = MODELS, weights: bool = True) -> Path:
+def ship(run: Path, name: str, models: Path = MODELS, weights: bool = True, sample: bool = False) -> Path:
     """Copy a training run's model.pt into navcore/models/<name>/ with its card (sha256 of the copy);
-    without weights, only the card (the run's sha256), e.g. into TRIALS."""
+    without weights, only the card (the run's sha256), e.g. into TRIALS. sample: the card's decoding
+    samples the moves (the registry name's default, navcore.baselines.agent)."""
     dst = models / name
     dst.mkdir(parents=True, exist_ok=True)
     card = json.loads((run / "model_card.json").read_text())
@@ -50,6 +53,9 @@ def ship(run: Path, name: str, models: Path = MODELS, weights: bool = True) -> P
         shutil.copyfile(run / "model.pt", dst / "model.pt")
         card["sha256"] = sha256_of(dst / "model.pt")
     card.update({"name": name, "file": "model.pt", "licence": "Apache-2.0"})
+    card.pop("decoding", None)
+    if sample:
+        card["decoding"] = {"sample": True}
     card["data"]["root"] = Path(card["data"]["root"]).name  # no machine's paths in a shipped card
     card.setdefault("evaluation", {})
     (dst / "model_card.json").write_text(json.dumps(card, indent=1) + "\n")
@@ -204,6 +210,38 @@ def scaling_plot(data: dict, png: Path = SCALING_PNG) -> None:
     plt.close(fig)
 
 
+def difficulty_plot(all_cards: dict[str, dict], png: Path = DIFFICULTY_PNG) -> None:
+    """The paper's figure: zero-shot SR against difficulty, a panel per track, a line per agent of the
+    shipped baseline's table under the distance protocol (docs/images/baselines_sr_difficulty.png)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    levels = ORDER[1:]
+    fig, axes = plt.subplots(1, len(all_cards), figsize=(4.2 * len(all_cards), 4.0), dpi=100, squeeze=False)
+    for ax, (name, card) in zip(axes[0], sorted(all_cards.items(), key=lambda kv: TRACKS.index(kv[1]["task"]))):
+        for summ in (card.get("evaluation") or {}).get("runs", {}).values():
+            groups = summ["tasks"][card["task"]]
+            if summ["protocol"] != "distance" or not all(g in groups for g in levels):
+                continue
+            label = summ.get("label") or summ["agent"]
+            kind = label if label in ("depth_reactive", "random", "oracle") else "greedy" if "greedy" in label else "learned"
+            color, style = {"learned": ("C0", "-"), "greedy": ("C0", "--"), "depth_reactive": ("C1", "-"),
+                            "random": ("C2", "-"), "oracle": ("0.5", ":")}[kind]
+            ax.plot(levels, [groups[g]["sr"] for g in levels], marker="o", color=color, linestyle=style, label=label)
+        ax.set_title(f"{card['task']} (eval_zeroshot)")
+        ax.set_ylim(0, 1.05)
+        ax.set_ylabel("distance SR")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, frameon=False)
+    fig.tight_layout()
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, metadata={"Software": None})
+    plt.close(fig)
+
+
+TRACKS = ["pointnav", "imagenav", "objectnav"]
 ORDER = ["overall", "easy", "medium", "hard"]
 COLUMNS = [("SR", "sr"), ("SPL", "spl"), ("NE m", "ne"), ("CR", "collision_rate"), ("AvgSteps", "steps"),
            ("Stop SR", "stop_sr")]
@@ -289,6 +327,14 @@ def expert(card: dict) -> str:
     return "the searching expert: it looks for the goal until it has been in view, then the geodesic oracle"
 
 
+def decoding(card: dict) -> str:
+    """How the registry name picks its moves (the card's `decoding`; greedy when absent)."""
+    if card.get("decoding", {}).get("sample"):
+        return ("sampled from the policy's distribution over the three moves, seeded per episode (STOP when it is the "
+                "most likely action); the figures below were measured so. `--agent-arg sample=false` acts greedily.")
+    return "greedy (the most likely action); `--agent-arg sample=true` draws the moves from the policy's distribution."
+
+
 def network(spec: dict) -> str:
     """The card's one-paragraph description of the network of a NavSpec (as a dict)."""
     size = f"{spec['depth_w']} x {spec['depth_h']}, area-pooled from any render size"
@@ -363,6 +409,7 @@ Generated from model_card.json by `python -m benchmarks.baselines.cards docs`; d
 - **File:** {file_line} {card['parameters']:,} parameters.
 - **Licence:** {licence_line(card)}
 - **Network:** {network(c['spec'])}
+- **Decoding:** {decoding(card)}
 - **Data:** data root `{card['data']['root']}`: {len(card['data']['train_scenes'])} training scenes{groups(card)} (split
   `{card['data']['split']}`), {card['frames']:,} labelled frames over {len(card['curve'])} rounds, rendered at
   {c['width']} x {c['height']}; closed-loop check after each round on `{val}`.
@@ -392,7 +439,11 @@ Reproduce: `{ev.get('command', '')}`
 
 
 def docs_section(all_cards: dict[str, dict], scaling: dict | None = None, trials: dict[str, dict] | None = None) -> str:
-    parts = [BEGIN]
+    parts = [BEGIN, f"""
+Zero-shot SR against difficulty, each shipped baseline's table under the distance protocol (below):
+
+![SR against difficulty per track](images/{DIFFICULTY_PNG.name})
+"""]
     for name, card in [*all_cards.items(), *(trials or {}).items()]:
         ev = card.get("evaluation") or {}
         shipped = name in all_cards
@@ -449,6 +500,8 @@ def write_docs(check: bool = False, models: Path = MODELS, docs: Path = DOCS, sc
     scale = json.loads(scaling.read_text()) if scaling.is_file() else None
     if scale and not check:
         scaling_plot(scale)
+    if not check:
+        difficulty_plot(all_cards)
     new = doc[:doc.index(BEGIN)] + docs_section(all_cards, scale, tried).rstrip("\n") + doc[doc.index(END) + len(END):]
     if new != doc:
         stale.append(str(docs))
@@ -464,6 +517,7 @@ def main(argv=None) -> int:
     s.add_argument("run", type=Path)
     s.add_argument("name")
     s.add_argument("--trial", action="store_true", help="only the card, into benchmarks/baselines/trials/ (not shipped)")
+    s.add_argument("--sample", action="store_true", help="the registry name samples its moves (its figures' decoding)")
     e = sub.add_parser("evaluation")
     e.add_argument("name")
     e.add_argument("summaries", nargs="+", type=Path)
@@ -488,7 +542,8 @@ def main(argv=None) -> int:
     d.add_argument("--check", action="store_true", help="exit 1 when a card's .md or the docs section is stale")
     a = ap.parse_args(argv)
     if a.cmd == "ship":
-        print(ship(a.run, a.name, TRIALS, weights=False) if a.trial else ship(a.run, a.name))
+        print(ship(a.run, a.name, TRIALS, weights=False, sample=a.sample) if a.trial else
+              ship(a.run, a.name, sample=a.sample))
     elif a.cmd == "evaluation":
         add_evaluation(a.name, a.summaries, a.conditions, a.command, home(a.name), a.title, a.real)
     elif a.cmd == "cost":

@@ -1,5 +1,6 @@
 """The learned baselines as agents of the evaluator (registry names in navcore.eval.agents:
-`pointnav_bc`, `objectnav_bc`), in-process or behind the agent server (navarena serve-agent --agent pointnav_bc).
+`pointnav_bc`, `imagenav_bc`, `objectnav_bc`), in-process or behind the agent server (navarena serve-agent --agent
+pointnav_bc).
 
     agent = LearnedNavAgent()                               # the shipped pointnav_bc
     agent = LearnedNavAgent(checkpoint="runs/on/model.pt", device="cuda")   # any track's navarena train run
@@ -9,8 +10,10 @@ network's distribution over the three moves (seeded per episode: the same seed a
 the same actions), and it stops only when STOP is the most likely action, so a sampled STOP never
 ends an explicit_stop episode. `stop_threshold` sets when it stops instead: when the policy gives
 STOP at least that probability. Sampling breaks the loops a greedy recurrent policy falls into when
-it is unsure (turning in place). Agents of one checkpoint and device share one network; the
-batched evaluator steps all of its slots in one forward pass (act_batch).
+it is unsure (turning in place). A shipped baseline's card names the decoding its figures were
+measured with (`decoding`; imagenav_bc samples, the others are greedy), and its registry name uses it
+unless `sample` is given. Agents of one checkpoint and device share one network; the batched
+evaluator steps all of its slots in one forward pass (act_batch).
 """
 from __future__ import annotations
 
@@ -30,12 +33,17 @@ from navcore.seeds import stream_seed
 MODELS = Path(str(resources.files("navcore") / "models"))
 
 
-def shipped(name: str) -> tuple[Path, str]:
-    """(model file, published sha256) of a shipped baseline (navcore/models/<name>/model_card.json)."""
+def shipped_card(name: str) -> dict:
+    """A shipped baseline's model card (navcore/models/<name>/model_card.json)."""
     card_file = MODELS / name / "model_card.json"
     if not card_file.is_file():
         raise FileNotFoundError(f"no shipped baseline {name!r} ({card_file} is missing; reinstall the package)")
-    card = json.loads(card_file.read_text())
+    return json.loads(card_file.read_text())
+
+
+def shipped(name: str) -> tuple[Path, str]:
+    """(model file, published sha256) of a shipped baseline."""
+    card = shipped_card(name)
     return MODELS / name / card["file"], card["sha256"]
 
 
@@ -71,7 +79,8 @@ class LearnedNavAgent:
         name: the shipped baseline read when no checkpoint is given.
         sha256: the checkpoint's expected sha256 (checked on load when given).
         device: auto (CUDA when there) | cpu | cuda[:i].
-        sample: draw the move from the policy's distribution instead of argmax (see the module docstring).
+        sample: draw the move from the policy's distribution instead of argmax (see the module docstring);
+            None: as the shipped baseline's card says (`decoding`), greedy for a checkpoint file.
         stop_threshold: STOP when the policy gives it at least this probability (None: when it is the
             argmax); else the most likely (or a sampled) move. Above 0.5 it stops less eagerly.
         seed: the sampling stream's seed (the evaluator passes one per scene; each episode's stream is
@@ -79,9 +88,11 @@ class LearnedNavAgent:
     """
 
     def __init__(self, checkpoint: str | None = None, name: str = "pointnav_bc", device: str | None = "auto",
-                 sha256: str | None = None, sample: bool = False, stop_threshold: float | None = None, seed: int = 0,
+                 sha256: str | None = None, sample: bool | None = None, stop_threshold: float | None = None, seed: int = 0,
                  **_):
         path, digest = (Path(checkpoint), sha256) if checkpoint else shipped(name)
+        if sample is None:
+            sample = False if checkpoint else bool(shipped_card(name).get("decoding", {}).get("sample", False))
         if not isinstance(sample, bool):
             raise ValueError(f"sample={sample!r}: true or false")
         if stop_threshold is not None and not (isinstance(stop_threshold, (int, float)) and 0 < stop_threshold <= 1):
@@ -136,4 +147,5 @@ def shipped_agent(name: str):
 
 
 pointnav_bc = shipped_agent("pointnav_bc")
+imagenav_bc = shipped_agent("imagenav_bc")
 objectnav_bc = shipped_agent("objectnav_bc")

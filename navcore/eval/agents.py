@@ -24,6 +24,7 @@ AGENTS = Registry("agent", {
     "depth_reactive": "navcore.eval.agents:DepthReactiveAgent",
     # the learned baselines, trained on NavArena's own episodes (navcore/models/<name>/model_card.md)
     "pointnav_bc": "navcore.baselines.agent:pointnav_bc",
+    "imagenav_bc": "navcore.baselines.agent:imagenav_bc",
     "objectnav_bc": "navcore.baselines.agent:objectnav_bc",
     # any navarena train run's policy: --agent learned --agent-arg checkpoint=runs/x/model.pt
     "learned": "navcore.baselines.agent:LearnedNavAgent",

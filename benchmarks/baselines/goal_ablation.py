@@ -1,0 +1,124 @@
+"""Does a learned ImageNav policy use its goal image? The same episodes run three ways, each
+episode's figures paired across them:
+
+- `goal`: the policy as shipped (its card's decoding), the episode's own goal image;
+- `decoy`: the same, shown the goal image of another episode of the scene, the one whose goal lies
+  farthest from this episode's goal (a policy that ignores the goal image scores as with `goal`);
+- `greedy`: the episode's own goal image, moves by argmax (the decoding's share of the figure).
+
+CPU renderer at the policy's training size (160 x 120), distance protocol, the split's first
+--per-scene episodes of each scene:
+
+    python -m benchmarks.baselines.goal_ablation ROOT [--split val_unseen] [--per-scene 10] [--agent imagenav_bc]
+    -> data/08_reports/goal_ablation.json
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from navcore.baselines.agent import LearnedNavAgent
+
+VARIANTS = ("goal", "decoy", "greedy")
+
+
+class DecoyGoalAgent(LearnedNavAgent):
+    """A learned agent that sees `decoys[episode_id]` instead of the episode's goal image."""
+
+    decoys: dict[str, np.ndarray] = {}
+
+    def reset(self, task: dict) -> None:
+        super().reset(task)
+        self.episode_id = str(task.get("episode_id", ""))
+
+    @classmethod
+    def act_batch(cls, agents: list, observations: list[dict]) -> list[int]:
+        shown = [{**o, "goal_image": cls.decoys[a.episode_id]} for a, o in zip(agents, observations)]
+        return LearnedNavAgent.act_batch.__func__(cls, agents, shown)
+
+
+def decoy_images(ctx, episodes, width: int, height: int) -> dict[str, np.ndarray]:
+    """Each episode's decoy: the goal image of the scene's episode whose goal is farthest from its own."""
+    goals = np.array([ep.goal_pose[:2] for ep in episodes], float)
+    far = [int(np.argmax(np.linalg.norm(goals - g, axis=1))) for g in goals]
+    poses = np.stack([episodes[j].goal_pose for j in far])
+    rgb = ctx.render(poses, width, height)[0]
+    return {ep.episode_id: rgb[i] for i, ep in enumerate(episodes)}
+
+
+def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: str = "imagenav_bc",
+            width: int = 160, height: int = 120, slots: int = 16) -> dict:
+    from navarena.dataset import NavDataset
+    from navcore.eval.loop import InProcessBatch, run_episodes_batched
+
+    ds = NavDataset(root)
+    cfg = ds.env_config(width=width, height=height, protocol="distance")
+    rows = {v: [] for v in VARIANTS}
+    seconds = {v: 0.0 for v in VARIANTS}
+    for sid in ds.scene_ids("imagenav"):
+        eps = ds.episodes(sid, "imagenav", split, limit=per_scene)
+        if len(eps) < 2:
+            continue
+        ctx = ds.scene_context(sid, renderer="cpu")
+        DecoyGoalAgent.decoys = decoy_images(ctx, eps, width, height)
+        makers = {"goal": lambda: LearnedNavAgent(name=agent, device="cpu"),
+                  "decoy": lambda: DecoyGoalAgent(name=agent, device="cpu"),
+                  "greedy": lambda: LearnedNavAgent(name=agent, device="cpu", sample=False)}
+        for v in VARIANTS:
+            t = time.perf_counter()
+            for r in run_episodes_batched(ctx, eps, InProcessBatch(makers[v]), slots, cfg):
+                rows[v].append({"scene_id": sid, "episode_id": r["episode_id"], "sr": float(r["sr"]),
+                                "spl": float(r["spl"]), "steps": int(r["steps"]), "path_length": float(r["path_length"])})
+            seconds[v] += time.perf_counter() - t
+        print(f"{sid}: " + ", ".join(f"{v} SR {np.mean([r['sr'] for r in rows[v]]):.3f}" for v in VARIANTS), flush=True)
+    return report(rows, seconds, dict(root=str(root), split=split, per_scene=per_scene, agent=agent,
+                                      render=f"{width}x{height} cpu", protocol="distance"))
+
+
+def report(rows: dict[str, list[dict]], seconds: dict[str, float], setting: dict) -> dict:
+    """Per variant SR, SPL, steps and walked metres; per pair of variants the episodes that succeed for
+    one alone and the sign test's p."""
+    from scipy.stats import binomtest
+
+    key = {v: {(r["scene_id"], r["episode_id"]): r for r in rs} for v, rs in rows.items()}
+    common = sorted(set.intersection(*(set(k) for k in key.values())))
+    out = {"setting": setting, "episodes": len(common), "variants": {}, "pairs": {}}
+    for v in rows:
+        rs = [key[v][k] for k in common]
+        out["variants"][v] = {"sr": round(float(np.mean([r["sr"] for r in rs])), 4) if rs else None,
+                              "spl": round(float(np.mean([r["spl"] for r in rs])), 4) if rs else None,
+                              "steps": round(float(np.mean([r["steps"] for r in rs])), 1) if rs else None,
+                              "path_m": round(float(np.median([r["path_length"] for r in rs])), 2) if rs else None,
+                              "seconds": round(seconds.get(v, 0.0), 1)}
+    names = list(rows)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            only_a = sum(key[a][k]["sr"] > 0 and key[b][k]["sr"] == 0 for k in common)
+            only_b = sum(key[a][k]["sr"] == 0 and key[b][k]["sr"] > 0 for k in common)
+            p = binomtest(only_a, only_a + only_b).pvalue if only_a + only_b else 1.0
+            out["pairs"][f"{a}/{b}"] = {f"only_{a}": int(only_a), f"only_{b}": int(only_b), "sign_test_p": float(p)}
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("root")
+    ap.add_argument("--split", default="val_unseen")
+    ap.add_argument("--per-scene", type=int, default=10)
+    ap.add_argument("--agent", default="imagenav_bc", help="a shipped ImageNav baseline")
+    ap.add_argument("--out", type=Path, default=Path("data/08_reports/goal_ablation.json"))
+    a = ap.parse_args(argv)
+    rep = measure(a.root, a.split, a.per_scene, a.agent)
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    a.out.write_text(json.dumps(rep, indent=1) + "\n")
+    print(json.dumps(rep, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,52 @@
+"""benchmarks.baselines.goal_ablation: the decoy agent shows the network the decoy goal image, and
+the report's paired counts are the episodes' own."""
+import numpy as np
+import pytest
+import torch
+
+from benchmarks.baselines.goal_ablation import DecoyGoalAgent, report
+from navcore.baselines.agent import LearnedNavAgent
+from navcore.baselines.checkpoint import save_checkpoint
+from navcore.baselines.model import NavNet, NavSpec
+
+
+@pytest.fixture
+def imagenav_checkpoint(tmp_path):
+    torch.manual_seed(0)
+    net = NavNet(NavSpec(hidden=16, embed=16, task="imagenav", rgbd=True))
+    f = tmp_path / "i.pt"
+    save_checkpoint(f, "imagenav", net.spec.to_dict(), net.state_dict(), {})
+    return str(f)
+
+
+def test_the_decoy_agent_acts_on_the_decoy_image(imagenav_checkpoint):
+    rng = np.random.default_rng(0)
+    depth = rng.uniform(0.5, 4, (48, 64)).astype(np.float32)
+    rgb, goal, decoy = (rng.integers(0, 255, (48, 64, 3), dtype=np.uint8) for _ in range(3))
+    DecoyGoalAgent.decoys = {"e1": decoy}
+
+    def logits_seen(cls, image):
+        a = cls(checkpoint=imagenav_checkpoint, device="cpu")
+        a.reset({"episode_id": "e1"})
+        seen = []
+        step = a.net.step
+        a.net.step = lambda frames, g, prev, h: (seen.append(frames.clone()), step(frames, g, prev, h))[1]
+        a.act({"depth": depth, "rgb": rgb, "goal_image": image})
+        return seen[0]
+
+    shown = logits_seen(DecoyGoalAgent, goal)  # given the true goal image, the network sees the decoy
+    assert torch.equal(shown, logits_seen(LearnedNavAgent, decoy))
+    assert not torch.equal(shown, logits_seen(LearnedNavAgent, goal))
+
+
+def test_the_report_pairs_episodes():
+    rows = {"goal": [{"scene_id": "s", "episode_id": str(i), "sr": float(i < 6), "spl": 0.5 * (i < 6), "steps": 10,
+                      "path_length": 2.0} for i in range(10)],
+            "decoy": [{"scene_id": "s", "episode_id": str(i), "sr": float(i in (0, 9)), "spl": 0.0, "steps": 20,
+                       "path_length": 4.0} for i in range(10)]}
+    rep = report(rows, {"goal": 1.0, "decoy": 2.0}, {})
+    assert rep["episodes"] == 10
+    assert rep["variants"]["goal"]["sr"] == 0.6 and rep["variants"]["decoy"]["sr"] == 0.2
+    pair = rep["pairs"]["goal/decoy"]
+    assert pair["only_goal"] == 5 and pair["only_decoy"] == 1
+    assert pair["sign_test_p"] == pytest.approx(0.21875)  # two-sided binomial, 5 of 6
