@@ -327,6 +327,19 @@ def expert(card: dict) -> str:
     return "the searching expert: it looks for the goal until it has been in view, then the geodesic oracle"
 
 
+def rounds_count(card: dict) -> str:
+    n = len(card["curve"])
+    return f"{n} round{'s' * (n != 1)}"
+
+
+def rounds_line(card: dict) -> str:
+    """What the card's rounds were: behaviour cloning, then DAgger when there was more than one."""
+    if len(card["curve"]) == 1:
+        return "one round: behaviour cloning on the expert's rollouts, no DAgger round (the expert drives"
+    return ("round 0 behaviour cloning on the expert's rollouts, then DAgger (the learner drives, the expert's\n"
+            "  action executed with probability beta^round")
+
+
 def decoding(card: dict) -> str:
     """How the registry name picks its moves (the card's `decoding`; greedy when absent)."""
     if card.get("decoding", {}).get("sample"):
@@ -353,7 +366,7 @@ def network(spec: dict) -> str:
         inputs = (f"depth and RGB ({size}, depth clipped at {spec['max_depth']} m), the goal category as a learned "
                   f"embedding ({len(cats)} categories: {', '.join(cats)})")
     return (f"{inputs} and the previous action; a 4-layer CNN, a GRU of {spec['hidden']} over the "
-            "episode, logits of STOP / FORWARD / LEFT / RIGHT; argmax.")
+            "episode, logits of STOP / FORWARD / LEFT / RIGHT.")
 
 
 def more_tables(card: dict, level: str = "###") -> str:
@@ -411,10 +424,9 @@ Generated from model_card.json by `python -m benchmarks.baselines.cards docs`; d
 - **Network:** {network(c['spec'])}
 - **Decoding:** {decoding(card)}
 - **Data:** data root `{card['data']['root']}`: {len(card['data']['train_scenes'])} training scenes{groups(card)} (split
-  `{card['data']['split']}`), {card['frames']:,} labelled frames over {len(card['curve'])} rounds, rendered at
+  `{card['data']['split']}`), {card['frames']:,} labelled frames over {rounds_count(card)}, rendered at
   {c['width']} x {c['height']}; closed-loop check after each round on `{val}`.
-- **Training:** round 0 behaviour cloning on the expert's rollouts, then DAgger (the learner drives, the expert's
-  action executed with probability beta^round, every visited state labelled by {expert(card)});
+- **Training:** {rounds_line(card)}, every visited state labelled by {expert(card)});
   {c['episodes_per_round']} episodes and {c['grad_steps']} gradient steps of {c['batch_episodes']} whole episodes a
   round, AdamW lr {c['lr']}, seed {card['seed']}.{kept(card)} On {card['trained_on']} ({card.get('workers', 0)} collection
   workers): {card['train_seconds']} s of collection and fitting.
