@@ -90,9 +90,10 @@ class LearnedNavAgent:
     def __init__(self, checkpoint: str | None = None, name: str = "pointnav_bc", device: str | None = "auto",
                  sha256: str | None = None, sample: bool | None = None, stop_threshold: float | None = None, seed: int = 0,
                  **_):
-        path, digest = (Path(checkpoint), sha256) if checkpoint else shipped(name)
-        if sample is None:
-            sample = False if checkpoint else bool(shipped_card(name).get("decoding", {}).get("sample", False))
+        card = None if checkpoint else shipped_card(name)
+        path, digest = (Path(checkpoint), sha256) if card is None else (MODELS / name / card["file"], card["sha256"])
+        if sample is None:  # a shipped name decodes as its figures were measured; a file greedily
+            sample = card is not None and bool(card.get("decoding", {}).get("sample", False))
         if not isinstance(sample, bool):
             raise ValueError(f"sample={sample!r}: true or false")
         if stop_threshold is not None and not (isinstance(stop_threshold, (int, float)) and 0 < stop_threshold <= 1):
