@@ -1,10 +1,12 @@
 """benchmarks.baselines.goal_ablation: the decoy agent shows the network the decoy goal image, and
 the report's paired counts are the episodes' own."""
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import torch
 
-from benchmarks.baselines.goal_ablation import DecoyGoalAgent, report
+from benchmarks.baselines.goal_ablation import DecoyGoalAgent, decoy_poses, one_per_goal, report
 from navcore.baselines.agent import LearnedNavAgent
 from navcore.baselines.checkpoint import save_checkpoint
 from navcore.baselines.model import NavNet, NavSpec
@@ -50,3 +52,18 @@ def test_the_report_pairs_episodes():
     pair = rep["pairs"]["goal/decoy"]
     assert pair["only_goal"] == 5 and pair["only_decoy"] == 1
     assert pair["sign_test_p"] == pytest.approx(0.21875)  # two-sided binomial, 5 of 6
+
+
+def test_decoys_come_from_another_goal():
+    """Episodes sharing a goal: one per goal is kept, and each decoy is the farthest other goal."""
+    def ep(i, x, y):
+        return SimpleNamespace(episode_id=f"e{i}", goal_pose=np.array([x, y, 0.5]))
+
+    pool = [ep(0, 0, 0), ep(1, 0, 0), ep(2, 3, 0), ep(3, 3, 0), ep(4, 0, 5), ep(5, 1, 1)]
+    kept = one_per_goal(pool, 3)
+    assert [e.episode_id for e in kept] == ["e0", "e2", "e4"]
+    decoys = decoy_poses(kept, pool)
+    assert np.allclose(decoys["e0"], [0, 5, 0.5]) and np.allclose(decoys["e2"], [0, 5, 0.5])
+    assert np.allclose(decoys["e4"], [3, 0, 0.5])
+    for e in kept:
+        assert not np.allclose(decoys[e.episode_id][:2], e.goal_pose[:2])

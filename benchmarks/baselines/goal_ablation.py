@@ -2,12 +2,12 @@
 episode's figures paired across them:
 
 - `goal`: the policy as shipped (its card's decoding), the episode's own goal image;
-- `decoy`: the same, shown the goal image of another episode of the scene, the one whose goal lies
-  farthest from this episode's goal (a policy that ignores the goal image scores as with `goal`);
+- `decoy`: the same, shown the goal image of another goal of the scene and split, the one farthest
+  from this episode's goal (a policy that ignores the goal image scores as with `goal`);
 - `greedy`: the episode's own goal image, moves by argmax (the decoding's share of the figure).
 
-CPU renderer at the policy's training size (160 x 120), distance protocol, the split's first
---per-scene episodes of each scene:
+CPU renderer at the policy's training size (160 x 120), distance protocol, one episode of each of the
+first --per-scene goals of each scene in the split (a scene's ImageNav episodes share goals):
 
     python -m benchmarks.baselines.goal_ablation ROOT [--split val_unseen] [--per-scene 10] [--agent imagenav_bc]
     -> data/08_reports/goal_ablation.json
@@ -42,12 +42,29 @@ class DecoyGoalAgent(LearnedNavAgent):
         return LearnedNavAgent.act_batch.__func__(cls, agents, shown)
 
 
-def decoy_images(ctx, episodes, width: int, height: int) -> dict[str, np.ndarray]:
-    """Each episode's decoy: the goal image of the scene's episode whose goal is farthest from its own."""
-    goals = np.array([ep.goal_pose[:2] for ep in episodes], float)
-    far = [int(np.argmax(np.linalg.norm(goals - g, axis=1))) for g in goals]
-    poses = np.stack([episodes[j].goal_pose for j in far])
-    rgb = ctx.render(poses, width, height)[0]
+def one_per_goal(episodes: list, n: int) -> list:
+    """The first episode (by id) of each distinct goal, at most n: a scene's ImageNav episodes share
+    goals (about 10 starts each), and a decoy must come from another goal."""
+    seen, out = set(), []
+    for ep in sorted(episodes, key=lambda e: e.episode_id):
+        key = tuple(np.round(ep.goal_pose, 3))
+        if key not in seen and len(out) < n:
+            seen.add(key)
+            out.append(ep)
+    return out
+
+
+def decoy_poses(episodes: list, pool: list) -> dict[str, np.ndarray]:
+    """Each episode's decoy pose: the goal pose among `pool`'s episodes' farthest from its own goal."""
+    goals = np.array([ep.goal_pose for ep in pool], float)
+    return {ep.episode_id: goals[int(np.argmax(np.linalg.norm(goals[:, :2] - ep.goal_pose[:2], axis=1)))]
+            for ep in episodes}
+
+
+def decoy_images(ctx, episodes: list, pool: list, width: int, height: int) -> dict[str, np.ndarray]:
+    """The decoy goal image of each episode (decoy_poses), rendered as the environment renders goal images."""
+    poses = decoy_poses(episodes, pool)
+    rgb = ctx.render(np.stack([poses[ep.episode_id] for ep in episodes]), width, height)[0]
     return {ep.episode_id: rgb[i] for i, ep in enumerate(episodes)}
 
 
@@ -61,11 +78,12 @@ def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: st
     rows = {v: [] for v in VARIANTS}
     seconds = {v: 0.0 for v in VARIANTS}
     for sid in ds.scene_ids("imagenav"):
-        eps = ds.episodes(sid, "imagenav", split, limit=per_scene)
+        pool = ds.episodes(sid, "imagenav", split)
+        eps = one_per_goal(pool, per_scene)
         if len(eps) < 2:
             continue
         ctx = ds.scene_context(sid, renderer="cpu")
-        DecoyGoalAgent.decoys = decoy_images(ctx, eps, width, height)
+        DecoyGoalAgent.decoys = decoy_images(ctx, eps, pool, width, height)
         makers = {"goal": lambda: LearnedNavAgent(name=agent, device="cpu"),
                   "decoy": lambda: DecoyGoalAgent(name=agent, device="cpu"),
                   "greedy": lambda: LearnedNavAgent(name=agent, device="cpu", sample=False)}
