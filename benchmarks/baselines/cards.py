@@ -91,7 +91,7 @@ def add_evaluation(name: str, summaries: list[Path], conditions: str, command: s
 
 def cpu_cost(name: str, repeats: int = 300, models: Path = MODELS) -> dict:
     """Median milliseconds of one act() of the shipped policy on this machine's CPU (rendering
-    excluded), at 640 x 480 and 160 x 120 depth, recorded in the card."""
+    excluded), at 640 x 480 and 160 x 120 (every observation its track reads), recorded in the card."""
     import os
     import platform
     import time
@@ -295,8 +295,9 @@ def _cost(card: dict) -> str:
     c = card.get("cpu_ms_per_step")
     if not c:
         return "not measured yet (`python -m benchmarks.baselines.cards cost NAME`)."
-    return (f"{c['640x480']} ms a step at 640 x 480 depth, {c['160x120']} ms at 160 x 120 (median, rendering "
-            f"excluded; {c['machine']}; `python -m benchmarks.baselines.cards cost {card['name']}`).")
+    return (f"{c['640x480']} ms a step at 640 x 480 observations (those its track reads), {c['160x120']} ms at "
+            f"160 x 120 (median, rendering excluded; {c['machine']}; `python -m benchmarks.baselines.cards cost "
+            f"{card['name']}`).")
 
 
 def kept(card: dict) -> str:
