@@ -25,10 +25,9 @@ def test_the_decoy_agent_acts_on_the_decoy_image(imagenav_checkpoint):
     rng = np.random.default_rng(0)
     depth = rng.uniform(0.5, 4, (48, 64)).astype(np.float32)
     rgb, goal, decoy = (rng.integers(0, 255, (48, 64, 3), dtype=np.uint8) for _ in range(3))
-    DecoyGoalAgent.decoys = {"e1": decoy}
-
     def logits_seen(cls, image):
-        a = cls(checkpoint=imagenav_checkpoint, device="cpu")
+        extra = {"decoys": {"e1": decoy}} if cls is DecoyGoalAgent else {}
+        a = cls(checkpoint=imagenav_checkpoint, device="cpu", **extra)
         a.reset({"episode_id": "e1"})
         seen = []
         step = a.net.step

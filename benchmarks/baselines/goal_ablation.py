@@ -30,15 +30,17 @@ VARIANTS = ("goal", "decoy", "greedy")
 class DecoyGoalAgent(LearnedNavAgent):
     """A learned agent that sees `decoys[episode_id]` instead of the episode's goal image."""
 
-    decoys: dict[str, np.ndarray] = {}
+    def __init__(self, decoys: dict[str, np.ndarray], **kwargs):
+        super().__init__(**kwargs)
+        self.decoys, self.decoy = decoys, None
 
     def reset(self, task: dict) -> None:
         super().reset(task)
-        self.episode_id = str(task.get("episode_id", ""))
+        self.decoy = self.decoys[str(task.get("episode_id", ""))]
 
     @classmethod
     def act_batch(cls, agents: list, observations: list[dict]) -> list[int]:
-        shown = [{**o, "goal_image": cls.decoys[a.episode_id]} for a, o in zip(agents, observations)]
+        shown = [{**o, "goal_image": a.decoy} for a, o in zip(agents, observations)]
         return LearnedNavAgent.act_batch.__func__(cls, agents, shown)
 
 
@@ -83,9 +85,9 @@ def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: st
         if len(eps) < 2:
             continue
         ctx = ds.scene_context(sid, renderer="cpu")
-        DecoyGoalAgent.decoys = decoy_images(ctx, eps, pool, width, height)
+        decoys = decoy_images(ctx, eps, pool, width, height)
         makers = {"goal": lambda: LearnedNavAgent(name=agent, device="cpu"),
-                  "decoy": lambda: DecoyGoalAgent(name=agent, device="cpu"),
+                  "decoy": lambda: DecoyGoalAgent(decoys, name=agent, device="cpu"),
                   "greedy": lambda: LearnedNavAgent(name=agent, device="cpu", sample=False)}
         for v in VARIANTS:
             t = time.perf_counter()
