@@ -78,6 +78,10 @@ class TrainConfig:
     """pointnav | imagenav | objectnav: the track (its network's inputs: navcore.baselines.model)."""
     rounds: int = 5
     """Round 0 is behaviour cloning; rounds 1.. are DAgger."""
+    first_round: str = "bc"
+    """bc | dagger: what round 0 is. dagger (with --init): the init network drives round 0 as a first
+    DAgger round would (beta^1), so a fine-tune spends its rounds on the learner's own mistakes, not
+    on more of the expert's rollouts the init network was trained on already."""
     episodes_per_round: int = 3072
     """Training episodes collected per round (drawn over the training scenes)."""
     beta: float = 0.5
@@ -205,6 +209,10 @@ class Trainer:
                                  f"({cfg.spec.to_dict()})")
             self.net.load_state_dict(ck["state_dict"])
             self.init_sha256 = ck["sha256"]
+        if cfg.first_round not in ("bc", "dagger"):
+            raise SystemExit(f"navarena train: --first-round {cfg.first_round}: bc or dagger")
+        if cfg.first_round == "dagger" and not cfg.init:
+            raise SystemExit("navarena train: --first-round dagger needs --init (round 0's learner is the init network)")
         self.opt = torch.optim.AdamW(self.net.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay)
         tables = {sid: self.ds.episode_table(sid, cfg.task) for sid in self.ds.scene_ids(cfg.task)}
         self.splits = {sid: set(t["split"]) for sid, t in tables.items()}
@@ -243,7 +251,7 @@ class Trainer:
         rng = np.random.default_rng(stream_seed(cfg.seed, "train-collect", str(rnd)) % 2**32)
         per_scene = np.bincount(rng.integers(0, len(self.train_scenes), cfg.episodes_per_round),
                                 minlength=len(self.train_scenes))
-        jobs = [(sid, int(k), rnd, str(model) if rnd else None, sha) for sid, k in zip(self.train_scenes, per_scene) if k]
+        jobs = [(sid, int(k), rnd, str(model) if round_beta(self.cfg, rnd) < 1.0 else None, sha) for sid, k in zip(self.train_scenes, per_scene) if k]
         parts, t0, n_eps, steps = [], time.perf_counter(), 0, 0
         results = self.pool.imap(_collect_job, jobs) if self.pool is not None else map(self.collector.job, jobs)
         for (sid, k, *_), part in zip(jobs, results):
@@ -338,7 +346,8 @@ class Trainer:
             self.log(f"resuming after round {first - 1}")
         parts = [Steps.load(out / "rounds" / f"round_{r}.npz") for r in range(first)]
         # the learner of the next round is the last round's network (model.pt may hold the best round's)
-        sha = self.save_model(final=False) if first else None
+        # round 0's learner when it is a DAgger round: the init network
+        sha = self.save_model(final=False) if first or cfg.first_round == "dagger" else None
         if cfg.workers:
             import torch.multiprocessing as tmp
 
@@ -366,7 +375,8 @@ class Trainer:
             loss_first, loss, aux = self.fit(data, rnd)
             t_fit = time.perf_counter() - t1
             sha = self.save_model(final=False)
-            entry = {"round": rnd, "kind": "bc" if rnd == 0 else "dagger", "beta": cfg.beta ** rnd if rnd else 1.0,
+            beta = round_beta(self.cfg, rnd)
+            entry = {"round": rnd, "kind": "bc" if beta >= 1.0 else "dagger", "beta": beta,
                      "new_frames": len(new), "frames": len(data), "episodes": int(len(data.lengths)),
                      "loss_first": round(loss_first, 4), "loss": round(loss, 4), "collect_s": round(t_collect, 1), "fit_s": round(t_fit, 1),
                      "collect_frames_per_s": round(len(new) / t_collect, 1)}
@@ -479,7 +489,7 @@ class Collector:
         eps = self._eps[sid]
         rng = np.random.default_rng(stream_seed(cfg.seed, sid, f"train-collect-{rnd}") % 2**32)
         pick = rng.choice(len(eps), k, replace=len(eps) < k)
-        return self.rollouts(sid, [eps[j] for j in pick], cfg.beta ** rnd if rnd else 1.0, rng)
+        return self.rollouts(sid, [eps[j] for j in pick], round_beta(cfg, rnd), rng)
 
     @torch.no_grad()
     def rollouts(self, sid: str, episodes: list, beta: float, rng) -> Steps:
@@ -597,6 +607,13 @@ def goal_polar(x: float, y: float, yaw: float, ep) -> tuple[float, float]:
 _WORKER: dict = {}
 
 
+def round_beta(cfg: TrainConfig, rnd: int) -> float:
+    """The probability that a round executes the expert's action: 1 in a behaviour-cloning round 0,
+    beta^k in the k-th DAgger round (first_round dagger: round 0 is the first)."""
+    k = rnd + (cfg.first_round == "dagger")
+    return cfg.beta ** k if k else 1.0
+
+
 def _init_worker(root: str, cfg: TrainConfig, device: str, gpus: int) -> None:
     import multiprocessing
 
@@ -632,9 +649,7 @@ def _flag(text: str) -> bool:
 
 def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
     ap = ap or argparse.ArgumentParser(prog="navarena train", usage="navarena train ROOT --out OUT [options]",
-                                       description="Train a PointNav, ImageNav or ObjectNav "
-                                       "baseline (behaviour cloning, then DAgger) on a data root or a release "
-                                       "into --out (model.pt, model_card.json).")
+                                       description="Train a baseline policy (behaviour cloning, then DAgger) into --out.")
     ap.formatter_class = lambda prog: argparse.HelpFormatter(prog, max_help_position=30)  # one line an option
     ap.add_argument("root", help="a data root (make dataset) or a release folder")
     ap.add_argument("--out", required=True, help="the run folder (model.pt, model_card.json, rounds/)")
@@ -643,7 +658,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
     helps = {"task": None, "rounds": "0: behaviour cloning, then DAgger", "episodes_per_round": None, "grad_steps": None,
              "batch_episodes": None, "slots": "episodes stepped together", "width": "render size", "height": None,
              "val_episodes": "held-out check", "keep": "best|last round into model.pt", "scenes": "first N train scenes", "seed": None,
-             "init": "fine-tune: a model.pt or shipped name",
+             "init": "fine-tune: a model.pt or shipped name", "first_round": "bc|dagger: round 0 (dagger: --init drives)",
              "max_learner_steps": None, "expert": "auto|geodesic|search: the labelling expert",
              "view_overlap": "ImageNav: goal view share that is found",
              "workers": "collection processes", "beta": "DAgger mixing",

@@ -72,6 +72,25 @@ def test_init_fine_tunes_from_a_checkpoint(trained, episode_run, tmp_path, monke
             main([str(root), "--out", str(tmp_path / "bad"), *args, *bad, "--init", init])
 
 
+def test_a_fine_tune_can_begin_with_a_dagger_round(trained, episode_run, tmp_path):
+    """--first-round dagger: round 0 is a DAgger round driven by the --init network (beta^1), so its
+    rollouts are not the expert's (the behaviour-cloning round 0 of the same run is); it needs --init."""
+    from navarena.train import main
+
+    root, model = episode_run[0], trained[0] / "model.pt"
+    args = [a for a in TINY if a not in ("--rounds", "2")] + ["--rounds", "1", "--init", str(model)]
+    assert main([str(root), "--out", str(tmp_path / "bc"), *args]) == 0
+    assert main([str(root), "--out", str(tmp_path / "dg"), *args, "--first-round", "dagger"]) == 0
+    bc, dg = (json.loads((tmp_path / r / "model_card.json").read_text()) for r in ("bc", "dg"))
+    assert (bc["curve"][0]["kind"], bc["curve"][0]["beta"]) == ("bc", 1.0)
+    assert (dg["curve"][0]["kind"], dg["curve"][0]["beta"]) == ("dagger", 0.5)
+    assert dg["config"]["first_round"] == "dagger"
+    za, zb = (np.load(tmp_path / r / "rounds" / "round_0.npz") for r in ("bc", "dg"))
+    assert not np.array_equal(za["prev"], zb["prev"])  # the learner drove some of round 0's steps
+    with pytest.raises(SystemExit, match="needs --init"):
+        main([str(root), "--out", str(tmp_path / "bad"), *TINY, "--first-round", "dagger"])
+
+
 def test_a_card_trained_on_real_captures_says_so():
     """A card whose training scenes include real captures (a catalog group other than the generator's)
     does not claim to be trained on generated scenes alone, and names the groups and the fine-tuning."""

@@ -335,6 +335,9 @@ def rounds_count(card: dict) -> str:
 
 def rounds_line(card: dict) -> str:
     """What the card's rounds were: behaviour cloning, then DAgger when there was more than one."""
+    if card["config"].get("first_round") == "dagger":  # a fine-tune whose rounds are all DAgger
+        return (f"{rounds_count(card)} of DAgger from the --init weights (the learner drives, the expert's action\n"
+                "  executed with probability beta^(round + 1)")
     if len(card["curve"]) == 1:
         return "one round: behaviour cloning on the expert's rollouts, no DAgger round (the expert drives"
     return ("round 0 behaviour cloning on the expert's rollouts, then DAgger (the learner drives, the expert's\n"
