@@ -559,6 +559,24 @@ def test_a_card_holds_further_tables_and_says_when_real_captures_were_measured(t
     assert "### On real captures" in md and "| tiny | distance | 160x120 cpu | overall | 30 | 0.500 |" in md
     assert "also measured on real captures" in md and "gap to real captures is not measured" not in md
     assert "#### On real captures" in docs_section({}, None, {"tiny": card})
+    # --replace: a re-measured run in place of its namesake, the table's other runs and text kept
+    other = tmp_path / "random_run" / "summary.json"
+    other.parent.mkdir()
+    other.write_text(json.dumps({**json.loads(summ.read_text()), "agent": "random", "label": "random"}))
+    add_evaluation("tiny", [summ, other], "30 episodes of two captures", "navarena eval ...", tmp_path,
+                   title="On real captures", real=True)
+    metrics["sr"] = 0.125
+    other.write_text(json.dumps({**json.loads(other.read_text()), "tasks": {"pointnav": {"overall": metrics}}}))
+    add_evaluation("tiny", [other], "random re-run.", "navarena eval --agent random", tmp_path, title="On real captures",
+                   replace=True)
+    table = cards(tmp_path, weights=False)["tiny"]["more_evaluations"][0]
+    assert table["real"] and table["conditions"].endswith(" random re-run.") and table["command"].endswith("; navarena eval --agent random")
+    assert [r["tasks"]["pointnav"]["overall"]["sr"] for r in table["runs"].values()] == [0.5, 0.125]
+    with pytest.raises(SystemExit, match="has no run missing_run"):
+        bad = tmp_path / "missing_run" / "summary.json"
+        bad.parent.mkdir()
+        bad.write_text(other.read_text())
+        add_evaluation("tiny", [bad], "", "", tmp_path, title="On real captures", replace=True)
 
 
 def test_shipped_baseline_behind_the_agent_server_acts_as_in_process(episode_run, tmp_path):

@@ -321,6 +321,13 @@ def test_batched_loop_equals_the_single_loop_for_in_process_agents(ctx, make_epi
     assert [r["episode_id"] for r in batched] == [e.episode_id for e in eps]
     for a, b in zip(single, batched):
         assert (a["sr"], a["steps"], a["spl"]) == (b["sr"], b["steps"], b["spl"]) and a["sr"] == 1
+    # random: each episode's moves depend on its id, not on its slot, the slot count or the order
+    key = lambda rows: {r["episode_id"]: (r["steps"], r["sr"], tuple(np.round(r["trajectory"].ravel(), 6))) for r in rows}  # noqa: E731
+    single = key(run_episodes(ctx, eps, make_agent("random"), EnvConfig(render=False)))
+    for slots, order in ((3, eps), (2, eps[::-1])):
+        assert key(run_episodes_batched(ctx, order, InProcessBatch(lambda: make_agent("random")), slots,
+                                        EnvConfig(render=False))) == single
+    assert len({v[2] for v in single.values()}) == len(eps)  # and the episodes' streams differ
 
 
 # ---- blocked moves (navcore.nav.dynamics) ----------------------------------------------------------

@@ -5,6 +5,7 @@ Baselines section of docs/evaluation.md, generated from one source: the card's J
                      [--sample]   # its registry name samples its moves (the decoding its figures were measured with)
     python -m benchmarks.baselines.cards evaluation NAME SUMMARY.json ...   # closed-loop figures into the card
                      [--title T [--real]]   # a further table (another setting; --real: on real captures)
+                     [--replace]   # re-measured runs in place of those of the same names, the rest kept
     python -m benchmarks.baselines.cards cost NAME                # CPU ms per step into the card
     python -m benchmarks.baselines.cards gpu-rate NAME --machine M --setting S AGENT:STEPS:SECONDS ...
                                                                   # closed-loop steps/s in the batched GPU env
@@ -68,11 +69,12 @@ def home(name: str) -> Path:
 
 
 def add_evaluation(name: str, summaries: list[Path], conditions: str, command: str, models: Path = MODELS,
-                   title: str | None = None, real: bool = False) -> None:
+                   title: str | None = None, real: bool = False, replace: bool = False) -> None:
     """Merge navarena eval summary.json files (one per agent and protocol, named by their folder)
     into the card's `evaluation`, with the conditions they were measured under and the command.
     With a title, a further table instead (`more_evaluations`, replacing one of that title): figures
-    in another setting, e.g. on real captures (`real`)."""
+    in another setting, e.g. on real captures (`real`). replace: re-measured runs in place of the
+    table's runs of the same names (the others kept), conditions and command appended to the table's."""
     f = models / name / "model_card.json"
     card = json.loads(f.read_text())
     runs = {}
@@ -81,6 +83,14 @@ def add_evaluation(name: str, summaries: list[Path], conditions: str, command: s
         summ["root"] = Path(summ["root"]).name  # no machine's paths in a shipped card
         runs[Path(s).parent.name] = summ
     entry = {"conditions": conditions, "command": command, "runs": runs}
+    if replace:
+        old = card["evaluation"] if not title else next((m for m in card.get("more_evaluations", []) if m["title"] == title), None)
+        missing = sorted(set(runs) - set((old or {}).get("runs", {})))
+        if missing:
+            raise SystemExit(f"cards evaluation --replace: {name}'s table {title or '(main)'} has no run {', '.join(missing)}")
+        real = old.get("real", real)
+        entry = {"conditions": f"{old['conditions']} {conditions}", "command": f"{old['command']}; {command}",
+                 "runs": {k: runs.get(k, v) for k, v in old["runs"].items()}}
     if title:
         more = [m for m in card.get("more_evaluations", []) if m["title"] != title]
         card["more_evaluations"] = more + [{"title": title, "real": real, **entry}]
@@ -541,6 +551,7 @@ def main(argv=None) -> int:
     e.add_argument("--command", required=True, help="the command that reproduces them")
     e.add_argument("--title", help="a further table under this title (another setting) instead of the main one")
     e.add_argument("--real", action="store_true", help="the further table's episodes are on real captures")
+    e.add_argument("--replace", action="store_true", help="re-measured runs in place of those of the same names")
     c = sub.add_parser("cost")
     c.add_argument("name")
     n = sub.add_parser("note")
@@ -561,7 +572,7 @@ def main(argv=None) -> int:
         print(ship(a.run, a.name, TRIALS, weights=False, sample=a.sample) if a.trial else
               ship(a.run, a.name, sample=a.sample))
     elif a.cmd == "evaluation":
-        add_evaluation(a.name, a.summaries, a.conditions, a.command, home(a.name), a.title, a.real)
+        add_evaluation(a.name, a.summaries, a.conditions, a.command, home(a.name), a.title, a.real, a.replace)
     elif a.cmd == "cost":
         print(cpu_cost(a.name))
     elif a.cmd == "note":

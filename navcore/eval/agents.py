@@ -16,6 +16,7 @@ import numpy as np
 from navcore.nav.actions import MOVE_FORWARD, STOP, TURN_LEFT, TURN_RIGHT
 from navcore.nav.oracle import DiscreteOracle
 from navcore.registry import Registry
+from navcore.seeds import stream_seed
 
 AGENTS = Registry("agent", {
     "random": "navcore.eval.agents:RandomAgent",
@@ -46,13 +47,16 @@ def agent_for(spec: str, seed: int = 0, timeout: float = 60.0, batch: bool = Fal
 
 
 class RandomAgent:
-    """Uniform over forward / left / right; never stops (seeded)."""
+    """Uniform over forward / left / right; never stops. Seeded per episode: each episode's moves
+    depend on the seed and its episode id only, not on which batch slot or process ran it, so
+    --batch-slots and the number of processes leave the figures as they are."""
 
     def __init__(self, seed: int = 0):
-        self.rng = np.random.default_rng(seed)
+        self.seed = int(seed)
+        self.rng = np.random.default_rng(stream_seed(self.seed, "", "random"))
 
     def reset(self, task: dict) -> None:
-        pass
+        self.rng = np.random.default_rng(stream_seed(self.seed, str(task.get("episode_id", "")), "random"))
 
     def act(self, obs: dict):
         return int(self.rng.choice([MOVE_FORWARD, TURN_LEFT, TURN_RIGHT]))
