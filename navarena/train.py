@@ -251,7 +251,8 @@ class Trainer:
         rng = np.random.default_rng(stream_seed(cfg.seed, "train-collect", str(rnd)) % 2**32)
         per_scene = np.bincount(rng.integers(0, len(self.train_scenes), cfg.episodes_per_round),
                                 minlength=len(self.train_scenes))
-        jobs = [(sid, int(k), rnd, str(model) if round_beta(self.cfg, rnd) < 1.0 else None, sha) for sid, k in zip(self.train_scenes, per_scene) if k]
+        learner = str(model) if round_beta(cfg, rnd) < 1.0 else None  # a behaviour-cloning round has none
+        jobs = [(sid, int(k), rnd, learner, sha) for sid, k in zip(self.train_scenes, per_scene) if k]
         parts, t0, n_eps, steps = [], time.perf_counter(), 0, 0
         results = self.pool.imap(_collect_job, jobs) if self.pool is not None else map(self.collector.job, jobs)
         for (sid, k, *_), part in zip(jobs, results):

@@ -96,6 +96,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("export", export.run, ("episodes", "objectnav_episodes", "asset", "goal_images"), ("export",),
           finalize=export.finalize),
     Stage("evaluate", evaluate.run, ("episodes", "objectnav_episodes"), ("evaluate", "episodes", "task", "embodiment"),
+          version="2",  # 2: the random agent seeded per episode
           finalize=evaluate.finalize, default=False, gpu=True, memory_gb=2.0, inputs=evaluate.hashed_inputs),
 )
 DEFAULT_STAGES = [s.name for s in STAGES if s.default]
