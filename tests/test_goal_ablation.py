@@ -66,3 +66,39 @@ def test_decoys_come_from_another_goal():
     assert np.allclose(decoys["e4"], [3, 0, 0.5])
     for e in kept:
         assert not np.allclose(decoys[e.episode_id][:2], e.goal_pose[:2])
+
+
+def test_an_objectnav_decoy_is_another_category_and_reaches_the_network(tmp_path):
+    """ObjectNav: one episode per category, each decoy the farthest episode of another category, and
+    the decoy agent's network reads the decoy category's embedding, not the episode's."""
+    from benchmarks.baselines.goal_ablation import decoy_episodes
+
+    def ep(i, cat, x):
+        return SimpleNamespace(episode_id=f"e{i}", category=cat, goal_pose=np.array([x, 0.0, 0.0]))
+
+    pool = [ep(0, "chair", 0), ep(1, "chair", 9), ep(2, "bed", 1), ep(3, "sofa", 6), ep(4, "bed", 4)]
+    kept = one_per_goal(pool, 5)
+    assert [e.category for e in kept] == ["chair", "bed", "sofa"]
+    decoys = {k: o.category for k, o in decoy_episodes(kept, pool).items()}
+    assert decoys == {"e0": "sofa", "e2": "chair", "e3": "chair"}  # the farthest goal pose of another category
+
+    torch.manual_seed(0)
+    net = NavNet(NavSpec(hidden=16, embed=16, task="objectnav"))
+    f = tmp_path / "o.pt"
+    save_checkpoint(f, "objectnav", net.spec.to_dict(), net.state_dict(), {})
+    rng = np.random.default_rng(0)
+    obs = {"depth": rng.uniform(0.5, 4, (48, 64)).astype(np.float32),
+           "rgb": rng.integers(0, 255, (48, 64, 3), dtype=np.uint8), "goal_category": "chair"}
+
+    def goal_seen(agent):
+        agent.reset({"episode_id": "e0"})
+        seen = []
+        step = agent.net.step
+        agent.net.step = lambda frames, g, prev, h: (seen.append(g.clone()), step(frames, g, prev, h))[1]
+        agent.act(obs)
+        return seen[0]
+
+    decoy = goal_seen(DecoyGoalAgent({"e0": "sofa"}, "goal_category", checkpoint=str(f), device="cpu"))
+    own = goal_seen(LearnedNavAgent(checkpoint=str(f), device="cpu"))
+    cats = list(net.spec.categories)
+    assert decoy.tolist() == [[float(cats.index("sofa"))]] and own.tolist() == [[float(cats.index("chair"))]]

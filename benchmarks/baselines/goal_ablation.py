@@ -1,16 +1,20 @@
-"""Does a learned ImageNav policy use its goal image? The same episodes run three ways, each
-episode's figures paired across them:
+"""Does a learned policy use its goal? The same episodes run several ways, each episode's figures
+paired across them:
 
-- `goal`: the policy as shipped (its card's decoding), the episode's own goal image;
-- `decoy`: the same, shown the goal image of another goal of the scene and split, the one farthest
-  from this episode's goal (a policy that ignores the goal image scores as with `goal`);
-- `greedy`: the episode's own goal image, moves by argmax (the decoding's share of the figure).
+- `goal`: the policy as shipped (its card's decoding), the episode's own goal;
+- `decoy`: the same, shown another goal of the scene and split in place of its own, the one whose
+  goal pose is farthest from this episode's: ImageNav's goal image rendered there, ObjectNav's goal
+  category (a policy that ignores its goal scores as with `goal`);
+- `greedy` (ImageNav, whose registry name samples): the own goal image, moves by argmax (the
+  decoding's share of the figure).
 
-CPU renderer at the policy's training size (160 x 120), distance protocol, one episode of each of the
-first --per-scene goals of each scene in the split (a scene's ImageNav episodes share goals):
+CPU renderer at the policy's training size (160 x 120), one episode of each of the first --per-scene
+goals of each scene in the split (a scene's ImageNav episodes share goal images, its ObjectNav
+episodes goal categories); ImageNav under the distance protocol, ObjectNav under explicit_stop (the
+policy must stop at an instance of its category, which it cannot find without reading it):
 
-    python -m benchmarks.baselines.goal_ablation ROOT [--split val_unseen] [--per-scene 10] [--agent imagenav_bc]
-    -> data/08_reports/goal_ablation.json
+    python -m benchmarks.baselines.goal_ablation ROOT [--task imagenav|objectnav] [--split val_unseen]
+        [--per-scene 10] [--agent NAME] [--protocol P]   -> data/08_reports/goal_ablation[_objectnav].json
 """
 from __future__ import annotations
 
@@ -24,15 +28,19 @@ import numpy as np
 
 from navcore.baselines.agent import LearnedNavAgent
 
-VARIANTS = ("goal", "decoy", "greedy")
+VARIANTS = {"imagenav": ("goal", "decoy", "greedy"), "objectnav": ("goal", "decoy")}
+GOAL_KEY = {"imagenav": "goal_image", "objectnav": "goal_category"}
+"""The observation that carries each track's goal."""
+PROTOCOL = {"imagenav": "distance", "objectnav": "explicit_stop"}
 
 
 class DecoyGoalAgent(LearnedNavAgent):
-    """A learned agent that sees `decoys[episode_id]` instead of the episode's goal image."""
+    """A learned agent that sees `decoys[episode_id]` in place of the episode's goal (the observation
+    `key`: ImageNav's goal image, ObjectNav's goal category)."""
 
-    def __init__(self, decoys: dict[str, np.ndarray], **kwargs):
+    def __init__(self, decoys: dict, key: str = "goal_image", **kwargs):
         super().__init__(**kwargs)
-        self.decoys, self.decoy = decoys, None
+        self.decoys, self.decoy, self.key = decoys, None, key
 
     def reset(self, task: dict) -> None:
         super().reset(task)
@@ -40,27 +48,42 @@ class DecoyGoalAgent(LearnedNavAgent):
 
     @classmethod
     def act_batch(cls, agents: list, observations: list[dict]) -> list[int]:
-        shown = [{**o, "goal_image": a.decoy} for a, o in zip(agents, observations)]
+        shown = [{**o, a.key: a.decoy} for a, o in zip(agents, observations)]
         return LearnedNavAgent.act_batch.__func__(cls, agents, shown)
+
+
+def goal_of(ep) -> object:
+    """What identifies an episode's goal: ObjectNav's category, else its goal pose."""
+    return ep.category if getattr(ep, "category", None) else tuple(np.round(ep.goal_pose, 3))
 
 
 def one_per_goal(episodes: list, n: int) -> list:
     """The first episode (by id) of each distinct goal, at most n: a scene's ImageNav episodes share
-    goals (about 10 starts each), and a decoy must come from another goal."""
+    goals (about 10 starts each), its ObjectNav episodes categories, and a decoy must come from
+    another goal."""
     seen, out = set(), []
     for ep in sorted(episodes, key=lambda e: e.episode_id):
-        key = tuple(np.round(ep.goal_pose, 3))
+        key = goal_of(ep)
         if key not in seen and len(out) < n:
             seen.add(key)
             out.append(ep)
     return out
 
 
+def decoy_episodes(episodes: list, pool: list) -> dict:
+    """Each episode's decoy: the episode of `pool` with another goal (goal_of) whose goal pose is
+    farthest from this episode's."""
+    out = {}
+    for ep in episodes:
+        others = [o for o in pool if goal_of(o) != goal_of(ep)]
+        far = np.linalg.norm(np.array([o.goal_pose[:2] for o in others], float) - ep.goal_pose[:2], axis=1)
+        out[ep.episode_id] = others[int(np.argmax(far))]
+    return out
+
+
 def decoy_poses(episodes: list, pool: list) -> dict[str, np.ndarray]:
-    """Each episode's decoy pose: the goal pose among `pool`'s episodes' farthest from its own goal."""
-    goals = np.array([ep.goal_pose for ep in pool], float)
-    return {ep.episode_id: goals[int(np.argmax(np.linalg.norm(goals[:, :2] - ep.goal_pose[:2], axis=1)))]
-            for ep in episodes}
+    """Each episode's decoy pose: its decoy episode's goal pose."""
+    return {k: np.asarray(o.goal_pose, float) for k, o in decoy_episodes(episodes, pool).items()}
 
 
 def decoy_images(ctx, episodes: list, pool: list, width: int, height: int) -> dict[str, np.ndarray]:
@@ -70,34 +93,38 @@ def decoy_images(ctx, episodes: list, pool: list, width: int, height: int) -> di
     return {ep.episode_id: rgb[i] for i, ep in enumerate(episodes)}
 
 
-def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: str = "imagenav_bc",
-            width: int = 160, height: int = 120, slots: int = 16) -> dict:
+def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: str | None = None,
+            width: int = 160, height: int = 120, slots: int = 16, task: str = "imagenav",
+            protocol: str | None = None) -> dict:
     from navarena.dataset import NavDataset
     from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
+    agent, protocol = agent or f"{task}_bc", protocol or PROTOCOL[task]
     ds = NavDataset(root)
-    cfg = ds.env_config(width=width, height=height, protocol="distance")
-    rows = {v: [] for v in VARIANTS}
-    seconds = {v: 0.0 for v in VARIANTS}
-    for sid in ds.scene_ids("imagenav"):
-        pool = ds.episodes(sid, "imagenav", split)
+    cfg = ds.env_config(width=width, height=height, protocol=protocol)
+    variants = VARIANTS[task]
+    rows = {v: [] for v in variants}
+    seconds = {v: 0.0 for v in variants}
+    for sid in ds.scene_ids(task):
+        pool = ds.episodes(sid, task, split)
         eps = one_per_goal(pool, per_scene)
         if len(eps) < 2:
             continue
         ctx = ds.scene_context(sid, renderer="cpu")
-        decoys = decoy_images(ctx, eps, pool, width, height)
+        decoys = decoy_images(ctx, eps, pool, width, height) if task == "imagenav" else \
+            {k: o.category for k, o in decoy_episodes(eps, pool).items()}
         makers = {"goal": lambda: LearnedNavAgent(name=agent, device="cpu"),
-                  "decoy": lambda: DecoyGoalAgent(decoys, name=agent, device="cpu"),
+                  "decoy": lambda: DecoyGoalAgent(decoys, GOAL_KEY[task], name=agent, device="cpu"),
                   "greedy": lambda: LearnedNavAgent(name=agent, device="cpu", sample=False)}
-        for v in VARIANTS:
+        for v in variants:
             t = time.perf_counter()
             for r in run_episodes_batched(ctx, eps, InProcessBatch(makers[v]), slots, cfg):
                 rows[v].append({"scene_id": sid, "episode_id": r["episode_id"], "sr": float(r["sr"]),
                                 "spl": float(r["spl"]), "steps": int(r["steps"]), "path_length": float(r["path_length"])})
             seconds[v] += time.perf_counter() - t
-        print(f"{sid}: " + ", ".join(f"{v} SR {np.mean([r['sr'] for r in rows[v]]):.3f}" for v in VARIANTS), flush=True)
-    return report(rows, seconds, dict(root=str(root), split=split, per_scene=per_scene, agent=agent,
-                                      render=f"{width}x{height} cpu", protocol="distance"))
+        print(f"{sid}: " + ", ".join(f"{v} SR {np.mean([r['sr'] for r in rows[v]]):.3f}" for v in variants), flush=True)
+    return report(rows, seconds, dict(root=str(root), task=task, split=split, per_scene=per_scene, agent=agent,
+                                      render=f"{width}x{height} cpu", protocol=protocol))
 
 
 def report(rows: dict[str, list[dict]], seconds: dict[str, float], setting: dict) -> dict:
@@ -129,11 +156,14 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("root")
     ap.add_argument("--split", default="val_unseen")
+    ap.add_argument("--task", default="imagenav", choices=list(VARIANTS))
     ap.add_argument("--per-scene", type=int, default=10)
-    ap.add_argument("--agent", default="imagenav_bc", help="a shipped ImageNav baseline")
-    ap.add_argument("--out", type=Path, default=Path("data/08_reports/goal_ablation.json"))
+    ap.add_argument("--agent", default=None, help="a shipped baseline of the track (TASK_bc)")
+    ap.add_argument("--protocol", default=None, help="distance|explicit_stop (ImageNav: distance; ObjectNav: explicit_stop)")
+    ap.add_argument("--out", type=Path, default=None, help="(data/08_reports/goal_ablation[_objectnav].json)")
     a = ap.parse_args(argv)
-    rep = measure(a.root, a.split, a.per_scene, a.agent)
+    a.out = a.out or Path("data/08_reports") / ("goal_ablation.json" if a.task == "imagenav" else f"goal_ablation_{a.task}.json")
+    rep = measure(a.root, a.split, a.per_scene, a.agent, task=a.task, protocol=a.protocol)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(rep, indent=1) + "\n")
     print(json.dumps(rep, indent=1))
