@@ -599,9 +599,16 @@ def check_score(entry: dict) -> tuple[float, float]:
 
 
 def goal_polar(x: float, y: float, yaw: float, ep) -> tuple[float, float]:
-    """The aux_goal head's target at a pose before encoding (goal_input): the episode's goal point
-    in the robot frame as (distance, bearing)."""
-    gx, gy = goal_in_robot_frame(x, y, yaw, ep.goal_xy)
+    """The aux_goal head's target at a pose before encoding (goal_input): the episode's goal point in
+    the robot frame as (distance, bearing). ObjectNav (an episode with a category): the nearest
+    point of the nearest instance's success region (its footprint box, or its centre), which moves
+    to whichever instance is nearest as the robot does."""
+    goal = ep.goal_xy
+    if getattr(ep, "category", None) and ep.regions is not None and len(ep.regions):
+        r = np.asarray(ep.regions, np.float64).reshape(-1, 4)
+        near = np.column_stack([np.clip(x, r[:, 0], r[:, 2]), np.clip(y, r[:, 1], r[:, 3])])
+        goal = near[int(np.argmin(np.hypot(near[:, 0] - x, near[:, 1] - y)))]
+    gx, gy = goal_in_robot_frame(x, y, yaw, goal)
     return math.hypot(gx, gy), math.atan2(gy, gx)
 
 
@@ -677,7 +684,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
                         metavar={int: "N", float: "X", _flag: "B"}.get(kind, "S"),
                         help=f"{text + ' ' if text else ''}({default})")
     ap.add_argument("--aux-goal", action="store_true",
-                    help="ImageNav: also train a goal-position head (off)")
+                    help="ImageNav, ObjectNav: also train a goal-position head (off)")
     ap.add_argument("--quiet", action="store_true")
     return ap
 
@@ -686,9 +693,9 @@ def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     fields_ = {k: getattr(a, k) for k in TrainConfig.__dataclass_fields__ if k != "spec"}
     if a.aux_goal:
-        if a.task != "imagenav":
-            build_parser().error("--aux-goal applies to --task imagenav")
-        fields_["spec"] = NavSpec(task="imagenav", rgbd=True, aux_goal=True)
+        if a.task == "pointnav":
+            build_parser().error("--aux-goal applies to --task imagenav and objectnav")
+        fields_["spec"] = NavSpec(task=a.task, rgbd=a.task == "imagenav", aux_goal=True)
     init = init_checkpoint(a.init, a.task) if a.init else None  # read once: its network is this run's
     if init is not None:
         fields_["spec"] = NavSpec(**init["spec"])

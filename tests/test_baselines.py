@@ -214,7 +214,7 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
     root = episode_run[0]
-    extra = ["--aux-goal"] if task == "imagenav" else []  # the goal-position head, an option
+    extra = ["--aux-goal"]  # the goal-position head, an option of both tracks
     assert main([str(root), "--out", str(tmp_path), "--task", task, *TINY, *extra]) == 0
     card = json.loads((tmp_path / "model_card.json").read_text())
     assert card["task"] == task and card["curve"][0]["loss"] < card["curve"][0]["loss_first"]
@@ -226,11 +226,17 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     assert card["config"]["view_overlap"] == 0.5  # ImageNav's found criterion, recorded
     aux = z["aux"]
     assert aux.shape == (len(z["label"]), 3)
-    if task == "imagenav":  # the goal-position head's targets: goal_input's encoding, on every step
-        assert np.isfinite(aux).all() and np.allclose(aux[:, 1] ** 2 + aux[:, 2] ** 2, 1, atol=1e-5)
-        assert ck["spec"]["aux_goal"] and {"aux_loss_first", "aux_loss"} <= set(card["curve"][0])
-    else:
-        assert np.isnan(aux).all() and "aux_loss" not in card["curve"][0]
+    # the goal-position head's targets: goal_input's encoding, on every step
+    assert np.isfinite(aux).all() and np.allclose(aux[:, 1] ** 2 + aux[:, 2] ** 2, 1, atol=1e-5)
+    assert ck["spec"]["aux_goal"] and {"aux_loss_first", "aux_loss"} <= set(card["curve"][0])
+    if task == "objectnav":  # the nearest success region: the expert stops within the success radius of one
+        from navarena.dataset import NavDataset
+
+        radius = max(e.success_radius for sid in NavDataset(root).scene_ids(task)
+                     for e in NavDataset(root).episodes(sid, task, "train"))
+        ends = np.cumsum(z["lengths"]) - 1
+        stops = ends[z["label"][ends] == 0]
+        assert len(stops) and (aux[stops, 0] <= np.log1p(radius) + 1e-6).all() and (aux[:, 0] > np.log1p(radius)).any()
     ds = NavDataset(root)
     sid = next(s for s in ds.scene_ids(task) if len(ds.episodes(s, task, None)))
     eps = ds.episodes(sid, task, None)[:2]
@@ -409,8 +415,9 @@ def test_imagenav_specs_from_before_depth_keep_their_network():
     assert torch.allclose(frames[0, :, 0, 0], torch.tensor([0.5, 0.2, 0.2, 0.2, 1.0, 1.0, 1.0]))
     with pytest.raises(ValueError, match="rgbd applies to the imagenav network"):
         NavSpec(task="pointnav", rgbd=True)
-    with pytest.raises(ValueError, match="aux_goal applies to the imagenav network"):
-        NavSpec(task="objectnav", aux_goal=True)
+    with pytest.raises(ValueError, match="aux_goal applies to the imagenav and objectnav networks"):
+        NavSpec(task="pointnav", aux_goal=True)
+    assert NavNet(NavSpec(task="objectnav", aux_goal=True)).aux.out_features == 3
 
 
 def test_the_goal_in_the_robot_frame_and_rounds_saved_before_the_aux_target(tmp_path):
@@ -427,6 +434,13 @@ def test_the_goal_in_the_robot_frame_and_rounds_saved_before_the_aux_target(tmp_
     class Ep:
         goal_xy = (0.0, 3.0)
     assert np.allclose(goal_input(goal_polar(0.0, 0.0, 0.0, Ep)), [[np.log1p(3.0), 0.0, 1.0]], atol=1e-6)  # 3 m on the left
+
+    class Obj:  # ObjectNav: the nearest point of the nearest success region, not goal_xy
+        goal_xy, category = (9.0, 9.0), "chair"
+        regions = np.array([[2.0, -1.0, 3.0, 1.0], [-1.0, -6.0, 1.0, -4.0]])  # boxes 2 m ahead, 4 m to the right
+    assert np.allclose(goal_polar(0.0, 0.0, 0.0, Obj), (2.0, 0.0))
+    assert np.allclose(goal_polar(0.0, -3.0, 0.0, Obj), (1.0, -np.pi / 2))  # now the other box is nearer
+    assert np.allclose(goal_polar(2.5, 0.5, 1.0, Obj)[0], 0.0)  # inside a footprint
     assert np.isnan(goal_input([np.nan, np.nan]).numpy()).all()  # a step without a target stays NaN
     f = tmp_path / "round_0.npz"
     old = {"obs": np.zeros((5, 4, 2, 2), np.uint8), "goal": np.zeros((5, 0), np.float32), "prev": np.zeros(5, np.int8),

@@ -52,17 +52,20 @@ class NavSpec:
     """ImageNav: depth as well as RGB (navarena train's ImageNav default; False is the first ImageNav
     network's RGB alone, and a spec written before the field). Other tracks: False."""
     aux_goal: bool = False
-    """ImageNav: a head that predicts the goal's position in the robot frame (log(1 + distance), cos,
-    sin of the bearing: goal_input's encoding) from the GRU state, trained as an auxiliary loss
-    (navarena train's ImageNav default), so that the encoder learns to compare the view with the goal
-    image; acting never reads it. Other tracks: False."""
+    """ImageNav and ObjectNav: a head that predicts the goal's position in the robot frame (log(1 +
+    distance), cos, sin of the bearing: goal_input's encoding) from the GRU state, trained as an
+    auxiliary loss (navarena train --aux-goal), so that the encoder learns to compare the view with
+    the goal image, or to find its goal category (ObjectNav's target: the nearest point of the nearest
+    instance's success region, where stopping succeeds); acting never reads it. PointNav: False (its
+    goal is an input)."""
 
     def __post_init__(self):
         if self.task not in TRACKS:
             raise ValueError(f"no baseline network for task {self.task!r} (one of {sorted(TRACKS)})")
-        for name in ("rgbd", "aux_goal"):
-            if getattr(self, name) and self.task != "imagenav":
-                raise ValueError(f"{name} applies to the imagenav network, not {self.task!r} (its inputs are fixed: TRACKS)")
+        if self.rgbd and self.task != "imagenav":
+            raise ValueError(f"rgbd applies to the imagenav network, not {self.task!r} (its inputs are fixed: TRACKS)")
+        if self.aux_goal and self.task == "pointnav":
+            raise ValueError("aux_goal applies to the imagenav and objectnav networks, not 'pointnav' (its goal is an input)")
         object.__setattr__(self, "categories", tuple(self.categories))
 
     @property
