@@ -684,7 +684,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
                         metavar={int: "N", float: "X", _flag: "B"}.get(kind, "S"),
                         help=f"{text + ' ' if text else ''}({default})")
     ap.add_argument("--aux-goal", action="store_true",
-                    help="ImageNav, ObjectNav: also train a goal-position head (off)")
+                    help="also a goal-position head (not PointNav; off)")
     ap.add_argument("--quiet", action="store_true")
     return ap
 
