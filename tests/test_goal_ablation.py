@@ -102,3 +102,20 @@ def test_an_objectnav_decoy_is_another_category_and_reaches_the_network(tmp_path
     own = goal_seen(LearnedNavAgent(checkpoint=str(f), device="cpu"))
     cats = list(net.spec.categories)
     assert decoy.tolist() == [[float(cats.index("sofa"))]] and own.tolist() == [[float(cats.index("chair"))]]
+
+
+def test_stop_sites_tell_a_stop_beside_another_category_from_a_success():
+    """benchmarks.baselines.stop_sites on hand-made ends: distances to boxes (0 inside), the false
+    stops' median distance to a goal and the shares beside another category's object."""
+    from benchmarks.baselines.stop_sites import box_distance, stop_sites
+
+    assert np.allclose(box_distance(0.0, 0.0, [[1, -1, 2, 1], [-1, -1, 1, 1], [3, 4, 5, 5]]), [1.0, 0.0, 5.0])
+    goal, sofa = np.array([[0.0, 0.0, 1.0, 1.0]]), np.array([[6.0, 0.0, 7.0, 1.0]])
+    ends = [{"sr": 1.0, "end_reason": "stop", "xy": (1.5, 0.5), "goal_boxes": goal, "other_boxes": sofa},
+            {"sr": 0.0, "end_reason": "stop", "xy": (5.5, 0.5), "goal_boxes": goal, "other_boxes": sofa},  # beside the sofa
+            {"sr": 0.0, "end_reason": "stop", "xy": (4.0, 3.0), "goal_boxes": goal, "other_boxes": sofa},
+            {"sr": 0.0, "end_reason": "budget", "xy": (6.5, 0.5), "goal_boxes": goal, "other_boxes": sofa}]
+    rep = stop_sites(ends, beside=1.0)
+    assert (rep["successes"], rep["false_stops"]) == (1, 2)
+    assert rep["false_stop_goal_distance_median_m"] == round(float(np.median([4.5, np.hypot(3.0, 2.0)])), 2)
+    assert rep["false_stops_beside_another_category_1m"] == 0.5 and rep["successes_beside_another_category_1m"] == 0.0
