@@ -41,7 +41,7 @@ import platform
 import sys
 import time
 from collections import Counter
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -204,10 +204,15 @@ class Trainer:
         self.init_sha256 = None
         if cfg.init:
             ck = init if init is not None else init_checkpoint(cfg.init, cfg.task)
-            if NavSpec(**ck["spec"]) != cfg.spec:
+            spec = NavSpec(**ck["spec"])
+            new_head = cfg.spec.aux_goal and not spec.aux_goal  # --aux-goal on a network without the head
+            if replace(spec, aux_goal=spec.aux_goal or new_head) != cfg.spec:
                 raise SystemExit(f"navarena train: --init {cfg.init}: its network ({ck['spec']}) is not this run's "
                                  f"({cfg.spec.to_dict()})")
-            self.net.load_state_dict(ck["state_dict"])
+            missing, unexpected = self.net.load_state_dict(ck["state_dict"], strict=False)
+            if unexpected or any(not k.startswith("aux.") for k in missing) or (missing and not new_head):
+                raise SystemExit(f"navarena train: --init {cfg.init}: its weights do not fit the network "
+                                 f"(missing {missing}, unexpected {unexpected})")
             self.init_sha256 = ck["sha256"]
         if cfg.first_round not in ("bc", "dagger"):
             raise SystemExit(f"navarena train: --first-round {cfg.first_round}: bc or dagger")
@@ -697,8 +702,8 @@ def main(argv: list[str] | None = None) -> int:
             build_parser().error("--aux-goal applies to --task imagenav and objectnav")
         fields_["spec"] = NavSpec(task=a.task, rgbd=a.task == "imagenav", aux_goal=True)
     init = init_checkpoint(a.init, a.task) if a.init else None  # read once: its network is this run's
-    if init is not None:
-        fields_["spec"] = NavSpec(**init["spec"])
+    if init is not None:  # its network, plus the goal-position head when asked for (trained from scratch)
+        fields_["spec"] = NavSpec(**{**init["spec"], **({"aux_goal": True} if a.aux_goal else {})})
     cfg = TrainConfig(**fields_)
     res = Trainer(a.root, a.out, cfg, quiet=a.quiet, init=init).run(resume=a.resume)
     print(f"wrote {res['model']} (sha256 {res['sha256'][:12]}...)")

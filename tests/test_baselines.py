@@ -72,6 +72,33 @@ def test_init_fine_tunes_from_a_checkpoint(trained, episode_run, tmp_path, monke
             main([str(root), "--out", str(tmp_path / "bad"), *args, *bad, "--init", init])
 
 
+def test_init_with_aux_goal_adds_the_head_to_the_checkpoints_network(episode_run, tmp_path):
+    """--init of a network without the goal-position head plus --aux-goal: every weight of the
+    checkpoint is loaded and the head is new; a checkpoint whose network differs otherwise is refused."""
+    from navarena.train import TrainConfig, Trainer, init_checkpoint, main
+
+    torch.manual_seed(1)
+    plain = NavNet(NavSpec(task="objectnav"))
+    f = tmp_path / "plain.pt"
+    save_checkpoint(f, "objectnav", plain.spec.to_dict(), plain.state_dict(), {})
+    cfg = TrainConfig(task="objectnav", init=str(f), spec=NavSpec(task="objectnav", aux_goal=True), renderer="cpu")
+    tr = Trainer(episode_run[0], tmp_path / "run", cfg, quiet=True, init=init_checkpoint(str(f), "objectnav"))
+    got = tr.net.state_dict()
+    assert all(torch.equal(got[k], v) for k, v in plain.state_dict().items()) and "aux.weight" in got
+    args = [str(episode_run[0]), "--out", str(tmp_path / "tuned"), "--task", "objectnav", *TINY, "--rounds", "1",
+            "--init", str(f), "--aux-goal"]
+    assert main(args) == 0
+    card = json.loads((tmp_path / "tuned" / "model_card.json").read_text())
+    assert card["config"]["spec"]["aux_goal"] and card["config"]["init_sha256"] == sha256_of(f)
+    assert "aux_loss" in card["curve"][0]
+    other = NavNet(NavSpec(task="objectnav", hidden=32))
+    g = tmp_path / "other.pt"
+    save_checkpoint(g, "objectnav", other.spec.to_dict(), other.state_dict(), {})
+    bad = TrainConfig(task="objectnav", init=str(g), spec=NavSpec(task="objectnav", aux_goal=True), renderer="cpu")
+    with pytest.raises(SystemExit, match="is not this run's"):
+        Trainer(episode_run[0], tmp_path / "bad", bad, quiet=True, init=init_checkpoint(str(g), "objectnav"))
+
+
 def test_a_fine_tune_can_begin_with_a_dagger_round(trained, episode_run, tmp_path):
     """--first-round dagger: round 0 is a DAgger round driven by the --init network (beta^1), so its
     rollouts are not the expert's (the behaviour-cloning round 0 of the same run is); it needs --init."""
