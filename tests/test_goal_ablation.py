@@ -107,9 +107,11 @@ def test_an_objectnav_decoy_is_another_category_and_reaches_the_network(tmp_path
 def test_stop_sites_tell_a_stop_beside_another_category_from_a_success():
     """benchmarks.baselines.stop_sites on hand-made ends: distances to boxes (0 inside), the false
     stops' median distance to a goal and the shares beside another category's object."""
-    from benchmarks.baselines.stop_sites import box_distance, stop_sites
+    from benchmarks.baselines.stop_sites import stop_sites
+    from navcore.nav.poses import region_distance  # the distance stop_sites measures
 
-    assert np.allclose(box_distance(0.0, 0.0, [[1, -1, 2, 1], [-1, -1, 1, 1], [3, 4, 5, 5]]), [1.0, 0.0, 5.0])
+    boxes = [[1, -1, 2, 1], [-1, -1, 1, 1], [3, 4, 5, 5]]
+    assert np.allclose([region_distance((0.0, 0.0), [b])[0] for b in boxes], [1.0, 0.0, 5.0])
     goal, sofa = np.array([[0.0, 0.0, 1.0, 1.0]]), np.array([[6.0, 0.0, 7.0, 1.0]])
     ends = [{"sr": 1.0, "end_reason": "stop", "xy": (1.5, 0.5), "goal_boxes": goal, "other_boxes": sofa},
             {"sr": 0.0, "end_reason": "stop", "xy": (5.5, 0.5), "goal_boxes": goal, "other_boxes": sofa},  # beside the sofa

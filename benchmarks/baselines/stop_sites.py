@@ -15,23 +15,18 @@ import sys
 
 import numpy as np
 
-
-def box_distance(x: float, y: float, boxes: np.ndarray) -> np.ndarray:
-    """Planar distance from (x, y) to each box [k, 4] (min_x, min_y, max_x, max_y); 0 inside."""
-    b = np.asarray(boxes, np.float64).reshape(-1, 4)
-    return np.hypot(np.maximum.reduce([b[:, 0] - x, np.zeros(len(b)), x - b[:, 2]]),
-                    np.maximum.reduce([b[:, 1] - y, np.zeros(len(b)), y - b[:, 3]]))
+from navcore.nav.poses import region_distance
 
 
 def stop_sites(ends: list[dict], beside: float = 1.0) -> dict:
     """ends: per episode {sr, end_reason, xy (its last position), goal_boxes [k, 4] (its goal
     instances' footprints), other_boxes [m, 4] (the scene's objects of other categories)}."""
-    def near_other(e):
-        return bool(len(e["other_boxes"]) and box_distance(*e["xy"], e["other_boxes"]).min() <= beside)
+    def near_other(e):  # region_distance: to the nearest box (min_x, min_y, max_x, max_y), 0 inside; inf for none
+        return bool(region_distance(e["xy"], e["other_boxes"])[0] <= beside)
 
     false = [e for e in ends if e["sr"] == 0 and e["end_reason"] == "stop"]
     good = [e for e in ends if e["sr"] > 0]
-    dist = [float(box_distance(*e["xy"], e["goal_boxes"]).min()) for e in false if len(e["goal_boxes"])]
+    dist = [float(region_distance(e["xy"], e["goal_boxes"])[0]) for e in false if len(e["goal_boxes"])]
     share = (lambda es: round(float(np.mean([near_other(e) for e in es])), 3) if es else None)
     return {"episodes": len(ends), "successes": len(good), "false_stops": len(false),
             "false_stop_goal_distance_median_m": round(float(np.median(dist)), 2) if dist else None,
