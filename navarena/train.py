@@ -381,8 +381,8 @@ class Trainer:
             loss_first, loss, aux = self.fit(data, rnd)
             t_fit = time.perf_counter() - t1
             sha = self.save_model(final=False)
-            beta = round_beta(self.cfg, rnd)
-            entry = {"round": rnd, "kind": "bc" if beta >= 1.0 else "dagger", "beta": beta,
+            entry = {"round": rnd, "kind": "bc" if rnd == 0 and cfg.first_round == "bc" else "dagger",
+                     "beta": round_beta(cfg, rnd),
                      "new_frames": len(new), "frames": len(data), "episodes": int(len(data.lengths)),
                      "loss_first": round(loss_first, 4), "loss": round(loss, 4), "collect_s": round(t_collect, 1), "fit_s": round(t_fit, 1),
                      "collect_frames_per_s": round(len(new) / t_collect, 1)}
