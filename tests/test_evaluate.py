@@ -273,7 +273,7 @@ def test_evaluate_stage_writes_results_reports_plots_and_video(episode_run, make
     from navcore.io.progress_log import read_log
 
     for name, n in (("oracle_explicit_stop", 6), ("random_distance", len(rnd))):  # sequential and batched loops
-        logs = [read_log(p) for p in (root / "07_eval" / name / "_progress").glob("*.jsonl")]
+        logs = [read_log(p) for p in (root / "_progress" / "eval" / name).glob("*.jsonl")]
         assert sum(h["total"] for h, _ in logs) == sum(len(items) for _, items in logs) == n
     tables = (root / "07_eval" / "tables.md").read_text()
     assert "random_distance" in tables and "oracle_explicit_stop" in tables and "Table 7" in tables

@@ -774,6 +774,24 @@ def test_compare_data_normalises_roots_and_reports_every_difference(tmp_path):
     assert rep["differing"] == ["01_scenes/s/ingest.json"] and rep["only_second"] == ["extra.bin"]
 
 
+def test_every_progress_log_and_underscore_folder_of_the_layout_is_bookkeeping_the_byte_comparison_skips():
+    """Progress logs hold the writer's pid and a rerun rewrites them: they live in a bookkeeping folder
+    ({root}/_progress) beside _markers, never inside a stage's outputs, where they broke the fault suite's
+    byte-for-byte comparison of a disturbed run with an undisturbed one."""
+    import yaml
+
+    from benchmarks.dataset.compare_data import BOOKKEEPING
+    from navcore.io.catalog import LAYOUT_FILE
+
+    layout = yaml.safe_load(LAYOUT_FILE.read_text())
+    paths = {k: (v["path"] if isinstance(v, dict) else v) for k, v in layout.items()}
+    top = {k: p.split("/")[1] for k, p in paths.items()}
+    progress = [k for k in paths if k.endswith("_progress")]
+    assert progress and all(top[k] in BOOKKEEPING for k in progress), {k: paths[k] for k in progress}
+    assert all(t in BOOKKEEPING for t in top.values() if t.startswith("_")), top
+    assert not [p for k, p in paths.items() if top[k] not in BOOKKEEPING and "/_" in p], "a bookkeeping folder inside outputs"
+
+
 def test_storage_measure_counts_a_hard_link_to_the_source_once_and_names_stale_ones(tmp_path):
     import os
 

@@ -302,7 +302,8 @@ def test_instances_that_stay_on_the_floor_are_dropped_when_asked():
 
 
 def test_semantics_logs_its_views_and_the_console_counts_them(episode_run, tmp_path):
-    """The semantics stage writes views done / total while it runs (04_semantics/_progress), and the
+    """The semantics stage writes views done / total while it runs (_progress/semantics: run bookkeeping
+    beside _markers, outside the stage's outputs, since it holds the writer's pid), and the
     run console's watcher turns such a log into views done, total and views/s."""
     from rich.console import Console
     from rich.progress import Progress
@@ -311,8 +312,8 @@ def test_semantics_logs_its_views_and_the_console_counts_them(episode_run, tmp_p
     from pipeline.episode_progress import EpisodeWatcher
 
     root = episode_run[0]
-    logs = sorted((root / "04_semantics" / "_progress").glob("*.jsonl"))
-    assert logs
+    logs = sorted((root / "_progress" / "semantics").glob("*.jsonl"))
+    assert logs and not list((root / "04_semantics").rglob("*.jsonl"))
     for log in logs:
         header, items = read_log(log)
         assert header["total"] > 0 and header["segmenter"] and sum(it["views"] for it in items) == header["total"]

@@ -2,7 +2,7 @@
 
     python -m benchmarks.dataset.compare_data /tmp/before /tmp/after
 
-The pipeline's own bookkeeping (_markers, _runs, _hydra, _submit) is left out; each root's absolute path
+The pipeline's own bookkeeping (_markers, _runs, _hydra, _submit, _locks, _progress) is left out; each root's absolute path
 (recorded where a stage names its source file) is normalised, and so are the stage durations that
 asset manifests copy from the markers. Time stamps must be pinned with SOURCE_DATE_EPOCH in both
 runs. Prints a JSON report; exits 1 when any file differs or exists on one side only.
@@ -16,7 +16,7 @@ import re
 import sys
 from pathlib import Path
 
-BOOKKEEPING = ("_markers", "_runs", "_hydra", "_submit", "_locks")
+BOOKKEEPING = ("_markers", "_runs", "_hydra", "_submit", "_locks", "_progress")
 
 
 def digests(root: Path) -> dict[str, str]:
