@@ -4,6 +4,7 @@ in-process and behind the agent server, better than depth_reactive), the model c
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -129,6 +130,18 @@ def test_a_card_trained_on_real_captures_says_so():
     assert "Fine-tuned from `pointnav_bc`" in line and "real captures" in real_note(card)
     plain = {"licence": "Apache-2.0", "config": {}, "data": {"groups": {"synthetic": 3}}}
     assert "no third-party data" in licence_line(plain) and "generated scenes only" in real_note(plain)
+
+
+def test_a_card_without_held_out_checks_says_its_file_is_the_last_round():
+    """A run with --val-episodes 0 ran no check: its card names no check split and does not call the
+    kept round the best checked one."""
+    from benchmarks.baselines.cards import kept
+
+    curve = [{"round": 0}, {"round": 1}]
+    assert kept({"config": {"keep": "best"}, "curve": curve, "selected_round": 1}) == \
+        " The file holds round 1's weights (the last round: no held-out check ran)."
+    checked = [{"round": 0, "val_sr": 0.5, "val_spl": 0.4}, {"round": 1, "val_sr": 0.2, "val_spl": 0.1}]
+    assert "(the best held-out check)" in kept({"config": {"keep": "best"}, "curve": checked, "selected_round": 0})
 
 
 @pytest.mark.parametrize("keep", ["best", "last"])
@@ -341,7 +354,7 @@ def test_a_sampling_agent_draws_moves_by_the_policy_and_stops_only_when_stop_lea
 
     def agents(sample, seed=7, **kw):
         a = LearnedNavAgent(checkpoint=str(f), device="cpu", sample=sample, seed=seed, **kw)
-        a.net.step = lambda frames, goal, prev, h: (logits.expand(len(prev), 4), h)
+        a.net.step = lambda frames, goal, prev, h, aux=False: (logits.expand(len(prev), 4), h)
         a.reset({"episode_id": 3})
         return a
 
@@ -366,6 +379,40 @@ def test_a_sampling_agent_draws_moves_by_the_policy_and_stops_only_when_stop_lea
         agents(False, stop_threshold=1.5)
     with pytest.raises(ValueError, match="sample='yes'"):
         LearnedNavAgent(checkpoint=str(f), device="cpu", sample="yes")
+
+
+def test_the_stop_gate_vetoes_a_stop_where_the_goal_head_puts_the_goal_far(tmp_path):
+    """stop_gate (metres): an aux_goal network's STOP is taken only where its goal-position head puts the
+    goal within the gate, else its most likely move; a network without the head is refused."""
+    from navcore.baselines.agent import LearnedNavAgent
+
+    net = NavNet(NavSpec(task="objectnav", hidden=16, embed=16, aux_goal=True))
+    with torch.no_grad():
+        net.head.weight.zero_()
+        net.head.bias.copy_(torch.tensor([3.0, 1.0, 0.5, 0.0]))  # STOP leads, then FORWARD
+        net.aux.weight.zero_()
+
+    def agent(distance_m, **kw):
+        with torch.no_grad():
+            net.aux.bias.copy_(torch.tensor([math.log1p(distance_m), 1.0, 0.0]))  # goal_input's encoding
+        f = tmp_path / f"o{distance_m}.pt"
+        save_checkpoint(f, "objectnav", net.spec.to_dict(), net.state_dict(), {})
+        a = LearnedNavAgent(checkpoint=str(f), device="cpu", **kw)
+        a.reset({"episode_id": 1})
+        return a
+
+    obs = {"depth": np.full((48, 64), 2.0, np.float32), "rgb": np.zeros((48, 64, 3), np.uint8), "goal_category": "chair"}
+    assert agent(4.0).act(obs) == 0  # no gate: the argmax, STOP
+    assert agent(4.0, stop_gate=1.0).act(obs) == 1  # the head says 4 m: FORWARD instead
+    assert agent(0.5, stop_gate=1.0).act(obs) == 0  # within the gate: STOP
+    assert agent(4.0, stop_gate=1.0, sample=True).act(obs) != 0  # a sampled move, never STOP
+    plain = NavNet(NavSpec(task="objectnav", hidden=16, embed=16))
+    f = tmp_path / "plain.pt"
+    save_checkpoint(f, "objectnav", plain.spec.to_dict(), plain.state_dict(), {})
+    with pytest.raises(ValueError, match="goal-position head"):
+        LearnedNavAgent(checkpoint=str(f), device="cpu", stop_gate=1.0)
+    with pytest.raises(ValueError, match="stop_gate=-1"):
+        agent(1.0, stop_gate=-1)
 
 
 def test_checkpoint_round_trip_and_refusals(tmp_path):

@@ -314,8 +314,9 @@ def kept(card: dict) -> str:
     """Which round's weights the file holds (cards from before `keep` existed: the last)."""
     if "selected_round" not in card:
         return ""
-    best = card["config"].get("keep", "last") == "best"
-    how = "the best held-out check" if best else "the last round"
+    checked = any(e.get("val_sr") is not None for e in card["curve"])
+    best = card["config"].get("keep", "last") == "best" and checked
+    how = "the best held-out check" if best else "the last round" if checked else "the last round: no held-out check ran"
     if best and any(e.get("val_stop_sr") is not None for e in card["curve"]):
         from navarena.train import check_score
 
@@ -372,13 +373,14 @@ def network(spec: dict) -> str:
         seen = (f"depth and RGB ({size}, depth clipped at {spec['max_depth']} m)" if spec.get("rgbd")
                 else f"RGB ({size})")
         inputs = f"{seen} and the goal image stacked as channels into one encoder (early fusion, as GNM does)"
-        if spec.get("aux_goal"):
-            inputs += (" (an auxiliary head, trained and not used to act, predicts the goal's position in the "
-                       "robot frame from the GRU state)")
     else:
         cats = spec.get("categories", ())
         inputs = (f"depth and RGB ({size}, depth clipped at {spec['max_depth']} m), the goal category as a learned "
                   f"embedding ({len(cats)} categories: {', '.join(cats)})")
+    if spec.get("aux_goal"):
+        goal = "the goal's position" if task == "imagenav" else "the nearest point of the nearest goal instance"
+        inputs += (f" (an auxiliary head, trained beside the actions and not used to act unless a stop gate asks it, "
+                   f"predicts {goal} in the robot frame from the GRU state)")
     return (f"{inputs} and the previous action; a 4-layer CNN, a GRU of {spec['hidden']} over the "
             "episode, logits of STOP / FORWARD / LEFT / RIGHT.")
 
@@ -421,7 +423,8 @@ def real_note(card: dict) -> str:
 def card_markdown(card: dict, shipped: bool = True) -> str:
     """navcore/models/<name>/model_card.md (or a trial's), from its JSON."""
     c, ev = card["config"], card.get("evaluation") or {}
-    val = next((e.get("val_split") for e in card["curve"] if e.get("val_split")), "none")
+    val = next((e.get("val_split") for e in card["curve"] if e.get("val_split")), None)
+    checks = f"closed-loop check after each round on `{val}`" if val else "no closed-loop check between rounds"
     file_line = (f"`{card['file']}`, sha256 `{card['sha256']}` (checked on load)." if shipped else
                  f"not shipped (the run's `{card['file']}` had sha256 `{card['sha256']}`).")
     status = ("It is the interim baseline of its track (see docs/evaluation.md, \"Baselines\", for what is still "
@@ -439,7 +442,7 @@ Generated from model_card.json by `python -m benchmarks.baselines.cards docs`; d
 - **Decoding:** {decoding(card)}
 - **Data:** data root `{card['data']['root']}`: {len(card['data']['train_scenes'])} training scenes{groups(card)} (split
   `{card['data']['split']}`), {card['frames']:,} labelled frames over {rounds_count(card)}, rendered at
-  {c['width']} x {c['height']}; closed-loop check after each round on `{val}`.
+  {c['width']} x {c['height']}; {checks}.
 - **Training:** {rounds_line(card)}, every visited state labelled by {expert(card)});
   {c['episodes_per_round']} episodes and {c['grad_steps']} gradient steps of {c['batch_episodes']} whole episodes a
   round, AdamW lr {c['lr']}, seed {card['seed']}.{kept(card)} On {card['trained_on']} ({card.get('workers', 0)} collection

@@ -14,7 +14,7 @@ episodes goal categories); ImageNav under the distance protocol, ObjectNav under
 policy must stop at an instance of its category, which it cannot find without reading it):
 
     python -m benchmarks.baselines.goal_ablation ROOT [--task imagenav|objectnav] [--split val_unseen]
-        [--per-scene 10] [--agent NAME] [--protocol P]   -> data/08_reports/goal_ablation[_objectnav].json
+        [--per-scene 10] [--agent NAME | --checkpoint RUN/model.pt] [--protocol P]   -> data/08_reports/goal_ablation[_objectnav].json
 """
 from __future__ import annotations
 
@@ -95,11 +95,13 @@ def decoy_images(ctx, episodes: list, pool: list, width: int, height: int) -> di
 
 def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: str | None = None,
             width: int = 160, height: int = 120, slots: int = 16, task: str = "imagenav",
-            protocol: str | None = None) -> dict:
+            protocol: str | None = None, checkpoint: str | None = None) -> dict:
     from navarena.dataset import NavDataset
     from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
     agent, protocol = agent or f"{task}_bc", protocol or PROTOCOL[task]
+    # a shipped name, or a run's model.pt (a trial), which decodes greedily as navarena eval's --agent learned
+    net = {"checkpoint": checkpoint} if checkpoint else {"name": agent}
     ds = NavDataset(root)
     cfg = ds.env_config(width=width, height=height, protocol=protocol)
     variants = VARIANTS[task]
@@ -113,9 +115,9 @@ def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: st
         ctx = ds.scene_context(sid, renderer="cpu")
         decoys = decoy_images(ctx, eps, pool, width, height) if task == "imagenav" else \
             {k: o.category for k, o in decoy_episodes(eps, pool).items()}
-        makers = {"goal": lambda: LearnedNavAgent(name=agent, device="cpu"),
-                  "decoy": lambda: DecoyGoalAgent(decoys, GOAL_KEY[task], name=agent, device="cpu"),
-                  "greedy": lambda: LearnedNavAgent(name=agent, device="cpu", sample=False)}
+        makers = {"goal": lambda: LearnedNavAgent(**net, device="cpu"),
+                  "decoy": lambda: DecoyGoalAgent(decoys, GOAL_KEY[task], **net, device="cpu"),
+                  "greedy": lambda: LearnedNavAgent(**net, device="cpu", sample=False)}
         for v in variants:
             t = time.perf_counter()
             for r in run_episodes_batched(ctx, eps, InProcessBatch(makers[v]), slots, cfg):
@@ -123,7 +125,7 @@ def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: st
                                 "spl": float(r["spl"]), "steps": int(r["steps"]), "path_length": float(r["path_length"])})
             seconds[v] += time.perf_counter() - t
         print(f"{sid}: " + ", ".join(f"{v} SR {np.mean([r['sr'] for r in rows[v]]):.3f}" for v in variants), flush=True)
-    return report(rows, seconds, dict(root=str(root), task=task, split=split, per_scene=per_scene, agent=agent,
+    return report(rows, seconds, dict(root=str(root), task=task, split=split, per_scene=per_scene, agent=checkpoint or agent,
                                       render=f"{width}x{height} cpu", protocol=protocol))
 
 
@@ -159,11 +161,12 @@ def main(argv=None) -> int:
     ap.add_argument("--task", default="imagenav", choices=list(VARIANTS))
     ap.add_argument("--per-scene", type=int, default=10)
     ap.add_argument("--agent", default=None, help="a shipped baseline of the track (TASK_bc)")
+    ap.add_argument("--checkpoint", default=None, help="a run's model.pt in place of --agent (a trial, greedy)")
     ap.add_argument("--protocol", default=None, help="distance|explicit_stop (ImageNav: distance; ObjectNav: explicit_stop)")
     ap.add_argument("--out", type=Path, default=None, help="(data/08_reports/goal_ablation[_objectnav].json)")
     a = ap.parse_args(argv)
     a.out = a.out or Path("data/08_reports") / ("goal_ablation.json" if a.task == "imagenav" else f"goal_ablation_{a.task}.json")
-    rep = measure(a.root, a.split, a.per_scene, a.agent, task=a.task, protocol=a.protocol)
+    rep = measure(a.root, a.split, a.per_scene, a.agent, task=a.task, protocol=a.protocol, checkpoint=a.checkpoint)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text(json.dumps(rep, indent=1) + "\n")
     print(json.dumps(rep, indent=1))

@@ -9,7 +9,9 @@ The policy acts greedily (argmax) by default. With `sample=True` its move is dra
 network's distribution over the three moves (seeded per episode: the same seed and episode give
 the same actions), and it stops only when STOP is the most likely action, so a sampled STOP never
 ends an explicit_stop episode. `stop_threshold` sets when it stops instead: when the policy gives
-STOP at least that probability. Sampling breaks the loops a greedy recurrent policy falls into when
+STOP at least that probability. `stop_gate` (a network with the goal-position head, navarena train
+--aux-goal) vetoes a STOP where the head puts the goal farther than that many metres: the policy
+then takes its most likely move. Sampling breaks the loops a greedy recurrent policy falls into when
 it is unsure (turning in place). A shipped baseline's card names the decoding its figures were
 measured with (`decoding`; imagenav_bc samples, the others are greedy), and its registry name uses it
 unless `sample` is given. Agents of one checkpoint and device share one network; the batched
@@ -83,13 +85,15 @@ class LearnedNavAgent:
             None: as the shipped baseline's card says (`decoding`), greedy for a checkpoint file.
         stop_threshold: STOP when the policy gives it at least this probability (None: when it is the
             argmax); else the most likely (or a sampled) move. Above 0.5 it stops less eagerly.
+        stop_gate: metres: a STOP is taken only where the network's goal-position head (aux_goal) puts
+            the goal at most this far (None: no gate; a network without the head is refused).
         seed: the sampling stream's seed (the evaluator passes one per scene; each episode's stream is
             derived from it and the episode id).
     """
 
     def __init__(self, checkpoint: str | None = None, name: str = "pointnav_bc", device: str | None = "auto",
                  sha256: str | None = None, sample: bool | None = None, stop_threshold: float | None = None, seed: int = 0,
-                 **_):
+                 stop_gate: float | None = None, **_):
         card = None if checkpoint else shipped_card(name)
         path, digest = (Path(checkpoint), sha256) if card is None else (MODELS / name / card["file"], card["sha256"])
         if sample is None:  # a shipped name decodes as its figures were measured; a file greedily
@@ -101,6 +105,12 @@ class LearnedNavAgent:
         self.device = default_device(device)
         self.net = _load_net(str(path), digest, self.device)
         self.task = self.net.spec.task
+        if stop_gate is not None and not (isinstance(stop_gate, (int, float)) and stop_gate > 0):
+            raise ValueError(f"stop_gate={stop_gate!r}: metres (> 0), or none")
+        if stop_gate is not None and not self.net.spec.aux_goal:
+            raise ValueError(f"stop_gate needs a network with the goal-position head (navarena train --aux-goal); "
+                             f"{path} has none")
+        self.stop_gate = None if stop_gate is None else float(stop_gate)
         self.sample, self.seed = sample, int(seed)
         self.stop_threshold = None if stop_threshold is None else float(stop_threshold)
         self.rng = np.random.default_rng(stream_seed(self.seed, "", "learned-sample")) if sample else None
@@ -123,7 +133,12 @@ class LearnedNavAgent:
         frames, goal = observation_input(observations, net.spec, dev)
         prev = torch.tensor([a.prev for a in agents], device=dev)
         h = torch.cat([a.h if a.h is not None else net.initial_state(1, dev) for a in agents], 1)
-        logits, h = net.step(frames, goal, prev, h)
+        gated = any(a.stop_gate is not None for a in agents)
+        logits, h, *aux = net.step(frames, goal, prev, h, aux=gated)
+        if gated:  # the head's distance (log1p-encoded, goal_input) beyond the gate: STOP is not an option
+            far = torch.expm1(aux[0][:, 0]).cpu().numpy() > np.array([np.inf if a.stop_gate is None else a.stop_gate
+                                                                        for a in agents])
+            logits[torch.as_tensor(far, device=logits.device), STOP] = -torch.inf
         acts = logits.argmax(1).tolist()
         if any(a.sample or a.stop_threshold is not None for a in agents):
             probs = torch.softmax(logits.double(), 1).cpu().numpy()

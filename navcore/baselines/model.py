@@ -216,11 +216,12 @@ class NavNet(nn.Module):
         out, h = self.gru(x, h0)
         return (self.head(out), h, self.aux(out)) if aux else (self.head(out), h)
 
-    def step(self, frames, goal, prev, h):
-        """One step of B episodes: [B, C, h, w], [B, goal_size], [B], state [1, B, hidden] or None."""
+    def step(self, frames, goal, prev, h, aux: bool = False):
+        """One step of B episodes: [B, C, h, w], [B, goal_size], [B], state [1, B, hidden] or None ->
+        logits [B, 4] and the state; with aux (an aux_goal network) also the goal predictions [B, 3]."""
         x = self.features(frames, goal, prev)[None]
         out, h = self.gru(x, h)
-        return self.head(out[0]), h
+        return (self.head(out[0]), h, self.aux(out[0])) if aux else (self.head(out[0]), h)
 
     def initial_state(self, batch: int, device=None) -> torch.Tensor:
         return torch.zeros(1, batch, self.spec.hidden, device=device)
