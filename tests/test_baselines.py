@@ -354,7 +354,7 @@ def test_a_sampling_agent_draws_moves_by_the_policy_and_stops_only_when_stop_lea
 
     def agents(sample, seed=7, **kw):
         a = LearnedNavAgent(checkpoint=str(f), device="cpu", sample=sample, seed=seed, **kw)
-        a.net.step = lambda frames, goal, prev, h, aux=False: (logits.expand(len(prev), 4), h)
+        a.net.step = lambda frames, goal, prev, h: (logits.expand(len(prev), 4), h)
         a.reset({"episode_id": 3})
         return a
 

@@ -133,12 +133,14 @@ class LearnedNavAgent:
         frames, goal = observation_input(observations, net.spec, dev)
         prev = torch.tensor([a.prev for a in agents], device=dev)
         h = torch.cat([a.h if a.h is not None else net.initial_state(1, dev) for a in agents], 1)
-        gated = any(a.stop_gate is not None for a in agents)
-        logits, h, *aux = net.step(frames, goal, prev, h, aux=gated)
-        if gated:  # the head's distance (log1p-encoded, goal_input) beyond the gate: STOP is not an option
-            far = torch.expm1(aux[0][:, 0]).cpu().numpy() > np.array([np.inf if a.stop_gate is None else a.stop_gate
-                                                                        for a in agents])
+        if any(a.stop_gate is not None for a in agents):
+            logits, h, aux = net.step(frames, goal, prev, h, aux=True)
+            # the head's distance (log1p-encoded, goal_input) beyond the gate: STOP is not an option
+            far = torch.expm1(aux[:, 0]).cpu().numpy() > np.array([np.inf if a.stop_gate is None else a.stop_gate
+                                                                   for a in agents])
             logits[torch.as_tensor(far, device=logits.device), STOP] = -torch.inf
+        else:
+            logits, h = net.step(frames, goal, prev, h)
         acts = logits.argmax(1).tolist()
         if any(a.sample or a.stop_threshold is not None for a in agents):
             probs = torch.softmax(logits.double(), 1).cpu().numpy()
