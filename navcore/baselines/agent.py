@@ -14,8 +14,13 @@ STOP at least that probability. `stop_gate` (a network with the goal-position he
 then takes its most likely move. Sampling breaks the loops a greedy recurrent policy falls into when
 it is unsure (turning in place). A shipped baseline's card names the decoding its figures were
 measured with (`decoding`; imagenav_bc samples, the others are greedy), and its registry name uses it
-unless `sample` is given. Agents of one checkpoint and device share one network; the batched
-evaluator steps all of its slots in one forward pass (act_batch).
+unless `sample` is given. `verifier` (ObjectNav: a stop verifier of navarena train-stop,
+navcore.baselines.verifier) checks each frame for the goal category: a STOP it gives less than
+`stop_check` is vetoed (the policy's most likely move instead), and where it gives at least
+`stop_force` the agent stops. A shipped card may name its verifier (`stop_verifier`), which its
+registry name then uses unless `verifier` is given ("none": the policy alone). Agents of one
+checkpoint and device share one network; the batched evaluator steps all of its slots in one
+forward pass (act_batch).
 """
 from __future__ import annotations
 
@@ -29,6 +34,7 @@ import torch
 
 from navcore.baselines.checkpoint import CheckpointError, load_checkpoint
 from navcore.baselines.model import NO_ACTION, NavNet, NavSpec, observation_input
+from navcore.baselines.verifier import category_index, load_verifier, stop_input
 from navcore.nav.actions import STOP
 from navcore.seeds import stream_seed
 
@@ -89,11 +95,14 @@ class LearnedNavAgent:
             the goal at most this far (None: no gate; a network without the head is refused).
         seed: the sampling stream's seed (the evaluator passes one per scene; each episode's stream is
             derived from it and the episode id).
+        verifier: an ObjectNav stop verifier: its stop.pt, or "none" (None: the shipped card's, if it
+            names one). stop_check / stop_force: its thresholds (None: the card's; else 0.5 and never).
     """
 
     def __init__(self, checkpoint: str | None = None, name: str = "pointnav_bc", device: str | None = "auto",
                  sha256: str | None = None, sample: bool | None = None, stop_threshold: float | None = None, seed: int = 0,
-                 stop_gate: float | None = None, **_):
+                 stop_gate: float | None = None, verifier: str | None = None, stop_check: float | None = None,
+                 stop_force: float | None = None, **_):
         card = None if checkpoint else shipped_card(name)
         path, digest = (Path(checkpoint), sha256) if card is None else (MODELS / name / card["file"], card["sha256"])
         if sample is None:  # a shipped name decodes as its figures were measured; a file greedily
@@ -116,6 +125,29 @@ class LearnedNavAgent:
         self.rng = np.random.default_rng(stream_seed(self.seed, "", "learned-sample")) if sample else None
         self.h = None
         self.prev = NO_ACTION
+        self._verifier(card, name, verifier, stop_check, stop_force)
+
+    def _verifier(self, card, name, verifier, stop_check, stop_force) -> None:
+        shipped_v = (card or {}).get("stop_verifier") if verifier is None else None
+        if verifier is None and shipped_v is None or verifier == "none":
+            self.verifier = None
+            if stop_check is not None or stop_force is not None:
+                raise ValueError("stop_check and stop_force apply with a stop verifier (verifier=stop.pt)")
+            return
+        if self.task != "objectnav":
+            raise ValueError(f"a stop verifier applies to objectnav policies, not this {self.task} one")
+        if shipped_v is not None:
+            vpath, vsha = MODELS / name / shipped_v["file"], shipped_v["sha256"]
+            stop_check = shipped_v.get("stop_check") if stop_check is None else stop_check
+            stop_force = shipped_v.get("stop_force") if stop_force is None else stop_force
+        else:
+            vpath, vsha = Path(verifier), None
+        for key, v in (("stop_check", stop_check), ("stop_force", stop_force)):
+            if v is not None and not (isinstance(v, (int, float)) and 0 <= v <= 1):
+                raise ValueError(f"{key}={v!r}: a probability in [0, 1], or none")
+        self.verifier = load_verifier(str(vpath), vsha, self.device)
+        self.stop_check = 0.5 if stop_check is None else float(stop_check)
+        self.stop_force = None if stop_force is None else float(stop_force)
 
     def reset(self, task: dict) -> None:
         self.h, self.prev = self.net.initial_state(1, self.device), NO_ACTION
@@ -142,10 +174,18 @@ class LearnedNavAgent:
         else:
             logits, h = net.step(frames, goal, prev, h)
         acts = logits.argmax(1).tolist()
-        if any(a.sample or a.stop_threshold is not None for a in agents):
+        if any(a.sample or a.stop_threshold is not None or a.verifier is not None for a in agents):
             probs = torch.softmax(logits.double(), 1).cpu().numpy()
+            wants = [acts[i] == STOP if a.stop_threshold is None else probs[i, STOP] >= a.stop_threshold
+                     for i, a in enumerate(agents)]
+            # the verifier's P(a STOP here succeeds for the goal category), asked where it can change the decision
+            verified = cls._verify(agents, observations, [i for i, a in enumerate(agents) if a.verifier is not None
+                                                          and (wants[i] or a.stop_force is not None)])
             for i, a in enumerate(agents):
-                stop = acts[i] == STOP if a.stop_threshold is None else probs[i, STOP] >= a.stop_threshold
+                stop = wants[i]
+                if i in verified:
+                    p = verified[i]
+                    stop = (stop and p >= a.stop_check) or (a.stop_force is not None and p >= a.stop_force)
                 if stop:
                     acts[i] = STOP
                     continue
@@ -154,6 +194,27 @@ class LearnedNavAgent:
         for i, a in enumerate(agents):
             a.h, a.prev = h[:, i:i + 1], int(acts[i])
         return [int(x) for x in acts]
+
+    @staticmethod
+    def _verify(agents: list, observations: list[dict], slots: list[int]) -> dict[int, float]:
+        """slot -> the stop verifier's probability for its goal category, for the given slots (one
+        forward pass per verifier network)."""
+        out: dict[int, float] = {}
+        groups: dict[int, list[int]] = {}
+        for i in slots:
+            groups.setdefault(id(agents[i].verifier), []).append(i)
+        for group in groups.values():
+            net, dev = agents[group[0]].verifier, agents[group[0]].device
+            obs = [observations[i] for i in group]
+            for o in obs:
+                if "rgb" not in o or "depth" not in o or "goal_category" not in o:
+                    raise ValueError(f"the stop verifier needs rgb, depth and goal_category; got {sorted(o)}")
+            x = stop_input(torch.stack([torch.as_tensor(o["depth"]) for o in obs]).to(dev),
+                           torch.stack([torch.as_tensor(o["rgb"]) for o in obs]).to(dev), net.spec)
+            p = torch.sigmoid(net(x).double()).cpu().numpy()
+            for k, i in enumerate(group):
+                out[i] = float(p[k, category_index(net.spec, observations[i]["goal_category"])])
+        return out
 
 
 def shipped_agent(name: str):
