@@ -173,6 +173,9 @@ def check(net: StopNet, data: StopData, device: str) -> dict:
 
 
 class StopTrainer:
+    """One verifier run: `StopTrainer(root, out, StopConfig()).run()` renders the poses, fits and
+    writes out/stop.pt and out/stop_card.json; returns the card."""
+
     def __init__(self, root, out, cfg: StopConfig, quiet: bool = False):
         self.ds, self.out, self.cfg, self.quiet = NavDataset(root), Path(out), cfg, quiet
         self.root = str(root)

@@ -169,3 +169,61 @@ def test_verifier_input_is_resolution_independent():
     assert big.shape == (1, 4, 96, 128)
     assert torch.allclose(big, small, atol=1e-5)
     assert float(big[0, 0].max()) <= 1.0  # depth clipped at max_depth
+
+
+def test_a_verifier_is_shipped_into_a_card_and_shown(stop_runs, tmp_path):
+    """cards verifier: the run's stop.pt beside the policy with its sha256, thresholds, data and the
+    held-out runs the thresholds were chosen on; the card's page shows them. A verifier for another
+    track's card, or a run whose file is not the one its card names, is refused."""
+    import shutil
+
+    from benchmarks.baselines.cards import MODELS, add_evaluation, card_markdown, ship_verifier
+
+    models = tmp_path / "models"
+    (models / "objectnav_bc").mkdir(parents=True)
+    shutil.copyfile(MODELS / "objectnav_bc" / "model_card.json", models / "objectnav_bc" / "model_card.json")
+    sel = tmp_path / "sel" / "check0.3" / "summary.json"
+    sel.parent.mkdir(parents=True)
+    sel.write_text(json.dumps({"agent": "objectnav_bc", "agent_args": {"verifier": "x.pt", "stop_check": 0.3},
+                               "protocol": "explicit_stop", "split": "val_unseen", "render": None, "root": "r",
+                               "tasks": {"objectnav": {"overall": {"episodes": 7, "stop_sr": 0.4286, "spl": 0.2}}}}))
+    v = ship_verifier(stop_runs[0], "objectnav_bc", 0.3, None, [sel], models)
+    assert (models / "objectnav_bc" / "stop.pt").read_bytes() == (stop_runs[0] / "stop.pt").read_bytes()
+    card = json.loads((models / "objectnav_bc" / "model_card.json").read_text())
+    assert card["stop_verifier"] == v and v["stop_check"] == 0.3 and v["stop_force"] is None
+    assert v["selection"][0]["stop_sr"] == 0.4286 and "/" not in v["data"]["root"]
+    page = card_markdown(card)
+    assert "## Stop verifier" in page and "| check0.3 | yes | 0.3 | - | 0.429 | 0.200 |" in page
+    assert "less than 0.3" in page and "never stops on its own" in page
+    # --add: a run joins the main table; a name it already holds is refused
+    sel2 = tmp_path / "ev" / "objectnav_bc_tried_objectnav_explicit_stop" / "summary.json"
+    sel2.parent.mkdir(parents=True)
+    sel2.write_text(sel.read_text())
+    add_evaluation("objectnav_bc", [sel2], "more.", "cmd2", models, add=True)
+    ev = json.loads((models / "objectnav_bc" / "model_card.json").read_text())["evaluation"]
+    assert list(ev["runs"])[-1] == "objectnav_bc_tried_objectnav_explicit_stop" and len(ev["runs"]) > 1
+    assert ev["conditions"].endswith(" more.") and ev["command"].endswith("; cmd2")
+    with pytest.raises(SystemExit, match="already has objectnav_bc_tried"):
+        add_evaluation("objectnav_bc", [sel2], "again.", "cmd3", models, add=True)
+    pn = models / "pointnav_bc"
+    pn.mkdir()
+    shutil.copyfile(MODELS / "pointnav_bc" / "model_card.json", pn / "model_card.json")
+    with pytest.raises(SystemExit, match="a pointnav baseline"):
+        ship_verifier(stop_runs[0], "pointnav_bc", 0.3, models=models)
+    other = tmp_path / "other"
+    shutil.copytree(stop_runs[0], other)
+    (other / "stop.pt").write_bytes((other / "stop.pt").read_bytes()[:-8] + b"\0" * 8)
+    with pytest.raises(SystemExit, match="not the file its card names"):
+        ship_verifier(other, "objectnav_bc", 0.3, models=models)
+
+
+def test_the_shipped_objectnav_baseline_runs_its_verifier():
+    """The registry name objectnav_bc loads the card's stop verifier (sha256-checked) and its
+    threshold; verifier=none runs the policy alone."""
+    from navcore.baselines.agent import LearnedNavAgent, shipped_card
+
+    card = shipped_card("objectnav_bc")
+    a = LearnedNavAgent(name="objectnav_bc", device="cpu")
+    assert a.verifier is not None and a.stop_check == card["stop_verifier"]["stop_check"] and a.stop_force is None
+    assert LearnedNavAgent(name="objectnav_bc", device="cpu", verifier="none").verifier is None
+    assert LearnedNavAgent(name="objectnav_bc", device="cpu", stop_check=0.6).stop_check == 0.6

@@ -6,6 +6,9 @@ Baselines section of docs/evaluation.md, generated from one source: the card's J
     python -m benchmarks.baselines.cards evaluation NAME SUMMARY.json ...   # closed-loop figures into the card
                      [--title T [--real]]   # a further table (another setting; --real: on real captures)
                      [--replace]   # re-measured runs in place of those of the same names, the rest kept
+                     [--add]       # more runs into the table (new names), the rest kept
+    python -m benchmarks.baselines.cards verifier NAME RUN --stop-check P [--stop-force P] [--selection SUMMARY ...]
+                                                                  # a navarena train-stop run -> NAME's stop verifier
     python -m benchmarks.baselines.cards cost NAME                # CPU ms per step into the card
     python -m benchmarks.baselines.cards gpu-rate NAME --machine M --setting S AGENT:STEPS:SECONDS ...
                                                                   # closed-loop steps/s in the batched GPU env
@@ -69,12 +72,13 @@ def home(name: str) -> Path:
 
 
 def add_evaluation(name: str, summaries: list[Path], conditions: str, command: str, models: Path = MODELS,
-                   title: str | None = None, real: bool = False, replace: bool = False) -> None:
+                   title: str | None = None, real: bool = False, replace: bool = False, add: bool = False) -> None:
     """Merge navarena eval summary.json files (one per agent and protocol, named by their folder)
     into the card's `evaluation`, with the conditions they were measured under and the command.
     With a title, a further table instead (`more_evaluations`, replacing one of that title): figures
     in another setting, e.g. on real captures (`real`). replace: re-measured runs in place of the
-    table's runs of the same names (the others kept), conditions and command appended to the table's."""
+    table's runs of the same names (the others kept), conditions and command appended to the table's.
+    add: the runs join the table (each a name it does not hold yet), conditions and command appended."""
     f = models / name / "model_card.json"
     card = json.loads(f.read_text())
     runs = {}
@@ -83,6 +87,18 @@ def add_evaluation(name: str, summaries: list[Path], conditions: str, command: s
         summ["root"] = Path(summ["root"]).name  # no machine's paths in a shipped card
         runs[Path(s).parent.name] = summ
     entry = {"conditions": conditions, "command": command, "runs": runs}
+    if replace and add:
+        raise SystemExit("cards evaluation: --replace or --add, not both")
+    if add:
+        old = card["evaluation"] if not title else next((m for m in card.get("more_evaluations", []) if m["title"] == title), None)
+        if not old:
+            raise SystemExit(f"cards evaluation --add: {name} has no table {title or '(main)'} to add to")
+        clash = sorted(set(runs) & set(old["runs"]))
+        if clash:
+            raise SystemExit(f"cards evaluation --add: {name}'s table {title or '(main)'} already has {', '.join(clash)}")
+        real = old.get("real", real)
+        entry = {"conditions": f"{old['conditions']} {conditions}", "command": f"{old['command']}; {command}",
+                 "runs": {**old["runs"], **runs}}
     if replace:
         old = card["evaluation"] if not title else next((m for m in card.get("more_evaluations", []) if m["title"] == title), None)
         missing = sorted(set(runs) - set((old or {}).get("runs", {})))
@@ -97,6 +113,86 @@ def add_evaluation(name: str, summaries: list[Path], conditions: str, command: s
     else:
         card["evaluation"] = entry
     f.write_text(json.dumps(card, indent=1) + "\n")
+
+
+def ship_verifier(run: Path, name: str, stop_check: float, stop_force: float | None = None,
+                  selection: list[Path] = (), models: Path = MODELS) -> dict:
+    """A navarena train-stop run's stop.pt into navcore/models/<name>/ as the stop verifier its
+    registry name uses (the card's `stop_verifier`: file, sha256, thresholds, the run's config, data
+    and curve), with the held-out runs the thresholds were chosen on (navarena eval summaries, each
+    folder named for its setting)."""
+    from navcore.baselines.verifier import load_verifier
+
+    dst = models / name
+    card = json.loads((dst / "model_card.json").read_text())
+    if card["task"] != "objectnav":
+        raise SystemExit(f"cards verifier: {name} is a {card['task']} baseline; a stop verifier is ObjectNav's")
+    run_card = json.loads((run / "stop_card.json").read_text())
+    shutil.copyfile(run / "stop.pt", dst / "stop.pt")
+    sha = sha256_of(dst / "stop.pt")
+    if sha != run_card["sha256"]:
+        raise SystemExit(f"cards verifier: {run / 'stop.pt'} is not the file its card names (sha256 differs)")
+    load_verifier(str(dst / "stop.pt"), sha, "cpu")  # refuses a file that is not a verifier
+    data = {**run_card["data"], "root": Path(run_card["data"]["root"]).name}  # no machine's paths in a shipped card
+    rows = []
+    for f in selection:
+        summ = json.loads(Path(f).read_text())
+        m = summ["tasks"]["objectnav"]["overall"]
+        args = summ.get("agent_args") or {}
+        rows.append({"setting": Path(f).parent.name, "verifier": "verifier" in args,
+                     "stop_check": args.get("stop_check"), "stop_force": args.get("stop_force"),
+                     "protocol": summ["protocol"], "split": summ.get("split"), "episodes": m["episodes"],
+                     "stop_sr": m.get("stop_sr"), "spl": m.get("spl"), "render": summ.get("render")})
+    card["stop_verifier"] = {"file": "stop.pt", "sha256": sha, "stop_check": stop_check, "stop_force": stop_force,
+                             "parameters": run_card["parameters"], "config": run_card["config"], "data": data,
+                             "curve": run_card["curve"], "timing": run_card.get("timing"), "selection": rows}
+    (dst / "model_card.json").write_text(json.dumps(card, indent=1) + "\n")
+    return card["stop_verifier"]
+
+
+def _verified_rate(v: dict) -> str:
+    r = v.get("gpu_eval_rate")
+    if not r:
+        return ""
+    return (f" Closed loop with it in the batched GPU environment: {r['steps_per_s_per_process']:.0f} steps/s per "
+            f"navarena eval process ({r['steps']:,} steps in {r['process_seconds']:,} process-seconds; {r['setting']}; "
+            f"{r['machine']}).")
+
+
+def verifier_section(card: dict) -> str:
+    """The card's stop verifier (navcore.baselines.verifier), as markdown; empty without one."""
+    v = card.get("stop_verifier")
+    if not v:
+        return ""
+    c, d = v["config"], v["data"]
+    sp = c["spec"]
+    force = "never stops on its own" if v.get("stop_force") is None else f"stops where it gives at least {v['stop_force']}"
+    last = v["curve"][-1].get("val")
+    held = (f"Held-out check on {d['val_poses']:,} poses of the {d['val_split']} scenes at P >= 0.5: precision "
+            f"{last['precision']:.2f}, recall {last['recall']:.2f} (loss {last['loss']:.3f}; {last['positive_share']:.1%} "
+            "of its labels positive)." if last else "No held-out check (the data had no held-out scenes).")
+    lines = [f"""
+## Stop verifier
+
+`{v['file']}`, sha256 `{v['sha256']}` (checked on load), {v['parameters']:,} parameters: a per-frame classifier of
+which goal categories a STOP at the camera's pose would succeed for (RGB-D at {sp['depth_w']} x {sp['depth_h']}, one
+logit per category; navcore.baselines.verifier). The registry name vetoes the policy's STOP where the verifier gives the
+goal category less than {v['stop_check']} (the policy's most likely move instead) and {force};
+`--agent-arg verifier=none` runs the policy alone. Trained by `navarena train-stop` on {d['train_poses']:,} poses of
+{len(d['train_scenes'])} training scenes of data root `{d['root']}` rendered at {c['width']} x {c['height']} by
+{c['renderer']} ({c['near_share']:.0%} within {c['near_range']} m of an object instance, most facing it), labelled by the
+evaluator's success rule; {c['grad_steps']} steps of batch {c['batch']}, seed {c['seed']}. {held}{_verified_rate(v)}
+"""]
+    if v.get("selection"):
+        r0 = v["selection"][0]
+        lines.append(f"The thresholds were chosen on {r0['split']} ({r0['episodes']} episodes, {r0['protocol']}), never on "
+                     "the zero-shot set:\n")
+        lines.append("| setting | verifier | stop_check | stop_force | Stop SR | SPL |\n|---|---|---:|---:|---:|---:|")
+        for r in v["selection"]:
+            lines.append(f"| {r['setting']} | {'yes' if r['verifier'] else 'no'} | {_num(r['stop_check'], 1)} | "
+                         f"{_num(r['stop_force'], 1)} | {_num(r['stop_sr'])} | {_num(r['spl'])} |")
+        lines.append("")
+    return "\n".join(lines) + "\n"
 
 
 def cpu_cost(name: str, repeats: int = 300, models: Path = MODELS) -> dict:
@@ -130,6 +226,17 @@ def cpu_cost(name: str, repeats: int = 300, models: Path = MODELS) -> dict:
             agent.act(obs)
             times.append(time.perf_counter() - t)
         out[f"{w}x{h}"] = round(1000 * float(np.median(times)), 2)
+        if getattr(agent, "verifier", None) is not None:  # asked only on a step where the policy would STOP
+            from navcore.baselines.verifier import stop_input
+
+            times = []
+            with torch.no_grad():
+                for k in range(20 + repeats):
+                    t = time.perf_counter()
+                    agent.verifier(stop_input(torch.as_tensor(obs["depth"])[None], torch.as_tensor(obs["rgb"])[None],
+                                              agent.verifier.spec))
+                    times.append(time.perf_counter() - t)
+            out[f"verifier_{w}x{h}"] = round(1000 * float(np.median(times[20:])), 2)
     f = models / name / "model_card.json"
     card = json.loads(f.read_text())
     card["cpu_ms_per_step"] = out
@@ -305,9 +412,11 @@ def _cost(card: dict) -> str:
     c = card.get("cpu_ms_per_step")
     if not c:
         return "not measured yet (`python -m benchmarks.baselines.cards cost NAME`)."
+    verifier = (f" Its stop verifier adds {c['verifier_640x480']} ms ({c['verifier_160x120']} ms at 160 x 120) on a step "
+                "where the policy asks to stop." if "verifier_640x480" in c else "")
     return (f"{c['640x480']} ms a step at 640 x 480 observations (those its track reads), {c['160x120']} ms at "
             f"160 x 120 (median, rendering excluded; {c['machine']}; `python -m benchmarks.baselines.cards cost "
-            f"{card['name']}`).")
+            f"{card['name']}`).{verifier}")
 
 
 def kept(card: dict) -> str:
@@ -459,7 +568,7 @@ Generated from model_card.json by `python -m benchmarks.baselines.cards docs`; d
 
 {results_table(card)}
 Reproduce: `{ev.get('command', '')}`
-{more_tables(card)}
+{more_tables(card)}{verifier_section(card)}
 ## Limitations
 
 {card.get('notes') or ''}
@@ -555,6 +664,14 @@ def main(argv=None) -> int:
     e.add_argument("--title", help="a further table under this title (another setting) instead of the main one")
     e.add_argument("--real", action="store_true", help="the further table's episodes are on real captures")
     e.add_argument("--replace", action="store_true", help="re-measured runs in place of those of the same names")
+    e.add_argument("--add", action="store_true", help="more runs into the table (names it does not hold yet)")
+    v = sub.add_parser("verifier")
+    v.add_argument("name")
+    v.add_argument("run", type=Path, help="a navarena train-stop run folder (stop.pt, stop_card.json)")
+    v.add_argument("--stop-check", type=float, required=True, help="veto a STOP the verifier gives less than this")
+    v.add_argument("--stop-force", type=float, help="stop where the verifier gives at least this (default: never)")
+    v.add_argument("--selection", nargs="*", type=Path, default=[],
+                   help="the held-out navarena eval summaries the thresholds were chosen on")
     c = sub.add_parser("cost")
     c.add_argument("name")
     n = sub.add_parser("note")
@@ -575,7 +692,9 @@ def main(argv=None) -> int:
         print(ship(a.run, a.name, TRIALS, weights=False, sample=a.sample) if a.trial else
               ship(a.run, a.name, sample=a.sample))
     elif a.cmd == "evaluation":
-        add_evaluation(a.name, a.summaries, a.conditions, a.command, home(a.name), a.title, a.real, a.replace)
+        add_evaluation(a.name, a.summaries, a.conditions, a.command, home(a.name), a.title, a.real, a.replace, a.add)
+    elif a.cmd == "verifier":
+        print(json.dumps(ship_verifier(a.run, a.name, a.stop_check, a.stop_force, a.selection), indent=1)[:2000])
     elif a.cmd == "cost":
         print(cpu_cost(a.name))
     elif a.cmd == "note":
