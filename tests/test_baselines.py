@@ -667,9 +667,12 @@ def test_a_card_holds_further_tables_and_says_when_real_captures_were_measured(t
         add_evaluation("tiny", [bad], "", "", tmp_path, title="On real captures", replace=True)
 
 
-def test_shipped_baseline_behind_the_agent_server_acts_as_in_process(episode_run, tmp_path):
-    """navarena serve-agent --agent pointnav_bc, evaluated over ws:// by navarena eval: the same
-    episodes end the same way as with the agent in process (the policy is deterministic)."""
+@pytest.mark.parametrize("name,task", [("pointnav_bc", "pointnav"), ("objectnav_bc", "objectnav")])
+def test_shipped_baseline_behind_the_agent_server_acts_as_in_process(name, task, episode_run, tmp_path):
+    """navarena serve-agent --agent NAME, evaluated over ws:// by navarena eval: the same episodes
+    end the same way as with the agent in process (the policy is deterministic; objectnav_bc with its
+    stop verifier, under explicit_stop). RGB travels as PNG here: the protocol's default JPEG changes
+    the pixels an RGB policy sees (objectnav_bc then ends one of these episodes differently)."""
     import subprocess
     import sys
     import time
@@ -679,11 +682,11 @@ def test_shipped_baseline_behind_the_agent_server_acts_as_in_process(episode_run
     from navarena.evaluate import main as evaluate
 
     root = episode_run[0]
-    common = ["--tasks", "pointnav", "--difficulty", "easy", "--episodes-per-scene", "2", "--renderer", "cpu",
-              "--width", "64", "--height", "48", "--quiet"]
-    assert evaluate([str(root), "--agent", "pointnav_bc", *common, "--out", str(tmp_path / "local")]) == 0
+    common = ["--tasks", task, "--difficulty", "easy", "--episodes-per-scene", "2", "--renderer", "cpu",
+              "--width", "64", "--height", "48", "--quiet", "--protocol", "explicit_stop" if task == "objectnav" else "distance"]
+    assert evaluate([str(root), "--agent", name, *common, "--out", str(tmp_path / "local")]) == 0
     port_file = tmp_path / "port"
-    server = subprocess.Popen([sys.executable, "-m", "navarena", "serve-agent", "--agent", "pointnav_bc", "--port", "0",
+    server = subprocess.Popen([sys.executable, "-m", "navarena", "serve-agent", "--agent", name, "--port", "0",
                                "--port-file", str(port_file)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.time() + 120
@@ -691,7 +694,8 @@ def test_shipped_baseline_behind_the_agent_server_acts_as_in_process(episode_run
             assert server.poll() is None and time.time() < deadline, server.stdout.read()[-2000:]
             time.sleep(0.2)
         url = f"ws://127.0.0.1:{int(port_file.read_text())}"
-        assert evaluate([str(root), "--agent", url, *common, "--out", str(tmp_path / "remote")]) == 0
+        assert evaluate([str(root), "--agent", url, "--agent-arg", "image_format=png", *common,
+                         "--out", str(tmp_path / "remote")]) == 0
     finally:
         server.terminate()
         server.wait(timeout=30)
