@@ -195,6 +195,12 @@ def test_a_verifier_is_shipped_into_a_card_and_shown(stop_runs, tmp_path):
     page = card_markdown(card)
     assert "## Stop verifier" in page and "| check0.3 | yes | 0.3 | - | 0.429 | 0.200 |" in page
     assert "less than 0.3" in page and "never stops on its own" in page
+    rate = {"steps": 10, "process_seconds": 2.0, "steps_per_s_per_process": 5.0, "setting": "s", "machine": "m"}
+    card["stop_verifier"]["gpu_eval_rate"] = rate  # measured on the shipped file later ...
+    (models / "objectnav_bc" / "model_card.json").write_text(json.dumps(card))
+    again = ship_verifier(stop_runs[0], "objectnav_bc", 0.5, None, [sel], models, command="navarena eval X")
+    assert again["gpu_eval_rate"] == rate and again["stop_check"] == 0.5  # ... kept when it ships again
+    assert "Reproduce: `navarena eval X`" in card_markdown(json.loads((models / "objectnav_bc" / "model_card.json").read_text()))
     # --add: a run joins the main table; a name it already holds is refused
     sel2 = tmp_path / "ev" / "objectnav_bc_tried_objectnav_explicit_stop" / "summary.json"
     sel2.parent.mkdir(parents=True)

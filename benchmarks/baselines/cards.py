@@ -8,6 +8,7 @@ Baselines section of docs/evaluation.md, generated from one source: the card's J
                      [--replace]   # re-measured runs in place of those of the same names, the rest kept
                      [--add]       # more runs into the table (new names), the rest kept
     python -m benchmarks.baselines.cards verifier NAME RUN --stop-check P [--stop-force P] [--selection SUMMARY ...]
+                     [--command C]   # ... and the command that made the selection's runs
                                                                   # a navarena train-stop run -> NAME's stop verifier
     python -m benchmarks.baselines.cards cost NAME                # CPU ms per step into the card
     python -m benchmarks.baselines.cards gpu-rate NAME --machine M --setting S AGENT:STEPS:SECONDS ...
@@ -116,11 +117,11 @@ def add_evaluation(name: str, summaries: list[Path], conditions: str, command: s
 
 
 def ship_verifier(run: Path, name: str, stop_check: float, stop_force: float | None = None,
-                  selection: list[Path] = (), models: Path = MODELS) -> dict:
+                  selection: list[Path] = (), models: Path = MODELS, command: str | None = None) -> dict:
     """A navarena train-stop run's stop.pt into navcore/models/<name>/ as the stop verifier its
     registry name uses (the card's `stop_verifier`: file, sha256, thresholds, the run's config, data
     and curve), with the held-out runs the thresholds were chosen on (navarena eval summaries, each
-    folder named for its setting)."""
+    folder named for its setting) and the command that made them."""
     from navcore.baselines.verifier import load_verifier
 
     dst = models / name
@@ -143,9 +144,13 @@ def ship_verifier(run: Path, name: str, stop_check: float, stop_force: float | N
                      "stop_check": args.get("stop_check"), "stop_force": args.get("stop_force"),
                      "protocol": summ["protocol"], "split": summ.get("split"), "episodes": m["episodes"],
                      "stop_sr": m.get("stop_sr"), "spl": m.get("spl"), "render": summ.get("render")})
+    prev = card.get("stop_verifier") or {}
     card["stop_verifier"] = {"file": "stop.pt", "sha256": sha, "stop_check": stop_check, "stop_force": stop_force,
                              "parameters": run_card["parameters"], "config": run_card["config"], "data": data,
-                             "curve": run_card["curve"], "timing": run_card.get("timing"), "selection": rows}
+                             "curve": run_card["curve"], "timing": run_card.get("timing"), "selection": rows,
+                             "selection_command": command}
+    if prev.get("sha256") == sha:  # the same file shipped again: what was measured on it since stays
+        card["stop_verifier"] = {**prev, **card["stop_verifier"]}
     (dst / "model_card.json").write_text(json.dumps(card, indent=1) + "\n")
     return card["stop_verifier"]
 
@@ -159,7 +164,7 @@ def _verified_rate(v: dict) -> str:
             f"{r['machine']}).")
 
 
-def verifier_section(card: dict) -> str:
+def verifier_section(card: dict, level: str = "##") -> str:
     """The card's stop verifier (navcore.baselines.verifier), as markdown; empty without one."""
     v = card.get("stop_verifier")
     if not v:
@@ -172,7 +177,7 @@ def verifier_section(card: dict) -> str:
             f"{last['precision']:.2f}, recall {last['recall']:.2f} (loss {last['loss']:.3f}; {last['positive_share']:.1%} "
             "of its labels positive)." if last else "No held-out check (the data had no held-out scenes).")
     lines = [f"""
-## Stop verifier
+{level} Stop verifier
 
 `{v['file']}`, sha256 `{v['sha256']}` (checked on load), {v['parameters']:,} parameters: a per-frame classifier of
 which goal categories a STOP at the camera's pose would succeed for (RGB-D at {sp['depth_w']} x {sp['depth_h']}, one
@@ -192,6 +197,8 @@ evaluator's success rule; {c['grad_steps']} steps of batch {c['batch']}, seed {c
             lines.append(f"| {r['setting']} | {'yes' if r['verifier'] else 'no'} | {_num(r['stop_check'], 1)} | "
                          f"{_num(r['stop_force'], 1)} | {_num(r['stop_sr'])} | {_num(r['spl'])} |")
         lines.append("")
+        if v.get("selection_command"):
+            lines.append(f"Reproduce: `{v['selection_command']}`\n")
     return "\n".join(lines) + "\n"
 
 
@@ -594,7 +601,7 @@ Zero-shot SR against difficulty, each shipped baseline's table under the distanc
 {'' if shipped else chr(10) + (card.get('notes') or '') + chr(10)}
 {ev.get('conditions', '')}
 
-{results_table(card)}{more_tables(card, '####')}
+{results_table(card)}{more_tables(card, '####')}{verifier_section(card, '####')}
 {running}Training ({card['trained_on']}, {card['train_seconds']} s; {where}):
 
 {curve_table(card)}""")
@@ -672,6 +679,7 @@ def main(argv=None) -> int:
     v.add_argument("--stop-force", type=float, help="stop where the verifier gives at least this (default: never)")
     v.add_argument("--selection", nargs="*", type=Path, default=[],
                    help="the held-out navarena eval summaries the thresholds were chosen on")
+    v.add_argument("--command", help="the command that made the selection's runs")
     c = sub.add_parser("cost")
     c.add_argument("name")
     n = sub.add_parser("note")
@@ -694,7 +702,7 @@ def main(argv=None) -> int:
     elif a.cmd == "evaluation":
         add_evaluation(a.name, a.summaries, a.conditions, a.command, home(a.name), a.title, a.real, a.replace, a.add)
     elif a.cmd == "verifier":
-        print(json.dumps(ship_verifier(a.run, a.name, a.stop_check, a.stop_force, a.selection), indent=1)[:2000])
+        print(json.dumps(ship_verifier(a.run, a.name, a.stop_check, a.stop_force, a.selection, command=a.command), indent=1)[:2000])
     elif a.cmd == "cost":
         print(cpu_cost(a.name))
     elif a.cmd == "note":
