@@ -1,7 +1,9 @@
 """``navarena doctor``: what this machine has for NavArena, and which features work here and why not.
 
 Checks, each fast and without side effects: Python; the installed version of every dependency the
-project declares (a missing one is named); torch, its CUDA build and the GPUs it sees; gsplat and
+project declares (a missing one is named), and from a checkout those of the pipeline's dependency
+group (pyproject.toml; an offline `make setup-gpu WHEELS=dir` installs only what the folder holds);
+torch, its CUDA build and the GPUs it sees; gsplat and
 whether its CUDA kernels are built (they compile once on first use, `make setup-gpu`); FFmpeg's
 libraries for torchcodec (LeRobot loading) and PyAV's encoder (videos); Chromium (the HTML report
 test); OMPL; and the optional features: the GPU renderer, the `detector` segmenter's shipped
@@ -52,6 +54,31 @@ def declared() -> list[str]:
     return sorted({r.name for r in reqs if r.marker is None or r.marker.evaluate({"extra": ""})})
 
 
+def pipeline_group() -> tuple[list[str], list[str]] | None:
+    """(declared, missing): the distributions of the checkout's `pipeline` dependency group for this
+    platform (markers evaluated), and those not installed; None outside a checkout (the pipeline
+    package not importable, or no pyproject.toml beside it)."""
+    import importlib.util
+    from pathlib import Path
+
+    from packaging.requirements import Requirement
+
+    try:
+        import tomllib
+        spec = importlib.util.find_spec("pipeline")
+    except (ImportError, ValueError):
+        return None
+    if spec is None or not spec.origin:
+        return None
+    pyproject = Path(spec.origin).resolve().parents[1] / "pyproject.toml"
+    if not pyproject.is_file():
+        return None
+    group = tomllib.loads(pyproject.read_text()).get("dependency-groups", {}).get("pipeline", [])
+    reqs = [Requirement(r) for r in group if isinstance(r, str)]
+    names = sorted({r.name for r in reqs if r.marker is None or r.marker.evaluate({"extra": ""})})
+    return names, [n for n in names if _version(n) is None]
+
+
 def _try(module: str) -> tuple[bool, str]:
     try:
         importlib.import_module(module)
@@ -65,6 +92,12 @@ def checks() -> list[Check]:
     missing = [d for d in declared() if _version(d) is None]
     out.append(Check("packages", not missing, f"{len(declared()) - len(missing)} of {len(declared())} declared "
                      "dependencies installed" + (f"; missing: {', '.join(missing)} (make setup)" if missing else ""), True))
+    group = pipeline_group()
+    if group is not None:
+        names, gone = group
+        out.append(Check("pipeline packages", not gone, f"{len(names) - len(gone)} of {len(names)} of the checkout's "
+                         "pipeline group installed" + (f"; missing: {', '.join(gone)} (make setup; offline: add their "
+                                                       "wheels to the WHEELS folder of make setup-gpu)" if gone else "")))
     try:
         import torch
 

@@ -74,6 +74,9 @@ if [ -n "$PIP_SRC" ]; then
   "$BIN/python" -m pip install -q --no-index --no-deps --no-build-isolation -e .
   "$BIN/python" -m pip check || echo "make setup-gpu: the requirements above are not in $WHEELS nor installed;" \
     "navarena doctor says what each is for"
+  # the pipeline's dependency group is no requirement pip knows of: name what the folder lacked (make dataset,
+  # the evaluate stage's results check, releases need them)
+  "$BIN/python" -c "from navarena.doctor import pipeline_group; g = pipeline_group(); g and g[1] and print('make setup-gpu: the pipeline group lacks', ', '.join(g[1]), '(add their wheels to $WHEELS)')"
 else
   # the library with its gpu extra, plus the pipeline project's dependency groups (pyproject.toml)
   "$BIN/python" -m pip install -q -e ".[gpu,open_vocab]" --group pipeline --group test
