@@ -221,6 +221,7 @@ def test_a_verifier_is_shipped_into_a_card_and_shown(stop_runs, tmp_path):
     (other / "stop.pt").write_bytes((other / "stop.pt").read_bytes()[:-8] + b"\0" * 8)
     with pytest.raises(SystemExit, match="not the file its card names"):
         ship_verifier(other, "objectnav_bc", 0.3, models=models)
+    assert (models / "objectnav_bc" / "stop.pt").read_bytes() == (stop_runs[0] / "stop.pt").read_bytes()  # untouched
 
 
 def test_the_shipped_objectnav_baseline_runs_its_verifier():

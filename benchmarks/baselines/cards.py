@@ -90,24 +90,19 @@ def add_evaluation(name: str, summaries: list[Path], conditions: str, command: s
     entry = {"conditions": conditions, "command": command, "runs": runs}
     if replace and add:
         raise SystemExit("cards evaluation: --replace or --add, not both")
-    if add:
+    if replace or add:  # into the table already there: conditions and command appended to its own
+        flag = "--add" if add else "--replace"
         old = card["evaluation"] if not title else next((m for m in card.get("more_evaluations", []) if m["title"] == title), None)
-        if not old:
+        if add and not old:
             raise SystemExit(f"cards evaluation --add: {name} has no table {title or '(main)'} to add to")
-        clash = sorted(set(runs) & set(old["runs"]))
-        if clash:
-            raise SystemExit(f"cards evaluation --add: {name}'s table {title or '(main)'} already has {', '.join(clash)}")
+        wrong = sorted(set(runs) & set(old["runs"])) if add else sorted(set(runs) - set((old or {}).get("runs", {})))
+        if wrong:
+            raise SystemExit(f"cards evaluation {flag}: {name}'s table {title or '(main)'} "
+                             f"{'already has' if add else 'has no run'} {', '.join(wrong)}")
         real = old.get("real", real)
+        merged = {**old["runs"], **runs} if add else {k: runs.get(k, v) for k, v in old["runs"].items()}
         entry = {"conditions": f"{old['conditions']} {conditions}", "command": f"{old['command']}; {command}",
-                 "runs": {**old["runs"], **runs}}
-    if replace:
-        old = card["evaluation"] if not title else next((m for m in card.get("more_evaluations", []) if m["title"] == title), None)
-        missing = sorted(set(runs) - set((old or {}).get("runs", {})))
-        if missing:
-            raise SystemExit(f"cards evaluation --replace: {name}'s table {title or '(main)'} has no run {', '.join(missing)}")
-        real = old.get("real", real)
-        entry = {"conditions": f"{old['conditions']} {conditions}", "command": f"{old['command']}; {command}",
-                 "runs": {k: runs.get(k, v) for k, v in old["runs"].items()}}
+                 "runs": merged}
     if title:
         more = [m for m in card.get("more_evaluations", []) if m["title"] != title]
         card["more_evaluations"] = more + [{"title": title, "real": real, **entry}]
@@ -129,11 +124,11 @@ def ship_verifier(run: Path, name: str, stop_check: float, stop_force: float | N
     if card["task"] != "objectnav":
         raise SystemExit(f"cards verifier: {name} is a {card['task']} baseline; a stop verifier is ObjectNav's")
     run_card = json.loads((run / "stop_card.json").read_text())
-    shutil.copyfile(run / "stop.pt", dst / "stop.pt")
-    sha = sha256_of(dst / "stop.pt")
+    sha = sha256_of(run / "stop.pt")
     if sha != run_card["sha256"]:
         raise SystemExit(f"cards verifier: {run / 'stop.pt'} is not the file its card names (sha256 differs)")
-    load_verifier(str(dst / "stop.pt"), sha, "cpu")  # refuses a file that is not a verifier
+    load_verifier(str(run / "stop.pt"), sha, "cpu")  # refuses a file that is not a verifier
+    shutil.copyfile(run / "stop.pt", dst / "stop.pt")  # checked first: nothing half-shipped beside the policy
     data = {**run_card["data"], "root": Path(run_card["data"]["root"]).name}  # no machine's paths in a shipped card
     rows = []
     for f in selection:
@@ -218,6 +213,17 @@ def cpu_cost(name: str, repeats: int = 300, models: Path = MODELS) -> dict:
     agent.reset({})
     out = {"machine": f"{platform.machine()} CPU, {os.cpu_count()} cores, torch threads {torch.get_num_threads()}"}
     spec, rng = agent.net.spec, np.random.default_rng(0)
+
+    def median_ms(step) -> float:  # 20 warm-up calls, then the median of `repeats`
+        for _ in range(20):
+            step()
+        times = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            step()
+            times.append(time.perf_counter() - t)
+        return round(1000 * float(np.median(times)), 2)
+
     for w, h in ((640, 480), (160, 120)):
         # every observation the track's agent gets (it reads those its spec names)
         obs = {"depth": rng.uniform(0.5, 4.0, (h, w)).astype(np.float32),
@@ -225,25 +231,13 @@ def cpu_cost(name: str, repeats: int = 300, models: Path = MODELS) -> dict:
                "goal_image": rng.integers(0, 256, (h, w, 3), dtype=np.uint8),
                "pointgoal": np.array([3.0, 0.3], np.float32),
                "goal_category": (spec.categories or ["chair"])[0]}
-        for _ in range(20):
-            agent.act(obs)
-        times = []
-        for _ in range(repeats):
-            t = time.perf_counter()
-            agent.act(obs)
-            times.append(time.perf_counter() - t)
-        out[f"{w}x{h}"] = round(1000 * float(np.median(times)), 2)
+        out[f"{w}x{h}"] = median_ms(lambda: agent.act(obs))
         if getattr(agent, "verifier", None) is not None:  # asked only on a step where the policy would STOP
             from navcore.baselines.verifier import stop_input
 
-            times = []
             with torch.no_grad():
-                for k in range(20 + repeats):
-                    t = time.perf_counter()
-                    agent.verifier(stop_input(torch.as_tensor(obs["depth"])[None], torch.as_tensor(obs["rgb"])[None],
-                                              agent.verifier.spec))
-                    times.append(time.perf_counter() - t)
-            out[f"verifier_{w}x{h}"] = round(1000 * float(np.median(times[20:])), 2)
+                out[f"verifier_{w}x{h}"] = median_ms(lambda: agent.verifier(stop_input(
+                    torch.as_tensor(obs["depth"])[None], torch.as_tensor(obs["rgb"])[None], agent.verifier.spec)))
     f = models / name / "model_card.json"
     card = json.loads(f.read_text())
     card["cpu_ms_per_step"] = out
