@@ -34,7 +34,6 @@ reproducible).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import platform
@@ -52,6 +51,7 @@ from navarena.dataset import NavDataset
 from navcore.baselines.agent import default_device
 from navcore.baselines.checkpoint import load_checkpoint, save_checkpoint
 from navcore.baselines.model import NO_ACTION, TRACKS, NavNet, NavSpec, goal_input, observation_input, parameter_count
+from navcore.io import jsonio
 from navcore.io.atomic import atomic_path, write_text_atomic
 from navcore.nav.actions import STOP
 from navcore.nav.oracle import DiscreteOracle
@@ -449,7 +449,7 @@ class Trainer:
             card = {"name": self.out.name, "file": "model.pt", "sha256": sha, "licence": "Apache-2.0", **meta,
                     "curve": self.curve, "trained_on": dev, "workers": self.cfg.workers,
                     "train_seconds": train_seconds(self.curve)}
-            write_text_atomic(self.out / "model_card.json", json.dumps(card, indent=1, default=str) + "\n")
+            write_text_atomic(self.out / "model_card.json", jsonio.dumps(card, indent=1, default=str) + "\n")
         return sha
 
 

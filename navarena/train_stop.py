@@ -22,7 +22,6 @@ reproducible).
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import platform
 import sys
@@ -40,6 +39,7 @@ from navcore.baselines.agent import default_device
 from navcore.baselines.checkpoint import save_checkpoint
 from navcore.baselines.model import parameter_count
 from navcore.baselines.verifier import KIND, StopNet, StopSpec, stop_input
+from navcore.io import jsonio
 from navcore.io.atomic import write_text_atomic
 from navcore.nav.poses import region_distance
 from navcore.seeds import stream_seed
@@ -246,7 +246,7 @@ class StopTrainer:
                   "machine": torch.cuda.get_device_name(0) if dev.startswith("cuda") else f"{platform.machine()} CPU"}
         sha = save_checkpoint(self.out / "stop.pt", KIND, cfg.spec.to_dict(), net.state_dict(), meta)
         card = {"file": "stop.pt", "sha256": sha, **meta, "timing": timing}
-        write_text_atomic(self.out / "stop_card.json", json.dumps(card, indent=1, sort_keys=True) + "\n")
+        write_text_atomic(self.out / "stop_card.json", jsonio.dumps(card, indent=1, sort_keys=True) + "\n")
         return {"model": str(self.out / "stop.pt"), **card}
 
 
