@@ -705,7 +705,12 @@ def main(argv: list[str] | None = None) -> int:
     if init is not None:  # its network, plus the goal-position head when asked for (trained from scratch)
         fields_["spec"] = NavSpec(**{**init["spec"], **({"aux_goal": True} if a.aux_goal else {})})
     cfg = TrainConfig(**fields_)
-    res = Trainer(a.root, a.out, cfg, quiet=a.quiet, init=init).run(resume=a.resume)
+    try:
+        trainer = Trainer(a.root, a.out, cfg, quiet=a.quiet, init=init)
+    except FileNotFoundError as e:  # no such data root or release: one line, no traceback
+        print(f"navarena train: {e}", file=sys.stderr)
+        return 2
+    res = trainer.run(resume=a.resume)
     print(f"wrote {res['model']} (sha256 {res['sha256'][:12]}...)")
     return 0
 

@@ -272,7 +272,12 @@ def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     fields_ = {k: getattr(a, k) for k in StopConfig.__dataclass_fields__ if k != "spec"}
     cfg = StopConfig(**fields_, spec=StopSpec(depth_w=a.input[0], depth_h=a.input[1]))
-    res = StopTrainer(a.root, a.out, cfg, quiet=a.quiet).run()
+    try:
+        trainer = StopTrainer(a.root, a.out, cfg, quiet=a.quiet)
+    except FileNotFoundError as e:  # no such data root or release: one line, no traceback
+        print(f"navarena train-stop: {e}", file=sys.stderr)
+        return 2
+    res = trainer.run()
     print(f"wrote {res['model']} (sha256 {res['sha256'][:12]}...)")
     return 0
 

@@ -234,3 +234,14 @@ def test_the_shipped_objectnav_baseline_runs_its_verifier():
     assert a.verifier is not None and a.stop_check == card["stop_verifier"]["stop_check"] and a.stop_force is None
     assert LearnedNavAgent(name="objectnav_bc", device="cpu", verifier="none").verifier is None
     assert LearnedNavAgent(name="objectnav_bc", device="cpu", stop_check=0.6).stop_check == 0.6
+
+
+@pytest.mark.parametrize("command", ["train", "train_stop"])
+def test_training_on_a_missing_root_says_so_in_one_line(command, tmp_path, capsys):
+    import importlib
+
+    main = importlib.import_module(f"navarena.{command}").main
+    assert main([str(tmp_path / "nowhere"), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert f"navarena {command.replace('_', '-')}: " in err and "nowhere: no such folder" in err
+    assert "Traceback" not in err and not (tmp_path / "out").exists()
