@@ -6,7 +6,8 @@ Runs, each in this process and each recorded even when it fails (its error in th
   640x480 and 160x120 on 1 M and 1.5 M Gaussians, one frame and batched;
 - benchmarks.closed_loop.eval --gpu: closed-loop environment steps/s with gsplat, one env and vectorised;
 - benchmarks.map.voxelize_gpu: voxelization of 1 M Gaussians on the GPU vs the CPU path, same run;
-- benchmarks.goals.semantics --gpu: semantics seconds per scene (render, oracle, lift);
+- benchmarks.goals.semantics --gpu: bench-semantics' GPU half (semantics_gpu.json: 10 scenes' precision and
+  seconds per scene: render, oracle, lift);
 - benchmarks.goals.open_vocab_timing: the open_vocab segmenter's frames/s.
 Writes data/08_reports/bench_gpu.{json,md} (and docs/bench_gpu.md with --docs), headed by the
 commit, GPU, driver, torch and gsplat versions. Targets (H100): >= 3,000 frames/s 640x480 RGB-D
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import time
 import traceback
@@ -30,8 +32,6 @@ PARTS = ("ready", "render", "eval", "voxelize", "semantics", "open_vocab")
 
 
 def _commit() -> str:
-    import os
-
     if os.environ.get("NAVARENA_COMMIT"):  # a copy of the tree without its history (a device's)
         return os.environ["NAVARENA_COMMIT"]
     try:
@@ -67,7 +67,10 @@ def _part(name: str, out: Path) -> dict:
         elif name == "semantics":
             from benchmarks.goals import semantics
 
-            res = semantics.main(["--gpu", "--scenes", "3", "--timed", "2", "--out", str(out)])
+            # bench-semantics' GPU half in full (its 10 scenes, the untimed ones over half the cores): one run
+            # gives this page's seconds per scene and the semantics_gpu.json that make bench-semantics merges
+            jobs = max(1, min(8, (os.cpu_count() or 2) // 2))
+            res = semantics.main(["--gpu", "--timed", "2", "--jobs", str(jobs), "--out", str(out)])
             res = {k: v for k, v in res.items() if k not in ("per_scene", "variants")}
         else:
             from benchmarks.goals import open_vocab_timing
