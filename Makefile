@@ -58,10 +58,10 @@ bench-gpu:
 
 REAL_INDOOR ?= ../shared/data/real_indoor/fungi_room_lod3.spz ../shared/data/real_indoor/wangsha_hall_lod3.spz
 # on a host with several GPUs (make setup-gpu first): the release stages over every GPU, 1 GPU vs
-# all, one env group per GPU; data/08_reports/multi_gpu.json, merged into bench-gpu's report
+# all, one env group per GPU; data/08_reports/multi_gpu.json and its page, docs/bench_multi_gpu.md
 bench-multi-gpu:
 	$(BIN)/python -m benchmarks.gpu.multi_gpu --real $(REAL_INDOOR) --out data/08_reports $(ARGS)
-	$(BIN)/python -m benchmarks.gpu.multi_gpu --markdown --out data/08_reports
+	$(BIN)/python -m benchmarks.gpu.multi_gpu --docs --out data/08_reports
 
 # the render check's per-ray hits with every backend here (numba; PyTorch on CUDA when present)
 # at bench-real's poses (make bench-real first: its data root gives the poses and alignments)

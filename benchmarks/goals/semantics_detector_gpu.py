@@ -80,6 +80,10 @@ def run(folder: Path, sources: dict[str, str], cpu_views: int, out: Path) -> dic
 
     rep = {"machine": f"{platform.machine()} {platform.node()}", "cores": torch.get_num_threads(),
            "gpu": torch.cuda.get_device_name(0) if torch.cuda.is_available() else None, "scenes": {}}
+    if out.is_file():  # scenes run one at a time (a device that carries one capture a call): keep the others
+        old = json.loads(out.read_text())
+        if (old.get("machine"), old.get("gpu")) == (rep["machine"], rep["gpu"]):
+            rep["scenes"] = old.get("scenes", {})
     for name, path in sources.items():
         spec = json.loads((folder / f"{name}.json").read_text())
         gs = load_scene(path, spec["transform"])

@@ -13,7 +13,10 @@ Writes data/08_reports/bench_gpu.{json,md} (and docs/bench_gpu.md with --docs), 
 commit, GPU, driver, torch and gsplat versions. Targets (H100): >= 3,000 frames/s 640x480 RGB-D
 batched on 1 M Gaussians, closed loop >= 1,000 steps/s vectorised, voxelization of 1 M < 2 s.
 
-    python -m benchmarks.gpu.bench_gpu [--out data/08_reports] [--docs] [--only render,voxelize]
+    python -m benchmarks.gpu.bench_gpu [--out data/08_reports] [--docs] [--only render,voxelize] [--notes F]
+    python -m benchmarks.gpu.bench_gpu --from-report --docs [--notes F]   # the page from bench_gpu.json
+
+The several-GPU figures are their own page (docs/bench_multi_gpu.md, make bench-multi-gpu).
 """
 from __future__ import annotations
 
@@ -117,25 +120,38 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--docs", action="store_true", help="also write docs/bench_gpu.md")
     ap.add_argument("--only", default=",".join(PARTS))
+    ap.add_argument("--from-report", action="store_true",
+                    help="measure nothing: write the pages from OUT/bench_gpu.json (e.g. after a part was re-run and folded in)")
+    ap.add_argument("--notes", help="a markdown file appended to the page (how the run was made)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    if args.from_report:
+        rep = json.loads((out / "bench_gpu.json").read_text())
+        write(rep, out, args.docs, args.notes)
+        return rep
     parts = {name: _part(name, out) for name in args.only.split(",") if name}
     ready = parts.get("ready", {})
     rep = {"versions": {"commit": _commit(), **{k: ready.get(k) for k in ("device", "driver", "driver_cuda", "torch",
                                                                          "torch_cuda", "gsplat", "python")}},
            "parts": parts}
     (out / "bench_gpu.json").write_text(jsonio.dumps(rep, indent=1))
-    md = markdown(rep)
-    if (out / "multi_gpu.json").exists():  # written on a multi-GPU host by make bench-multi-gpu
-        from benchmarks.gpu.multi_gpu import markdown as multi_gpu_markdown
+    write(rep, out, args.docs, args.notes)
+    return rep
 
-        md += "\n" + multi_gpu_markdown(json.loads((out / "multi_gpu.json").read_text())) + "\n"
+
+def write(rep: dict, out: Path, docs: bool, notes: str | None = None) -> str:
+    """bench_gpu.md in `out` (and docs/bench_gpu.md with `docs`) from a report; `notes`: a markdown
+    file appended (how the run was made). The several-GPU figures are their own page,
+    docs/bench_multi_gpu.md (make bench-multi-gpu)."""
+    md = markdown(rep)
+    if notes:
+        md += "\n" + Path(notes).read_text().strip() + "\n"
     (out / "bench_gpu.md").write_text(md)
-    if args.docs:
+    if docs:
         write_page("bench_gpu.md", md)
     print(md)
-    return rep
+    return md
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""The release stages on every GPU of one host (a multi-GPU machine; figures in docs/bench_gpu.md).
+"""The release stages on every GPU of one host (a multi-GPU machine; figures in docs/bench_multi_gpu.md).
 
 1. release: the whole pipeline (default stages, goal images and a batched oracle evaluation with
    rendering) over `--scenes` synthetic scenes of `--gaussians` Gaussians plus the real indoor
@@ -180,9 +180,9 @@ def env_groups(data: Path, catalog: Path, n_gpus: int, steps: int) -> dict:
 
 
 def markdown(rep: dict) -> str:
-    """The multi-GPU section of docs/bench_gpu.md from multi_gpu.json."""
+    """docs/bench_multi_gpu.md from multi_gpu.json."""
     m = rep["machine"]
-    lines = ["## Several GPUs on one host", "",
+    lines = ["# bench-multi-gpu: several GPUs on one host", "",
              f"{len(m['gpus'])} x {m['gpus'][0]}, {m['cpu_cores']} cores; torch {m['torch']}, Python {m['python']}. "
              f"Reproduce: `make bench-multi-gpu` (`python -m benchmarks.gpu.multi_gpu`).", ""]
     rel = rep.get("release")
@@ -256,7 +256,8 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=40)
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--eval-episodes", type=int, default=64, help="evaluated episodes per scene and task")
-    ap.add_argument("--markdown", action="store_true", help="print the docs section of an existing multi_gpu.json")
+    ap.add_argument("--markdown", action="store_true", help="print the page of an existing multi_gpu.json")
+    ap.add_argument("--docs", action="store_true", help="write docs/bench_multi_gpu.md from an existing multi_gpu.json")
     ap.add_argument("--renderer", default="gsplat", help="the evaluation's renderer (cpu: a smoke test without CUDA)")
     # an env worker process (started by the env phase)
     ap.add_argument("--env-worker", action="store_true", help=argparse.SUPPRESS)
@@ -269,8 +270,13 @@ def main(argv=None) -> int:
     if args.env_worker:
         env_worker(args)
         return 0
-    if args.markdown:
-        print(markdown(json.loads((Path(args.out) / "multi_gpu.json").read_text())))
+    if args.markdown or args.docs:
+        md = markdown(json.loads((Path(args.out) / "multi_gpu.json").read_text()))
+        if args.docs:
+            from benchmarks.pages import write_page
+
+            write_page("bench_multi_gpu.md", md)
+        print(md)
         return 0
     from pipeline.backends import visible_gpus
 
