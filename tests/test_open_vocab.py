@@ -38,6 +38,10 @@ def test_missing_or_wrong_weights_name_the_key_and_the_files(tmp_path, models):
     (tmp_path / "half" / "config.json").write_text('{"model_type": "sam"}')
     with pytest.raises(SegmenterUnavailable, match="missing preprocessor_config.json, model.safetensors or pytorch_model.bin"):
         OpenVocabSegmenter(OpenVocabConfig(detector=str(det), masker=str(tmp_path / "half")))
+    # a folder saved by transformers >= 5 (one processor_config.json): the error says which transformers the extra takes
+    (tmp_path / "half" / "processor_config.json").write_text("{}")
+    with pytest.raises(SegmenterUnavailable, match=r"processor_config.json, as transformers >= 5 .* takes transformers < 5"):
+        OpenVocabSegmenter(OpenVocabConfig(detector=str(det), masker=str(tmp_path / "half")))
     with pytest.raises(SegmenterUnavailable, match="holds a 'sam' model; this segmenter takes owlv2, owlvit"):
         OpenVocabSegmenter(OpenVocabConfig(detector=str(sam), masker=str(sam)))
 

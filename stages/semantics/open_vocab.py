@@ -71,8 +71,15 @@ def _check_folder(path: Optional[str], key: str, kinds: tuple[str, ...], example
     if not any((p / f).is_file() for f in WEIGHT_FILES):
         missing.append(" or ".join(WEIGHT_FILES[:2]))
     if missing:
+        hint = ""
+        if "preprocessor_config.json" in missing and (p / "processor_config.json").is_file():
+            import transformers
+
+            hint = (f"; it holds a processor_config.json, as transformers >= 5 saves a processor: the open_vocab extra "
+                    f"takes transformers < 5 (installed here: {transformers.__version__}), whose folders hold "
+                    "preprocessor_config.json (pip install -e '.[open_vocab]')")
         raise SegmenterUnavailable(f"{key}={path!r}: missing {', '.join(missing)} (a model folder written by save_pretrained "
-                                   f"or huggingface-cli download; see README 'Open-vocabulary weights')")
+                                   f"or huggingface-cli download; see README 'Open-vocabulary weights'){hint}")
     return p
 
 
