@@ -98,7 +98,21 @@ RELEASE_EPISODES = 22_200_000
 CPU_STAGES = ("ingest", "voxelize", "align", "costmap", "episodes", "goal_images", "semantics", "asset",
               "objectnav_episodes", "export")
 GPU_STAGES = ("voxelize", "semantics", "goal_images")
-SAM3_FPS_H100 = 16.7  # SAM3 image model, 8 prompts, bf16, on the H100 (bench-semantics-gpu, README)
+SAM3_FPS_H100 = 16.7
+"""SAM3 image model, 8 prompts, bf16, on the H100 (bench-semantics-gpu, 2026-11-22): the segmenting rate of
+the cost model when no sam3 timing of the release_gpu.json machine is in semantics_gpu.json."""
+
+
+def sam3_rate(out: Path, device: str | None) -> tuple[float, str]:
+    """(SAM3 frames/s, where it comes from): semantics_gpu.json's sam3 timing (semantics --sam3-timing or
+    --sam3-only) when it was measured on `device` (release_gpu.json's GPU), else SAM3_FPS_H100."""
+    f = out / "semantics_gpu.json"
+    if f.is_file():
+        sem = json.loads(f.read_text())
+        t = sem.get("sam3_timing")
+        if t and t.get("frames_per_s") and sem.get("device") == device:
+            return float(t["frames_per_s"]), f"semantics_gpu.json's sam3 timing on {device}"
+    return SAM3_FPS_H100, "the H100's sam3 timing of 2026-11-22 (SAM3_FPS_H100)"
 
 
 def sample_of(root: Path) -> dict:
@@ -130,7 +144,7 @@ def sample_of(root: Path) -> dict:
             "source_bytes": st["scenes"][0]["source_bytes"], "bytes_per_episode": st["bytes_per_episode"]}
 
 
-def extrapolate(sample: dict, gpu: dict | None, objectnav_like: str = "pointnav") -> dict:
+def extrapolate(sample: dict, gpu: dict | None, objectnav_like: str = "pointnav", sam3_fps: float = SAM3_FPS_H100) -> dict:
     """The 22.2 M release from one scene's sample: 2,000 such scenes at release density."""
     sec, eps = sample["seconds"], sample["episodes"]
     # per-episode cost of the episode-sized stages (tasks the sample lacks, e.g. ObjectNav on an
@@ -157,7 +171,7 @@ def extrapolate(sample: dict, gpu: dict | None, objectnav_like: str = "pointnav"
         sc = SemanticsConfig()
         views = sample["semantics_views"] or int(sample["free_area_m2"] / sc.spacing**2 * round(360 / sc.yaw_step_deg))
         gpu_s = {"voxelize": g["voxelize_s"], "goal_images": g["goal_image_s"] * per_scene_eps["imagenav"],
-                 "semantics": views * (g["semantics_view_s"] + 1.0 / SAM3_FPS_H100)}
+                 "semantics": views * (g["semantics_view_s"] + 1.0 / sam3_fps)}
         cpu_rest = {k: v for k, v in cpu.items() if k not in GPU_STAGES}
         out.update(per_scene_gpu_s=gpu_s, per_scene_cpu_with_gpu_s=cpu_rest,
                    release_core_hours=sum(cpu_rest.values()) * RELEASE_SCENES / 3600,
@@ -169,11 +183,13 @@ def extrapolate(sample: dict, gpu: dict | None, objectnav_like: str = "pointnav"
 def cost(args) -> dict:
     gpu_file = Path(args.out) / "release_gpu.json"
     gpu = json.loads(gpu_file.read_text()) if gpu_file.exists() else None
+    fps, fps_from = sam3_rate(Path(args.out), gpu and gpu.get("device"))
     rep = {"release": {"scenes": RELEASE_SCENES, "episodes": RELEASE_EPISODES, "per_scene": RELEASE},
-           "gpu": {k: gpu[k] for k in ("device", "stages")} if gpu else None, "samples": {}}
+           "gpu": {k: gpu[k] for k in ("device", "stages")} if gpu else None, "samples": {},
+           "sam3_fps": fps, "sam3_fps_from": fps_from}
     for root in args.roots:
         smp = sample_of(Path(root))
-        rep["samples"][smp["name"]] = {**smp, **extrapolate(smp, gpu)}
+        rep["samples"][smp["name"]] = {**smp, **extrapolate(smp, gpu, sam3_fps=fps)}
     worst = max(rep["samples"].values(), key=lambda s: s.get("release_core_hours", s["release_core_hours_cpu_only"]))
     rep["release_core_hours"] = worst.get("release_core_hours")
     rep["release_gpu_hours"] = worst.get("release_gpu_hours")
@@ -304,7 +320,8 @@ def markdown(r: dict) -> str:
         L += ["## Release cost (22.2 M episodes over 2,000 scenes)", "",
               "Stage seconds of one release-size scene on one core of this machine (a sample at 1/10 of the "
               "release density, episode-sized stages scaled linearly, the episodes stage's per-scene set-up "
-              "counted once), GPU stages on the H100:", "",
+              f"counted once), GPU stages on the {(c.get('gpu') or {}).get('device', 'GPU')} (semantics: gsplat's label "
+              f"views plus SAM3 at {c.get('sam3_fps', SAM3_FPS_H100):.1f} frames/s, {c.get('sam3_fps_from', 'SAM3_FPS_H100')}):", "",
               "| scene | Gaussians | stage | CPU only (s) | with GPU: CPU (s) | with GPU: GPU (s) |", "|---|---|---|---|---|---|"]
         for name, smp in c["samples"].items():
             for stg in CPU_STAGES:
@@ -347,7 +364,8 @@ def markdown(r: dict) -> str:
                 f"| {name} | {size} | {v['fps']:.1f} | {v['fps_read_only']:.1f} | {v['bound_speedup']:.2f}x | "
                 f"{v['identical_frames']} of {s['views']} | {v['gaussians_read_mean']:,.0f} of {s['n_gaussians']:,} |"))
         if r["render_gpu"]:
-            L += ["", "Agreement with gsplat (H100, 1 M Gaussians, 10 views):", ""]
+            L += ["", f"Agreement with gsplat ({r['render_gpu']['device']}, {r['render_gpu']['agreement_gaussians']:,} "
+                  "Gaussians, 10 views):", ""]
             for size, v in r["render_gpu"]["agreement"].items():
                 L.append(f"- {size}: PSNR min {v['psnr_min']:.1f} dB (median {v['psnr_median']:.1f}), depth median "
                          f"difference <= {v['depth_median_abs_m_max'] * 1000:.4f} mm; gsplat {v['gsplat_fps']:,.0f} frames/s")
