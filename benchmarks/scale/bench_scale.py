@@ -322,7 +322,8 @@ def markdown(r: dict) -> str:
         L += ["## Release cost (22.2 M episodes over 2,000 scenes)", "",
               "Stage seconds of one release-size scene on one core of this machine (a sample at 1/10 of the "
               "release density, episode-sized stages scaled linearly, the episode stages' per-scene set-up "
-              f"counted once, every other stage once a scene), GPU stages on the {(c.get('gpu') or {}).get('device', 'GPU')} (semantics: gsplat's label "
+              f"counted once, every other stage once a scene), GPU stages on the {(c.get('gpu') or {}).get('device', 'GPU')} "
+              "(semantics: gsplat's label "
               f"views plus SAM3 at {c.get('sam3_fps', SAM3_FPS_H100):.1f} frames/s, {c.get('sam3_fps_from', 'SAM3_FPS_H100')}):", "",
               "| scene | Gaussians | stage | CPU only (s) | with GPU: CPU (s) | with GPU: GPU (s) |", "|---|---|---|---|---|---|"]
         for name, smp in c["samples"].items():
