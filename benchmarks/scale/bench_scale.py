@@ -264,6 +264,8 @@ def report(args) -> dict:
            "render_gpu": gpu and {k: gpu[k] for k in ("device", "agreement_gaussians", "agreement")}}
     write(out, "bench_scale.json", rep)
     md = markdown(rep)
+    if args.notes:  # what the run found, how it was made (appended as it is)
+        md += "\n" + Path(args.notes).read_text().strip() + "\n"
     (out / "bench_scale.md").write_text(md)
     if args.docs:  # only when asked (make bench-scale): a report into a scratch folder must not replace it
         write_page(Path(args.docs).name, md)
@@ -398,6 +400,7 @@ def main(argv=None) -> int:
     rp.add_argument("--real-root")
     rp.add_argument("--compact-root")
     rp.add_argument("--docs", help="also write the markdown report here (make bench-scale: docs/bench_scale.md)")
+    rp.add_argument("--notes", help="a markdown file appended to the report (what the run found)")
     for p in sub.choices.values():
         p.add_argument("--out", default="data/08_reports")
     args = ap.parse_args(argv)
