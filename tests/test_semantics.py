@@ -299,6 +299,11 @@ def test_instances_that_stay_on_the_floor_are_dropped_when_asked():
     every = {f["label"] for f in lift(frames, means, LiftingConfig())}
     kept = {f["label"] for f in lift(frames, means, LiftingConfig(min_top_m=0.25))}
     assert every == {1, 2} and kept == {1}
+    # min_top_m=0 is off: lifted in a frame whose floor lies 2 m below z = 0 (a scene's source frame, as
+    # bench-semantics lifts), every instance stays (a top below 0 dropped them all, 2026-11-27 to 12-02)
+    down = np.array([0.0, 0.0, -2.0])
+    low = [(d, k, np.vstack([c[:3], c[3:]]) + np.pad(down[:, None], ((0, 1), (3, 0))), m) for d, k, c, m in frames]
+    assert {f["label"] for f in lift(low, means + down, LiftingConfig())} == {1, 2}
 
 
 def test_semantics_logs_its_views_and_the_console_counts_them(episode_run, tmp_path):

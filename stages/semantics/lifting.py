@@ -208,7 +208,7 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
             conf = float(g_conf[idx[sel]].mean()) if g_conf is not None else 1.0
             views, agreement = view_support(voxel_keys(p, cfg.delta_vote), voters) if cfg.voting else \
                 (len(np.unique(frames_of[idx[sel]])), 1.0)
-            if views < cfg.min_views or float(p[:, 2].max()) < cfg.min_top_m:
+            if views < cfg.min_views or (cfg.min_top_m > 0 and float(p[:, 2].max()) < cfg.min_top_m):
                 continue
             out.append({"label": int(lab), "center": p.mean(0), "min": p.min(0), "max": p.max(0),
                         "support": int(sel.sum()), "confidence": conf, "views": views, "agreement": agreement})
