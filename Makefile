@@ -16,7 +16,7 @@ GSPLAT_BUILD ?=
 # process; with --no-compile every process that first imports a module compiles it, and make test's
 # processes start side by side: the set-up gained 29 s and the tests lost more (2026-11-27)
 PIP := $(BIN)/python -m pip install -q
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml scripts/torchvision_fix.py
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(PIP) --upgrade pip
 	# the CPU build of torch (an unpinned torch would pull several GB of CUDA packages)
@@ -29,9 +29,9 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -c "import pathlib, sysconfig; pathlib.Path(sysconfig.get_paths()['purelib'], 'navarena_checkout.pth').write_text(str(pathlib.Path.cwd()) + chr(10))"
 	# the lerobot package and the torchvision / torchcodec it imports, next to our CPU torch 2.13:
 	# torchvision 0.28.0 is the release made for torch 2.13, but PyPI builds it for CUDA torch, so its
-	# operators cannot load here; navarena.torchvision_fix (a .pth import hook) lets its Python part load
+	# operators cannot load here; scripts/torchvision_fix.py (a .pth import hook) lets its Python part load
 	$(PIP) --no-deps "lerobot==0.4.4" "torchvision==0.28.0" "torchcodec==0.13.0"
-	$(BIN)/python -m navarena.torchvision_fix install
+	$(BIN)/python scripts/torchvision_fix.py install
 	sh scripts/system_packages.sh
 	touch $(STAMP)
 
@@ -52,13 +52,13 @@ setup-gpu:
 test-gpu:
 	$(BIN)/python -m pytest -q -m gpu $(ARGS)
 
-# every GPU figure in one report: data/08_reports/bench_gpu.{json,md} and docs/bench_gpu.md
+# every GPU figure in one report: data/08_reports/bench_gpu.{json,md} and docs/benchmarks/bench_gpu.md
 bench-gpu:
 	$(BIN)/python -m benchmarks.gpu.bench_gpu --docs $(ARGS)
 
 REAL_INDOOR ?= ../shared/data/real_indoor/fungi_room_lod3.spz ../shared/data/real_indoor/wangsha_hall_lod3.spz
 # on a host with several GPUs (make setup-gpu first): the release stages over every GPU, 1 GPU vs
-# all, one env group per GPU; data/08_reports/multi_gpu.json and its page, docs/bench_multi_gpu.md
+# all, one env group per GPU; data/08_reports/multi_gpu.json and its page, docs/benchmarks/bench_multi_gpu.md
 bench-multi-gpu:
 	$(BIN)/python -m benchmarks.gpu.multi_gpu --real $(REAL_INDOOR) --out data/08_reports $(ARGS)
 	$(BIN)/python -m benchmarks.gpu.multi_gpu --docs --out data/08_reports
@@ -93,7 +93,7 @@ test-all: $(STAMP)
 
 bench: bench-spatial bench-episodes bench-eval bench-semantics
 
-# the benchmark pages (docs/bench_*.md) whose inputs changed since they were measured: the hashes of
+# the benchmark pages (docs/benchmarks/bench_*.md) whose inputs changed since they were measured: the hashes of
 # the stages they measure (as the pipeline's markers) and the digest of their code (benchmarks/pages.py
 # names each page's stages, code and command); exits 1 when one is stale
 bench-stale: $(STAMP)
@@ -103,7 +103,7 @@ bench-spatial: $(STAMP)
 	$(BIN)/python -m benchmarks.map.spatial --docs $(ARGS)
 
 # the README's tour as a new user meets it: each command's time against the time the README states
-# (a scratch folder with its own data/) -> data/08_reports/tour.json, docs/bench_tour.md
+# (a scratch folder with its own data/) -> data/08_reports/tour.json, docs/benchmarks/bench_tour.md
 bench-tour: $(STAMP)
 	$(BIN)/python -m benchmarks.usage.tour --docs $(ARGS)
 
@@ -143,7 +143,7 @@ verify-release: $(STAMP)
 	$(BIN)/navarena verify-release $(DIR) $(ARGS)
 
 # a release of the 2,000-scene simulation: time, peak memory, files, bytes, verify-release time and the
-# 22 M-episode projection -> data/08_reports/bench_release.{json,md}, docs/bench_release.md
+# 22 M-episode projection -> data/08_reports/bench_release.{json,md}, docs/benchmarks/bench_release.md
 bench-release: $(STAMP)
 	$(BIN)/python -m benchmarks.publishing.release --docs $(ARGS)
 
@@ -165,7 +165,7 @@ bench-trained-scan:
 
 # scene and region screening: the quality layer against injected blur and holes on realistic
 # synthetic scenes, and on the real indoor scenes (their screen stage run first; pictures and the
-# sharpness cross-check) -> data/08_reports/screening.json, docs/bench_screening.md
+# sharpness cross-check) -> data/08_reports/screening.json, docs/benchmarks/bench_screening.md
 bench-screening: $(STAMP)
 	$(BIN)/python -m pipeline stages=[screen] scenes=real_indoor data_root=data/real_indoor
 	$(BIN)/python -m benchmarks.captures.screening --real-data data/real_indoor --docs $(ARGS)
@@ -188,13 +188,13 @@ SUBMIT_FLAGS ?=
 submit: $(STAMP)
 	$(BIN)/python -m pipeline.submit --shards $(SHARDS) --scheduler $(SCHEDULER) $(SUBMIT_FLAGS) -- $(ARGS)
 
-# issue 14's and 48's proof (benchmarks/robustness/suite.py): the fault-injection scenarios, 10,000
+# issue 14's and 48's proof (tests/faults/suite.py): the fault-injection scenarios, 10,000
 # fuzz cases of each input kind, reader layout and agent-server frame type, a run under chaos
 # (CHAOS_MINUTES=60: the scale simulation for an hour, about 2 hours in all), then
-# data/08_reports/bench_faults.{json,md} and docs/bench_faults.md
+# data/08_reports/bench_faults.{json,md} and docs/benchmarks/bench_faults.md
 CHAOS_MINUTES ?= 5
 test-faults: $(STAMP)
-	$(BIN)/python -m benchmarks.robustness.suite --chaos-minutes $(CHAOS_MINUTES) $(ARGS)
+	PYTHONPATH=tests $(BIN)/python -m faults.suite --chaos-minutes $(CHAOS_MINUTES) $(ARGS)
 
 # the batch-scheduler tests: a one-node SLURM on this machine (scripts/slurm_localhost.sh, root),
 # then make submit (array job, shards, cancel and resubmit) and executor=slurm (dask-jobqueue)

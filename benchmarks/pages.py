@@ -19,7 +19,7 @@ A page ends with a stamp written by ``write_page``:
 
 ``dirty=1`` says the run had uncommitted changes in the page's code (the figures then belong to
 the commit that lands them, and the check reports the page until it is re-run on a clean tree).
-PAGES names, for every docs/bench_*.md, the command that refreshes it, its stages and its code;
+PAGES names, for every docs/benchmarks/bench_*.md, the command that refreshes it, its stages and its code;
 a test checks that every page is listed and stamped.
 
     python -m benchmarks.pages stale [--strict]     # the stale pages and the changed files
@@ -40,6 +40,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
+PAGES_DIR = "docs/benchmarks"
+"""Where the pages live, beside their index (relative to a project root)."""
 STAMP_RE = re.compile(r"<!-- bench-page: commit=(?P<commit>[0-9a-f]{7,40}) dirty=(?P<dirty>[01]) "
                       r"date=(?P<date>[0-9-]+) -->(\n<!-- bench-inputs: (?P<inputs>\{.*\}) -->)?")
 
@@ -80,9 +82,9 @@ PAGES: dict[str, Page] = {
                                      ("benchmarks/goals/semantics_views.py",), ("semantics",)),
     "bench_blind_views.md": Page("python -m benchmarks.dataset.blind_views --docs docs/bench_blind_views.md",
                                  ("benchmarks/dataset/blind_views.py", *_RENDER), ("episodes",)),
-    "bench_faults.md": Page("make test-faults", ("benchmarks/robustness/suite.py", "benchmarks/robustness/faults.py",
-                                                 "benchmarks/robustness/fuzz_frames.py",
-                                                 "benchmarks/robustness/fuzz_readers.py", "tests/test_faults.py", "pipeline",
+    "bench_faults.md": Page("make test-faults", ("tests/faults/suite.py", "tests/faults/faults.py",
+                                                 "tests/faults/fuzz_frames.py",
+                                                 "tests/faults/fuzz_readers.py", "tests/test_faults.py", "pipeline",
                                                  "navcore/io", "navcore/gaussians/formats", "navcore/eval/protocol"),
                             ALL_STAGES),
     "bench_gpu.md": Page("make bench-gpu", ("benchmarks/gpu/bench_gpu.py", "benchmarks/gpu/render_gpu.py",
@@ -174,7 +176,7 @@ def write_page(name: str, markdown: str, root: Path = ROOT, stage_hashes: dict[s
     """Write docs/<name> (a page of PAGES) with its stamp; returns the path."""
     if name not in PAGES:
         raise KeyError(f"{name} is not a benchmark page of benchmarks.pages.PAGES")
-    path = root / "docs" / name
+    path = root / PAGES_DIR / name
     body = re.sub(r"Measured on commit `[0-9a-f]+`[^\n]*\n(?=<!-- bench-page)", "", markdown)
     body = STAMP_RE.sub("", body).rstrip() + "\n\n"
     path.write_text(body + stamp(name, root, stage_hashes=stage_hashes))
@@ -197,7 +199,7 @@ def stale_pages(root: Path = ROOT, stage_hashes: dict[str, str] | None = None) -
     hashes = stage_hashes
     out: dict[str, list[str]] = {}
     for name, page in PAGES.items():
-        path = root / "docs" / name
+        path = root / PAGES_DIR / name
         if not path.exists():
             out[name] = ["page missing"]
             continue

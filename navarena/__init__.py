@@ -9,7 +9,7 @@ and evaluated in closed loop, without the pipeline.
     print(aggregate(rows)["overall"]["spl"])
 
 The public API (imported on first use, so `import navarena` stays light):
-- the data: NavDataset (navarena.dataset), Episode;
+- the data: NavDataset (navcore.eval.dataset), Episode;
 - the environment: NavEnv, BatchNavEnv, EnvConfig, SceneContext (navcore.eval), NavGymEnv
   (gymnasium, navarena.gym_env);
 - agents and loops: Agent registry AGENTS, make_agent, run_episode, run_episodes,
@@ -33,7 +33,7 @@ except PackageNotFoundError:  # the sources without an install
     __version__ = "unknown"
 
 _API = {
-    "NavDataset": "navarena.dataset", "Episode": "navcore.eval.episode",
+    "NavDataset": "navcore.eval.dataset", "Episode": "navcore.eval.episode",
     "NavEnv": "navcore.eval.env", "EnvConfig": "navcore.eval.env", "SceneContext": "navcore.eval.env",
     "DynamicsConfig": "navcore.eval.env", "BatchNavEnv": "navcore.eval.batch", "NavGymEnv": "navarena.gym_env",
     "AGENTS": "navcore.eval.agents", "make_agent": "navcore.eval.agents",

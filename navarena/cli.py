@@ -16,6 +16,7 @@ CONSUMER = {"inspect": ("navarena.inspect_scene", "a 3DGS file before any run: f
             "eval": ("navarena.evaluate", "evaluate an agent in closed loop on a data root or a release"),
             "train": ("navarena.train", "train a learned baseline (behaviour cloning + DAgger) on a data root or release"),
             "train-stop": ("navarena.train_stop", "train ObjectNav's stop verifier (which categories a STOP succeeds for)"),
+            "card": ("navarena.card", "a training run's model card: ship it, add figures, write its markdown"),
             "serve-agent": ("navarena.serve_agent", "serve an agent over the agent-server protocol"),
             "export-lerobot": ("navarena.lerobot", "a split of a data root as a LeRobot dataset"),
             "render-episodes": ("navarena.render_episodes", "episode videos and an HTML report"),

@@ -18,8 +18,7 @@ import math
 import sys
 from pathlib import Path
 
-from navarena.dataset import TASKS, NavDataset
-from navcore.eval.agents import agent_for
+from navcore.eval.dataset import TASKS, NavDataset
 
 
 def agent_arg(text: str) -> tuple[str, object]:
@@ -106,9 +105,8 @@ def write_results(table, out: Path, meta: dict) -> dict:
 
 def evaluate(args) -> tuple[list[dict], bool]:
     """Every chosen episode, scene by scene; (rows, interrupted)."""
-    from navarena.progress import ToolProgress
-    from navcore.eval.env import NavEnv
-    from navcore.eval.loop import InProcessBatch, run_episode, run_episodes_batched
+    from navcore.eval.loop import evaluate_episodes
+    from navcore.io.tool_progress import ToolProgress
     from navcore.seeds import stream_seed
 
     ds = NavDataset(args.root, args.embodiment)
@@ -121,29 +119,17 @@ def evaluate(args) -> tuple[list[dict], bool]:
     rows: list[dict] = []
     interrupted = False
     with ToolProgress("eval", total, args.quiet) as progress:
+
+        def done(row: dict, frames) -> None:
+            rows.append(row)
+            progress.advance(frames=int(row["steps"]))
+
         try:
             for sid, eps in plan.items():
                 ctx = ds.scene_context(sid, render=not args.no_render, renderer=args.renderer)
-                seed = stream_seed(args.seed, sid, "evaluate") % 2**31
-                if args.batch_slots > 1:
-                    remote = args.agent.startswith(("ws://", "wss://"))
-                    kw = dict(args.agent_arg)
-                    client = agent_for(args.agent, seed, args.timeout, batch=True) if remote else \
-                        InProcessBatch(lambda seed=seed: agent_for(args.agent, seed, args.timeout, **kw))
-
-                    def done(row):
-                        rows.append(row)
-                        progress.advance(frames=int(row["steps"]))
-                        return row
-
-                    run_episodes_batched(ctx, eps, client, args.batch_slots, cfg, on_result=done)
-                else:
-                    env, client = NavEnv(ctx, cfg), agent_for(args.agent, seed, args.timeout, **dict(args.agent_arg))
-                    for ep in eps:
-                        rows.append(run_episode(env, client, ep))
-                        progress.advance(frames=int(rows[-1]["steps"]))
-                if hasattr(client, "close"):
-                    client.close()
+                evaluate_episodes(ctx, eps, args.agent, cfg, seed=stream_seed(args.seed, sid, "evaluate") % 2**31,
+                                  timeout=args.timeout, agent_args=dict(args.agent_arg), batch_slots=args.batch_slots,
+                                  on_result=done)
         except KeyboardInterrupt:
             interrupted = True
     return rows, interrupted

@@ -36,10 +36,10 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from navarena.progress import ToolProgress
 from navcore.io import jsonio
 from navcore.io.atomic import atomic_path
 from navcore.io.catalog import Catalog
+from navcore.io.tool_progress import ToolProgress
 from navcore.io.video import H264Writer
 from navcore.nav.embodiment import Embodiment
 from navcore.nav.poses import wrap_angle

@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from navarena.progress import ToolProgress
+from navcore.io.tool_progress import ToolProgress
 from navcore.render.frames import SceneFrames
 from navcore.seeds import stream_seed
 

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from navarena.progress import ToolProgress
 from navcore.io.catalog import Catalog
+from navcore.io.tool_progress import ToolProgress
 from navcore.nav.embodiment import Embodiment
 
 FREE, INFLATED, OBSTACLE = (255, 255, 255), (170, 170, 170), (20, 20, 20)

@@ -44,9 +44,9 @@ def scannet_scan() -> Path:
 
 @pytest.fixture(scope="session")
 def torchvision_shim():
-    """torchvision's Python part next to the CPU torch (navarena.torchvision_fix, which make setup
-    also installs as a start-up hook; with a matching torchvision this does nothing)."""
-    from navarena.torchvision_fix import apply
+    """torchvision's Python part next to the CPU torch (scripts/torchvision_fix.py, which make setup
+    installs as a start-up hook; with a matching torchvision this does nothing)."""
+    from navarena_torchvision_fix import apply
 
     apply()
 

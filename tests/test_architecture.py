@@ -188,13 +188,14 @@ def test_registries_list_without_importing_heavy_modules(project_root):
 
 def test_moved_modules_leave_no_alias_behind(project_root):
     """What moved out of pipeline/ and stages/ (the catalog to navcore.io, the user tools and the gym
-    env to navarena, the evaluator's library to navcore.eval) has one import path: the old ones are
+    env to navarena, the evaluator's library to navcore.eval) and out of navarena (the dataset API to
+    navcore.eval, the trainers to navcore.baselines, the torchvision install hook to scripts/) has one import path: the old ones are
     gone, and no module is a shim of another."""
     import importlib
 
     for old in ("pipeline.catalog", "pipeline.observations", "pipeline.lerobot_export", "pipeline.render_episodes",
                 "pipeline.inspect_scene", "stages.evaluate.env", "stages.evaluate.gym_env", "stages.evaluate.protocol",
-                "stages.align.floor"):
+                "stages.align.floor", "navarena.dataset", "navarena.progress", "navarena.torchvision_fix"):
         with pytest.raises(ModuleNotFoundError):
             importlib.import_module(old)
     shims = [str(p.relative_to(project_root)) for top in PACKAGES for p in (project_root / top).rglob("*.py")
@@ -210,3 +211,17 @@ def test_pipeline_holds_orchestration_only(project_root):
                      "kernels"}  # compiles the CPU kernels ahead of a first run (a tiny run of the stages)
     found = {p.stem for p in (project_root / "pipeline").glob("*.py")}
     assert found <= orchestration, found - orchestration
+
+
+def test_the_import_contracts_name_every_stage_and_the_benchmarks(project_root):
+    """pyproject's contracts (lint-imports checks them): every stage folder is in the independence
+    list, and benchmarks is a root package that nothing of the product may import."""
+    import tomllib
+
+    linter = tomllib.loads((project_root / "pyproject.toml").read_text())["tool"]["importlinter"]
+    assert "benchmarks" in linter["root_packages"]
+    independent = next(c for c in linter["contracts"] if c["type"] == "independence")["modules"]
+    folders = {f"stages.{p.name}" for p in (project_root / "stages").iterdir() if (p / "__init__.py").exists()}
+    assert set(independent) == folders
+    forbidden = [c for c in linter["contracts"] if c["type"] == "forbidden" and c["forbidden_modules"] == ["benchmarks"]]
+    assert forbidden and set(forbidden[0]["source_modules"]) == {"navcore", "stages", "pipeline", "navarena"}

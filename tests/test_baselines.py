@@ -76,7 +76,8 @@ def test_init_fine_tunes_from_a_checkpoint(trained, episode_run, tmp_path, monke
 def test_init_with_aux_goal_adds_the_head_to_the_checkpoints_network(episode_run, tmp_path):
     """--init of a network without the goal-position head plus --aux-goal: every weight of the
     checkpoint is loaded and the head is new; a checkpoint whose network differs otherwise is refused."""
-    from navarena.train import TrainConfig, Trainer, init_checkpoint, main
+    from navarena.train import main
+    from navcore.baselines.train import TrainConfig, Trainer, init_checkpoint
 
     torch.manual_seed(1)
     plain = NavNet(NavSpec(task="objectnav"))
@@ -122,7 +123,7 @@ def test_a_fine_tune_can_begin_with_a_dagger_round(trained, episode_run, tmp_pat
 def test_a_card_trained_on_real_captures_says_so():
     """A card whose training scenes include real captures (a catalog group other than the generator's)
     does not claim to be trained on generated scenes alone, and names the groups and the fine-tuning."""
-    from benchmarks.baselines.cards import licence_line, real_note
+    from navcore.baselines.card import licence_line, real_note
 
     card = {"licence": "Apache-2.0", "config": {"init": "pointnav_bc"}, "data": {"groups": {"real_indoor": 2}}}
     line = licence_line(card)
@@ -135,7 +136,7 @@ def test_a_card_trained_on_real_captures_says_so():
 def test_a_card_without_held_out_checks_says_its_file_is_the_last_round():
     """A run with --val-episodes 0 ran no check: its card names no check split and does not call the
     kept round the best checked one."""
-    from benchmarks.baselines.cards import kept
+    from navcore.baselines.card import kept
 
     curve = [{"round": 0}, {"round": 1}]
     assert kept({"config": {"keep": "best"}, "curve": curve, "selected_round": 1}) == \
@@ -149,7 +150,8 @@ def test_model_keeps_the_best_checked_round(keep, episode_run, tmp_path, monkeyp
     """A DAgger round can be worse than the one before: with keep=best the final model.pt holds the
     round with the best held-out check (here round 0, scripted: SR 0.5 then 0.25), with keep=last
     the last round's; the network state a resumed run goes on from is the last round's either way."""
-    from navarena.train import TrainConfig, Trainer, main
+    from navarena.train import main
+    from navcore.baselines.train import TrainConfig, Trainer
 
     checks = iter([{"episodes": 4, "sr": 0.5, "spl": 0.4}, {"episodes": 4, "sr": 0.25, "spl": 0.2}])
     monkeypatch.setattr(Trainer, "evaluate", lambda self, *a, **k: next(checks))
@@ -173,10 +175,11 @@ def test_objectnav_check_also_measures_stop_sr(episode_run, tmp_path, monkeypatc
     """ObjectNav's held-out check after a round runs under distance and explicit_stop (scripted here:
     SR 0.5 and Stop SR 0.25); the card's curve and its table carry both. The check passes its
     protocol on: a policy that always stops ends each explicit_stop episode at its first step."""
-    from benchmarks.baselines.cards import curve_table
-    from navarena.dataset import NavDataset
-    from navarena.train import Collector, TrainConfig, Trainer, main
+    from navarena.train import main
+    from navcore.baselines.card import curve_table
     from navcore.baselines.checkpoint import save_checkpoint
+    from navcore.baselines.train import Collector, TrainConfig, Trainer
+    from navcore.eval.dataset import NavDataset
 
     calls = []
 
@@ -209,7 +212,8 @@ def test_objectnav_keeps_the_round_that_also_stops(episode_run, tmp_path, monkey
     """ObjectNav's --keep best ranks a round by the mean of its check's SR and Stop SR (check_score),
     not SR alone: scripted, round 0 reads SR 0.5 and Stop SR 0.1 (mean 0.3), round 1 0.4 and 0.3
     (mean 0.35), and round 1 is kept, where SR alone would keep round 0. Other tracks rank by SR."""
-    from navarena.train import Trainer, check_score, main
+    from navarena.train import main
+    from navcore.baselines.train import Trainer, check_score
 
     checks = iter([{"episodes": 2, "sr": 0.5, "spl": 0.4}, {"episodes": 2, "sr": 0.1, "spl": 0.1},
                    {"episodes": 2, "sr": 0.4, "spl": 0.3}, {"episodes": 2, "sr": 0.3, "spl": 0.3}])
@@ -249,8 +253,8 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     """ImageNav (RGB-D + the goal image, one encoder) and ObjectNav (RGB-D + the goal category): the
     loss falls, the checkpoint is of the track and its agent acts on the track's observations; both
     are labelled by the searching expert, and the card names it (auto resolved)."""
-    from navarena.dataset import NavDataset
     from navarena.train import main
+    from navcore.eval.dataset import NavDataset
     from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
     root = episode_run[0]
@@ -270,7 +274,7 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     assert np.isfinite(aux).all() and np.allclose(aux[:, 1] ** 2 + aux[:, 2] ** 2, 1, atol=1e-5)
     assert ck["spec"]["aux_goal"] and {"aux_loss_first", "aux_loss"} <= set(card["curve"][0])
     if task == "objectnav":  # the nearest success region: the expert stops within the success radius of one
-        from navarena.dataset import NavDataset
+        from navcore.eval.dataset import NavDataset
 
         radius = max(e.success_radius for sid in NavDataset(root).scene_ids(task)
                      for e in NavDataset(root).episodes(sid, task, "train"))
@@ -293,7 +297,7 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
         geo = np.load(tmp_path / "geo" / "rounds" / "round_0.npz")
         assert z["lengths"].sum() > geo["lengths"].sum(), \
             (z["lengths"], geo["lengths"])
-        from benchmarks.baselines.cards import card_markdown  # the card names the expert that labelled it
+        from navcore.baselines.card import card_markdown  # the card names the expert that labelled it
 
         geo_card = json.loads((tmp_path / "geo" / "model_card.json").read_text())
         assert "labelled by the searching expert" in card_markdown(card, shipped=False)
@@ -305,8 +309,8 @@ def test_a_learners_false_stop_is_labelled_and_the_expert_goes_on(veto, episode_
     """DAgger with a learner that always stops (beta 0): without the veto each episode ends at its
     first step, labelled with the expert's move; with it the expert's moves are executed instead,
     so the episodes go on and every one of the learner's false stops is labelled."""
-    from navarena.dataset import NavDataset
-    from navarena.train import Collector, TrainConfig
+    from navcore.baselines.train import Collector, TrainConfig
+    from navcore.eval.dataset import NavDataset
     from navcore.nav.actions import STOP
 
     root = episode_run[0]
@@ -497,8 +501,8 @@ def test_imagenav_specs_from_before_depth_keep_their_network():
 def test_the_goal_in_the_robot_frame_and_rounds_saved_before_the_aux_target(tmp_path):
     """goal_in_robot_frame on known poses; a round file without `aux` (saved before it) loads with
     NaN targets, which the aux loss skips."""
-    from navarena.train import Steps, goal_polar
     from navcore.baselines.model import goal_input
+    from navcore.baselines.train import Steps, goal_polar
     from navcore.nav.poses import goal_in_robot_frame
 
     assert np.allclose(goal_in_robot_frame(1.0, 1.0, np.pi / 2, (1.0, 3.0)), (2.0, 0.0))   # straight ahead
@@ -556,8 +560,8 @@ def test_a_shipped_baseline_decodes_as_its_card_says(tmp_path):
     """The registry name uses the decoding the card's figures were measured with (imagenav_bc samples,
     pointnav_bc and objectnav_bc act greedily); `sample` given overrides it; a checkpoint file is greedy
     unless told; the card says which."""
-    from benchmarks.baselines.cards import card_markdown, cards
     from navcore.baselines.agent import LearnedNavAgent, shipped
+    from navcore.baselines.card import card_markdown, cards
     from navcore.eval.agents import agent_for
 
     decoding = {name: bool(c.get("decoding", {}).get("sample")) for name, c in cards().items()}
@@ -571,7 +575,7 @@ def test_a_shipped_baseline_decodes_as_its_card_says(tmp_path):
 
 
 def test_every_shipped_baseline_has_a_registry_name():
-    from benchmarks.baselines.cards import cards
+    from navcore.baselines.card import cards
     from navcore.eval.agents import AGENTS
 
     shipped = set(cards())
@@ -582,8 +586,8 @@ def test_every_shipped_baseline_has_a_registry_name():
 def test_shipped_pointnav_baseline_beats_depth_reactive(episode_run):
     """Fixed PointNav episodes of the session's generated scene, CPU renderer: the learned policy
     reaches more goals than the hand-written depth_reactive (the same budget for both)."""
-    from navarena.dataset import NavDataset
     from navcore.eval.agents import agent_for
+    from navcore.eval.dataset import NavDataset
     from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
     ds = NavDataset(episode_run[0])
@@ -602,16 +606,18 @@ def test_shipped_pointnav_baseline_beats_depth_reactive(episode_run):
 
 
 def test_model_cards_and_docs_are_generated_from_the_cards():
-    from benchmarks.baselines.cards import cards, write_docs
+    from benchmarks.baselines.evaluation_page import write_docs
+    from navcore.baselines.card import cards
 
     assert "pointnav_bc" in cards()
-    assert write_docs(check=True) == [], "run python -m benchmarks.baselines.cards docs"
+    assert write_docs(check=True) == [], "run python -m benchmarks.baselines.evaluation_page docs"
 
 
 def test_a_trial_is_recorded_without_weights_and_not_registered(trained, tmp_path):
     """A run that is measured but not shipped: its card (no model.pt) goes to the trials folder, its
     .md says so, the docs section lists it as not shipped, and no agent name resolves to it."""
-    from benchmarks.baselines.cards import card_markdown, cards, docs_section, ship
+    from benchmarks.baselines.evaluation_page import docs_section
+    from navcore.baselines.card import card_markdown, cards, ship
     from navcore.eval.agents import AGENTS
 
     dst = ship(trained[0], "tiny_trial", tmp_path, weights=False)
@@ -627,7 +633,8 @@ def test_a_trial_is_recorded_without_weights_and_not_registered(trained, tmp_pat
 def test_a_card_holds_further_tables_and_says_when_real_captures_were_measured(trained, tmp_path):
     """cards evaluation --title adds a table in another setting (replacing one of the same title,
     the main table untouched); --real makes the card say it was measured on real captures."""
-    from benchmarks.baselines.cards import add_evaluation, card_markdown, cards, docs_section, ship
+    from benchmarks.baselines.evaluation_page import docs_section
+    from navcore.baselines.card import add_evaluation, card_markdown, cards, ship
 
     ship(trained[0], "tiny", tmp_path, weights=False)
     summ = tmp_path / "real_run" / "summary.json"

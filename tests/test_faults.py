@@ -1,4 +1,4 @@
-"""Fault injection (slow; `make test-faults`): each scenario of benchmarks.robustness.faults against an
+"""Fault injection (slow; `make test-faults`): each scenario of faults.faults against an
 undisturbed reference run, asserting that every injected fault was survived and every stored
 byte matches. The full-disk scenario needs root (it mounts a tmpfs) and is skipped otherwise.
 
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from benchmarks.robustness import faults
+from faults import faults
 
 pytestmark = [pytest.mark.slow, pytest.mark.faults]
 

@@ -2,7 +2,7 @@
 huge counts, NaN / inf / 1e30 / denormals, empty files, folders in place of files, decompression
 bombs) ends in the scene's SceneFormatError or a validated scene: no other exception, no hang,
 no allocation beyond a bound on the input's size. `make test-faults` runs 10,000 cases a kind
-(benchmarks.robustness.fuzz_readers); here a few dozen each, plus the cases that found real defects."""
+(faults.fuzz_readers); here a few dozen each, plus the cases that found real defects."""
 import gzip
 import struct
 import zipfile
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 
-from benchmarks.robustness.fuzz_readers import KINDS, READER_OF, apply_case, case_strategy, make_seed, run_case, small_scene
+from faults.fuzz_readers import KINDS, READER_OF, apply_case, case_strategy, make_seed, run_case, small_scene
 from navcore.gaussians import SceneFormatError
 from navcore.gaussians.formats import write_sog, write_spz
 from navcore.gaussians.validate import read_validated
@@ -122,7 +122,7 @@ def test_spz_v4_frame_that_declares_more_than_its_stream_is_refused_before_alloc
 
 
 # ---- agent-server frames: a hostile server against the evaluator, a hostile client against ours ----
-from benchmarks.robustness.fuzz_frames import CLIENT_KINDS, SERVER_KINDS  # noqa: E402
+from faults.fuzz_frames import CLIENT_KINDS, SERVER_KINDS  # noqa: E402
 
 
 @pytest.mark.parametrize("spec", [f"client:{k}" for k in CLIENT_KINDS] + [f"server:{k}" for k in SERVER_KINDS])
@@ -130,7 +130,7 @@ def test_hostile_frames_end_in_recorded_failures(spec):
     """A few dozen drawn frames a type (`make test-faults` runs 10,000): the evaluator accepts,
     skips or rejects each with ProtocolError / ValueError; serve_agent answers each with a
     well-formed frame or nothing; no hang, no MemoryError."""
-    from benchmarks.robustness.fuzz_frames import run
+    from faults.fuzz_frames import run
 
     rep = run([spec], cases=25, seed=0, time_limit=5.0)[spec]
     assert rep["cases"] == 25 and rep["crashes"] == rep["hangs"] == rep["memory"] == 0, rep["examples"]
@@ -150,7 +150,7 @@ def test_frames_that_found_defects():
     with pytest.raises(ProtocolError):  # seq True is not an int seq
         unpack(msgpack.packb({"type": "action", "payload": {}, "seq": True, "timestamp": 0}))
     # an image whose PNG header disagrees with its declared shape, and one too large to decode
-    from benchmarks.robustness.fuzz_frames import png_image
+    from faults.fuzz_frames import png_image
 
     with pytest.raises(ProtocolError):
         decode_value({"rgb": png_image(8, 8, declared=[2**20, 2**20, 3])})
@@ -179,8 +179,8 @@ def test_quaternions_near_float32_max_normalize_to_unit(tmp_path):
 
 @pytest.mark.parametrize("kind", ["catalog", "label_folder", "mesh_scannet", "mesh_replica", "mesh_points"])
 def test_catalogs_label_folders_and_meshes_survive_random_corruption(kind, tmp_path):
-    """A few dozen cases of benchmarks.robustness.fuzz_inputs (10,000 an input in make test-faults)."""
-    from benchmarks.robustness.fuzz_inputs import fuzz_kind
+    """A few dozen cases of faults.fuzz_inputs (10,000 an input in make test-faults)."""
+    from faults.fuzz_inputs import fuzz_kind
 
     rep = fuzz_kind(kind, 30, 0, tmp_path)
     assert rep["cases"] == 30 and rep["crash"] == rep["hang"] == rep["memory"] == 0, rep["failures"]
@@ -213,7 +213,7 @@ def test_catalog_defects_found_by_fuzzing_are_clear_errors(tmp_path, text, match
 def test_mesh_defects_found_by_fuzzing_are_clear_errors(tmp_path):
     import json
 
-    from benchmarks.robustness.fuzz_inputs import make_seed
+    from faults.fuzz_inputs import make_seed
     from navcore.labels.mesh import read_labelled_geometry
 
     mesh = make_seed("mesh_replica", tmp_path / "r")

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from benchmarks.robustness.fuzz_inputs import write_labelled_ply
+from faults.fuzz_inputs import write_labelled_ply
 from navcore.labels import BUILTIN, GoalVocabulary, LabelSet, builtin, read_table, resolve
 from navcore.labels.shipped import CleaningConfig, LabelReport, LabelSpec, instances_from_gaussians
 

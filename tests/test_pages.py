@@ -2,15 +2,16 @@
 whose code changed since (benchmarks/pages.py)."""
 import subprocess
 
-from benchmarks.pages import DOCS, PAGES, ROOT, Page, read_stamp, stale_pages, write_page
+from benchmarks.pages import PAGES, PAGES_DIR, ROOT, Page, read_stamp, stale_pages, write_page
 
 
 def test_every_benchmark_page_is_listed_stamped_and_has_real_inputs():
-    pages = {p.name for p in DOCS.glob("bench_*.md")}
+    pages = {p.name for p in (ROOT / PAGES_DIR).glob("bench_*.md")}
+    assert not list((ROOT / "docs").glob("bench_*.md")), "benchmark pages live in docs/benchmarks/, beside their index"
     assert pages == set(PAGES), f"pages without an entry in PAGES or entries without a page: {pages ^ set(PAGES)}"
     for name, page in PAGES.items():
-        st = read_stamp(DOCS / name)
-        assert st is not None, f"docs/{name} names no commit (benchmarks.pages.write_page writes the stamp)"
+        st = read_stamp(ROOT / PAGES_DIR / name)
+        assert st is not None, f"{PAGES_DIR}/{name} names no commit (benchmarks.pages.write_page writes the stamp)"
         missing = [p for p in page.inputs if not (ROOT / p).exists()]
         assert not missing, (name, missing)
 
@@ -27,7 +28,7 @@ def test_stale_check_known_answer(tmp_path, monkeypatch):
     a comment, a docstring or a file elsewhere does not; re-writing it makes it current again; a run
     with uncommitted code changes is reported until re-run clean."""
     _git(tmp_path, "init", "-q")
-    (tmp_path / "docs").mkdir()
+    (tmp_path / PAGES_DIR).mkdir(parents=True)
     bench = tmp_path / "benchmarks/map"
     bench.mkdir(parents=True)
     (bench / "spatial.py").write_text("import os\n\ndef f():\n    return 1\n\n\ndef g():\n    return 2\n")
@@ -55,13 +56,13 @@ def test_stale_check_known_answer(tmp_path, monkeypatch):
     (bench / "spatial.py").write_text("def f():\n    return 3\n")
     assert stale()["bench_spatial.md"] == ["code of benchmarks/map"]
     _git(tmp_path, "commit", "-qam", "b")
-    write_page("bench_spatial.md", (tmp_path / "docs/bench_spatial.md").read_text(), root=tmp_path, stage_hashes=hashes)
+    write_page("bench_spatial.md", (tmp_path / "docs/benchmarks/bench_spatial.md").read_text(), root=tmp_path, stage_hashes=hashes)
     assert "bench_spatial.md" not in stale()
-    page = (tmp_path / "docs/bench_spatial.md").read_text()
+    page = (tmp_path / "docs/benchmarks/bench_spatial.md").read_text()
     assert page.count("bench-page:") == 1 and page.count("bench-inputs:") == 1 and page.count("Measured on") == 1
     (bench / "spatial.py").write_text("def f():\n    return 4\n")
     write_page("bench_spatial.md", "# bench\n", root=tmp_path, stage_hashes=hashes)  # measured with uncommitted changes
-    assert read_stamp(tmp_path / "docs/bench_spatial.md")["dirty"]
+    assert read_stamp(tmp_path / "docs/benchmarks/bench_spatial.md")["dirty"]
     assert stale()["bench_spatial.md"][0] == "measured with uncommitted changes"
     # pages that do not exist are listed too
     assert stale()["bench_real.md"] == ["page missing"]

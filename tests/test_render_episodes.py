@@ -40,7 +40,7 @@ def test_count_is_the_total_round_robin_and_one_index_links_every_video(rendered
 
 
 def test_progress_prints_plain_lines_without_a_terminal(capsys):
-    from navarena.progress import ToolProgress
+    from navcore.io.tool_progress import ToolProgress
 
     with ToolProgress("render-episodes", 3, unit="videos", log_every=0) as p:
         p.advance(1, 100)

@@ -22,7 +22,7 @@ TINY = ["--poses-per-scene", "48", "--grad-steps", "25", "--batch", "16", "--wid
 def test_labels_follow_the_evaluators_rule():
     """A pose is positive for a category within its success radius of one of the category's
     regions (boxes, the evaluator's region_distance), whatever the other categories."""
-    from navarena.train_stop import pose_labels
+    from navcore.baselines.train_stop import pose_labels
 
     regions = {"chair": (np.array([[0.0, 0.0, 1.0, 1.0]]), 0.5), "bed": (np.array([[4.0, 0.0, 6.0, 2.0]]), 1.0)}
     cats = ("chair", "bed", "sofa")
@@ -34,7 +34,7 @@ def test_labels_follow_the_evaluators_rule():
 
 
 def test_poses_near_an_instance_face_it():
-    from navarena.train_stop import StopConfig, sample_poses
+    from navcore.baselines.train_stop import StopConfig, sample_poses
 
     g = np.stack(np.meshgrid(np.arange(0, 8, 0.25), np.arange(0, 8, 0.25)), -1).reshape(-1, 2)
     box = np.array([[3.0, 3.0, 4.0, 4.0]])
@@ -177,7 +177,8 @@ def test_a_verifier_is_shipped_into_a_card_and_shown(stop_runs, tmp_path):
     track's card, or a run whose file is not the one its card names, is refused."""
     import shutil
 
-    from benchmarks.baselines.cards import MODELS, add_evaluation, card_markdown, ship_verifier
+    from navcore.baselines.agent import MODELS
+    from navcore.baselines.card import add_evaluation, card_markdown, ship_verifier
 
     models = tmp_path / "models"
     (models / "objectnav_bc").mkdir(parents=True)

@@ -96,7 +96,7 @@ def decoy_images(ctx, episodes: list, pool: list, width: int, height: int) -> di
 def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: str | None = None,
             width: int = 160, height: int = 120, slots: int = 16, task: str = "imagenav",
             protocol: str | None = None, checkpoint: str | None = None) -> dict:
-    from navarena.dataset import NavDataset
+    from navcore.eval.dataset import NavDataset
     from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
     agent, protocol = agent or f"{task}_bc", protocol or PROTOCOL[task]

@@ -60,7 +60,7 @@ ROUNDS = os.environ.get("ROUNDS", "")  # N, or task=N,...; a track not named: na
 
 def rounds(task: str) -> int:
     """The reference run's rounds for `task` (ROUNDS: one number for every track, or task=N pairs)."""
-    from navarena.train import TrainConfig
+    from navcore.baselines.train import TrainConfig
 
     if ROUNDS.strip().isdigit():
         return int(ROUNDS)
@@ -230,7 +230,7 @@ def train(deadline: Deadline, which: str) -> int:
 
 
 def test_scenes() -> list[str]:
-    from navarena.dataset import NavDataset
+    from navcore.eval.dataset import NavDataset
 
     ds = NavDataset(ROOT)
     return sorted(set(ds.eval_set(SPLIT)["scene_id"])) if SPLIT == "eval_zeroshot" else ds.scene_ids()
@@ -239,7 +239,7 @@ def test_scenes() -> list[str]:
 def evaluate(deadline: Deadline, per_gpu: int = EVAL_PER_GPU) -> int:
     """Each track's zero-shot set for every agent (see the module docstring), merged per agent,
     track and protocol."""
-    from benchmarks.baselines.cards import MODELS
+    from navcore.baselines.agent import MODELS
 
     trained = [t for t in TRAIN_TASKS if finished(RUNS / f"{t}_bc", rounds(t))]
     tracks = [t for t in TASKS if t in EVAL_TASKS and

@@ -17,7 +17,7 @@ import time
 def measure(root: str, split: str = "train", per_scene: int = 25, task: str = "objectnav", overlap: float = 0.0):
     import pandas as pd
 
-    from navarena.dataset import NavDataset
+    from navcore.eval.dataset import NavDataset
     from navcore.eval.env import EnvConfig, NavEnv
     from navcore.nav.actions import STOP
     from navcore.nav.oracle import DiscreteOracle

@@ -39,7 +39,7 @@ def load(root: str, results: str) -> list[dict]:
     episodes' goals_json, other objects from 04_semantics/<scene>/instances.parquet)."""
     import pandas as pd
 
-    from navarena.dataset import NavDataset
+    from navcore.eval.dataset import NavDataset
 
     ds, rows, ends = NavDataset(root), pd.read_parquet(results), []
     for sid, part in rows.groupby("scene_id"):

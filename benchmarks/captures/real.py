@@ -8,7 +8,7 @@ costmap, the top-down costmap, the floor side view and three egocentric views at
 (CPU renderer, 320x240). Then, on realistic synthetic scenes (realism level moderate) against the
 mesh: the costmap's true state FP / FN rates and the render estimator's error at the same poses.
 
-Writes data/08_reports/bench_real.{json,md} and docs/bench_real.md. Pictures of the real scenes
+Writes data/08_reports/bench_real.{json,md} and docs/benchmarks/bench_real.md. Pictures of the real scenes
 go to data/08_reports/bench_real/ only: their sources state no licence, so no render of them is
 committed or published (the markdown links the local files).
   python -m benchmarks.captures.real [--data data] [--synthetic-scenes 3] [--poses 200]

@@ -152,7 +152,7 @@ def main(argv=None) -> int:
 
 
 def markdown(rep: dict, args) -> str:
-    """docs/bench_screening.md from a report."""
+    """docs/benchmarks/bench_screening.md from a report."""
     import platform
 
     pc = lambda x: f"{100 * x:.1f} %"  # noqa: E731

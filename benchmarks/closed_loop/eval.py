@@ -168,7 +168,7 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser()
     ap.add_argument("--data", default="data")
     ap.add_argument("--out", default="data/08_reports")
-    ap.add_argument("--docs", action="store_true", help="also write docs/bench_eval.md")
+    ap.add_argument("--docs", action="store_true", help="also write docs/benchmarks/bench_eval.md")
     ap.add_argument("--gpu", action="store_true")
     ap.add_argument("--merge-gpu", action="store_true", help="only fold eval_gpu.json into an existing report")
     args = ap.parse_args(argv)

@@ -3,7 +3,7 @@ starts, ImageNav goal views and trajectory frames, against the costmap's own fre
 same directions.
 
     python -m benchmarks.dataset.blind_views --root data/real_indoor [--per-kind 100] [--out data/08_reports]
-        -> blind_views.json, and docs/bench_blind_views.md (--docs)
+        -> blind_views.json, and docs/benchmarks/bench_blind_views.md (--docs)
 
 A view counts as blocked when its rendered depth (median over a 40x30 frame, SH degree 0) is under
 `--near` metres while the costmap sees at least twice as far (median of 9 rays over the field of

@@ -30,7 +30,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from benchmarks import machine
-from benchmarks.pages import DOCS, write_page
+from benchmarks.pages import PAGES_DIR, ROOT, write_page
 from navcore.io import jsonio
 from navcore.io.datasets import CostmapDataset
 from navcore.nav.costmap import Costmap
@@ -226,7 +226,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--episodes", type=int, default=None, help="episodes per scene and task (default: config)")
     ap.add_argument("--data", default="data")
     ap.add_argument("--out", default="data/08_reports")
-    ap.add_argument("--docs", action="store_true", help="also write docs/bench_episodes.md (make bench-episodes)")
+    ap.add_argument("--docs", action="store_true", help="also write docs/benchmarks/bench_episodes.md (make bench-episodes)")
     ap.add_argument("--density", type=int, default=1000,
                     help="episodes per scene and task of the throughput run at release density (0 = skip)")
     ap.add_argument("--repeats", type=int, default=3, help="repeats of the release-density run (median)")
@@ -364,7 +364,7 @@ def main(argv=None) -> dict:
     (out / "bench_episodes.md").write_text(_markdown(result))
     if args.docs:
         write_page("bench_episodes.md", _markdown(result))
-        (DOCS / "bench_episodes_geodesic.png").write_bytes((out / "bench_episodes_geodesic.png").read_bytes())
+        (ROOT / PAGES_DIR / "bench_episodes_geodesic.png").write_bytes((out / "bench_episodes_geodesic.png").read_bytes())
     print(_markdown(result))
     return result
 

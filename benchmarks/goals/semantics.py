@@ -241,7 +241,7 @@ def timing(rep: dict) -> dict:
 
 def write_report(out: Path, cpu: dict | None, gpu: dict | None, docs: bool = True) -> dict:
     """The report: metrics from the GPU run when there is one (same code; the renderers agree to
-    > 75 dB), timings from both; docs: also docs/bench_semantics.md."""
+    > 75 dB), timings from both; docs: also docs/benchmarks/bench_semantics.md."""
     base = dict(gpu or cpu)
     base.pop("per_scene", None)
     base["timing_gpu"] = timing(gpu) if gpu else None

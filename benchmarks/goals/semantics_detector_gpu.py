@@ -9,7 +9,7 @@ source, aligns it and keeps its content (render_check_gpu.load_scene), renders e
 stage's batches with each renderer this machine has (gsplat on CUDA: all views, after a warm-up
 batch that compiles the kernels; cpu: the first `--cpu-views` views, seconds scaled to all), and
 writes the seconds. The detection and the lifting run on the CPU in either case (OpenCV DNN's CPU
-path); their seconds come from the CPU run of the stage (docs/bench_semantics_detector.md).
+path); their seconds come from the CPU run of the stage (docs/benchmarks/bench_semantics_detector.md).
   python -m benchmarks.goals.semantics_detector_gpu prepare --data data/real_indoor --out OUT
   python -m benchmarks.goals.semantics_detector_gpu run OUT --source NAME=PATH ... [--out FILE]
 """

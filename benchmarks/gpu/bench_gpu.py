@@ -9,14 +9,14 @@ Runs, each in this process and each recorded even when it fails (its error in th
 - benchmarks.goals.semantics --gpu: bench-semantics' GPU half (semantics_gpu.json: 10 scenes' precision and
   seconds per scene: render, oracle, lift);
 - benchmarks.goals.open_vocab_timing: the open_vocab segmenter's frames/s.
-Writes data/08_reports/bench_gpu.{json,md} (and docs/bench_gpu.md with --docs), headed by the
+Writes data/08_reports/bench_gpu.{json,md} (and docs/benchmarks/bench_gpu.md with --docs), headed by the
 commit, GPU, driver, torch and gsplat versions. Targets (H100): >= 3,000 frames/s 640x480 RGB-D
 batched on 1 M Gaussians, closed loop >= 1,000 steps/s vectorised, voxelization of 1 M < 2 s.
 
     python -m benchmarks.gpu.bench_gpu [--out data/08_reports] [--docs] [--only render,voxelize] [--notes F]
     python -m benchmarks.gpu.bench_gpu --from-report --docs [--notes F]   # the page from bench_gpu.json
 
-The several-GPU figures are their own page (docs/bench_multi_gpu.md, make bench-multi-gpu).
+The several-GPU figures are their own page (docs/benchmarks/bench_multi_gpu.md, make bench-multi-gpu).
 """
 from __future__ import annotations
 
@@ -118,7 +118,7 @@ def markdown(rep: dict) -> str:
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default="data/08_reports")
-    ap.add_argument("--docs", action="store_true", help="also write docs/bench_gpu.md")
+    ap.add_argument("--docs", action="store_true", help="also write docs/benchmarks/bench_gpu.md")
     ap.add_argument("--only", default=",".join(PARTS))
     ap.add_argument("--from-report", action="store_true",
                     help="measure nothing: write the pages from OUT/bench_gpu.json (e.g. after a part was re-run and folded in)")
@@ -141,9 +141,9 @@ def main(argv=None) -> dict:
 
 
 def write(rep: dict, out: Path, docs: bool, notes: str | None = None) -> str:
-    """bench_gpu.md in `out` (and docs/bench_gpu.md with `docs`) from a report; `notes`: a markdown
+    """bench_gpu.md in `out` (and docs/benchmarks/bench_gpu.md with `docs`) from a report; `notes`: a markdown
     file appended (how the run was made). The several-GPU figures are their own page,
-    docs/bench_multi_gpu.md (make bench-multi-gpu)."""
+    docs/benchmarks/bench_multi_gpu.md (make bench-multi-gpu)."""
     md = markdown(rep)
     if notes:
         md += "\n" + Path(notes).read_text().strip() + "\n"

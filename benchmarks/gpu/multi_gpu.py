@@ -1,4 +1,4 @@
-"""The release stages on every GPU of one host (a multi-GPU machine; figures in docs/bench_multi_gpu.md).
+"""The release stages on every GPU of one host (a multi-GPU machine; figures in docs/benchmarks/bench_multi_gpu.md).
 
 1. release: the whole pipeline (default stages, goal images and a batched oracle evaluation with
    rendering) over `--scenes` synthetic scenes of `--gaussians` Gaussians plus the real indoor
@@ -180,7 +180,7 @@ def env_groups(data: Path, catalog: Path, n_gpus: int, steps: int) -> dict:
 
 
 def markdown(rep: dict) -> str:
-    """docs/bench_multi_gpu.md from multi_gpu.json."""
+    """docs/benchmarks/bench_multi_gpu.md from multi_gpu.json."""
     m = rep["machine"]
     lines = ["# bench-multi-gpu: several GPUs on one host", "",
              f"{len(m['gpus'])} x {m['gpus'][0]}, {m['cpu_cores']} cores; torch {m['torch']}, Python {m['python']}. "

@@ -344,7 +344,7 @@ def main(argv=None) -> int:
 
 def write_report(rep: dict, out: Path, docs: bool = False) -> None:
     """Merge the GPU voxelization figure (from benchmarks.map.voxelize_gpu on a CUDA machine) when
-    present, then write the JSON and the markdown table (and docs/bench_spatial.md with docs)."""
+    present, then write the JSON and the markdown table (and docs/benchmarks/bench_spatial.md with docs)."""
     gpu_file = out / "voxelize_gpu.json"
     if gpu_file.exists():
         gv = json.loads(gpu_file.read_text())

@@ -8,7 +8,7 @@ that the release finds every stage done). For each size (the first n generated s
 scenes.count=n) a release is built in a subprocess whose peak RSS is polled: the build streams scene
 by scene, so its memory must not grow with the number of episodes; then verify-release hashes the
 whole folder and re-checks 200 episodes against the maps. Writes data/08_reports/bench_release.{json,md}
-and, with --docs, docs/bench_release.md.
+and, with --docs, docs/benchmarks/bench_release.md.
 """
 from __future__ import annotations
 

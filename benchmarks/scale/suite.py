@@ -7,7 +7,7 @@
    release_gpu.json, written on a CUDA machine by `python -m benchmarks.publishing.release_gpu`);
 3. the CPU renderer (its frames/s and its bound) on the real scenes;
 4. the 2,000-scene simulation and the SLURM tests;
-5. the report: data/08_reports/bench_scale.{json,md} and docs/bench_scale.md.
+5. the report: data/08_reports/bench_scale.{json,md} and docs/benchmarks/bench_scale.md.
 
     python -m benchmarks.scale.suite [--skip-runs]   # --skip-runs: reuse the data roots already there
 """

@@ -1,6 +1,6 @@
 """The README's five-minute tour, timed as a new user meets it: each step's command run as printed
 (in a scratch folder with its own `data/`, through this checkout's venv), its wall time against the
-time the README states for it. Writes data/08_reports/tour.json and docs/bench_tour.md.
+time the README states for it. Writes data/08_reports/tour.json and docs/benchmarks/bench_tour.md.
 
     python -m benchmarks.usage.tour [--work DIR] [--repeats N] [--docs]     # make bench-tour
 
@@ -112,7 +112,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--work", type=Path, default=None, help="scratch folder (default: a temporary one, removed)")
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--docs", action="store_true", help="write docs/bench_tour.md")
+    ap.add_argument("--docs", action="store_true", help="write docs/benchmarks/bench_tour.md")
     ap.add_argument("--strict", action="store_true", help="exit 1 when a step fails or runs over its stated time")
     a = ap.parse_args(argv)
     missing = [s.command for s in STEPS if not in_readme(s)]

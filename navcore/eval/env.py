@@ -151,6 +151,25 @@ class SceneContext:
         self._fields: dict[str, object] = {}
         self.max_fields = 256
 
+    @classmethod
+    def from_catalog(cls, catalog, scene, emb, components: str, min_island_area_m2: float, neighbourhood: int,
+                     render: bool = True, renderer: str = "auto") -> "SceneContext":
+        """A data root's scene as every evaluation sees it: the stored costmap of the embodiment, the
+        geodesic graph over the cells its episodes may use (navcore.nav.geodesic.eligible_cells, with
+        the episodes config's `components` and `min_island_area_m2`) and, with render, the aligned
+        scene less the splats the costmap hid from the camera, on `renderer` (auto | cpu | gsplat).
+        The one constructor both the pipeline's evaluate stage and NavDataset use."""
+        from types import SimpleNamespace
+
+        from navcore.gaussians.content import camera_scene
+        from navcore.nav.geodesic import NavGraph, eligible_cells
+
+        cm = catalog.dataset("costmaps", scene).load(emb.name)
+        rules = SimpleNamespace(components=components, min_island_area_m2=min_island_area_m2)
+        graph = NavGraph(cm, eligible_cells(cm, rules), neighbourhood)
+        gs = camera_scene(catalog, scene, emb.name)[0] if render else None
+        return cls(cm, graph, emb, gs, renderer)
+
     def field(self, ep: Episode):
         """Geodesic distance field to the episode's goal (set), cached per episode."""
         key = (ep.task, ep.episode_id)  # episode ids repeat across tasks

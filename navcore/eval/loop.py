@@ -5,6 +5,7 @@ import time
 
 import numpy as np
 
+from navcore.eval.agents import agent_for
 from navcore.eval.env import EnvConfig, NavEnv
 from navcore.eval.metrics import episode_metrics
 
@@ -172,3 +173,46 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
     order = {(ep.task, ep.episode_id): k for k, ep in enumerate(episodes)}
     rows.sort(key=lambda r: order.get((r["task"], r["episode_id"]), 0))
     return rows
+
+
+def evaluate_episodes(ctx, episodes, agent: str, cfg: EnvConfig, *, seed: int = 0, timeout: float = 60.0,
+                      agent_args: dict | None = None, batch_slots: int = 1, videos: int = 0, on_result=None) -> list[dict]:
+    """The evaluate verb: one agent on one scene's episodes, the loop both `navarena eval` and the
+    pipeline's `evaluate` stage run. Picks the agent's form (an agent server over the protocol,
+    batched or one episode at a time; in-process agents, one per slot when batched), drives the
+    episodes, and closes the agent, whatever happened.
+
+    Args:
+        ctx: the scene's SceneContext (SceneContext.from_catalog, NavDataset.scene_context).
+        episodes: the Episodes to run, in order.
+        agent: a registry name, "package.module:Class" or ws://host:port (navcore.eval.agents.agent_for).
+        cfg: the environment's config (protocol, render size, step sizes).
+        seed: the seed of stochastic agents (per scene: the caller derives it).
+        timeout: seconds an agent server may take for an action.
+        agent_args: keyword arguments of the agent's constructor (or of the remote client).
+        batch_slots: episodes stepped together (> 1: one render call a step, no frames recorded).
+        videos: with batch_slots 1, the first `videos` episodes' egocentric RGB frames are passed to on_result.
+        on_result: called as each episode finishes, on_result(row, frames) (frames: a list of
+            HxWx3 uint8, or None when not recorded).
+
+    Returns:
+        The episodes' result rows (navcore.eval.loop.result_row), in the order of `episodes`.
+    """
+    kwargs = dict(agent_args or {})
+    report = on_result or (lambda row, frames: None)
+    remote = agent.startswith(("ws://", "wss://"))
+    client = None
+    try:
+        if batch_slots > 1:
+            client = agent_for(agent, seed, timeout, batch=True, **kwargs) if remote else \
+                InProcessBatch(lambda: agent_for(agent, seed, timeout, **kwargs))
+            return run_episodes_batched(ctx, episodes, client, batch_slots, cfg, on_result=lambda row: report(row, None))
+        env, client, rows = NavEnv(ctx, cfg), agent_for(agent, seed, timeout, **kwargs), []
+        for k, ep in enumerate(episodes):
+            frames = [] if cfg.render and k < videos else None
+            rows.append(run_episode(env, client, ep, frames))
+            report(rows[-1], frames)
+        return rows
+    finally:
+        if client is not None and hasattr(client, "close"):
+            client.close()

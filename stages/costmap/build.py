@@ -296,7 +296,7 @@ def hidden_splats(scene: GaussianScene, noise: np.ndarray, layers: "CostmapLayer
     plus half a cell diagonal, and that extent meets the body band [h_min, h_max] within radius +
     extent + half a cell diagonal of a free cell's centre. The robot drives through them, so its
     camera must not see them: a camera that passes through a 0.3 m opaque floater sees nothing
-    else (docs/bench_blind_views.md). The clearance test keeps surface splats that a sparse
+    else (docs/benchmarks/bench_blind_views.md). The clearance test keeps surface splats that a sparse
     scene's isolated rule calls noise (stages/costmap/design.md).
 
     Args:

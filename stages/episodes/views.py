@@ -4,7 +4,7 @@ not have.
 A trained reconstruction holds floaters and blur in the space the costmap calls free (large,
 opaque, sparse Gaussians near the capture path: ingest calls them floaters, and the map, built from
 the content, drives through them). A start pose inside one gives the agent a first observation of
-one colour (docs/bench_blind_views.md: a fifth of the real room's starts). The test casts the
+one colour (docs/benchmarks/bench_blind_views.md: a fifth of the real room's starts). The test casts the
 costmap's 9 rays across the field of view (their median free distance D) and
 renders the camera with its far plane at min(near_m, D - MAP_MARGIN), so only the Gaussians whose
 mean lies nearer than any obstacle the map knows there (about a millisecond on the CPU, whatever

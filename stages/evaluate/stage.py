@@ -14,16 +14,13 @@ import numpy as np
 import pyarrow as pa
 from omegaconf import OmegaConf
 
-from navcore.eval.agents import agent_for
-from navcore.eval.env import EnvConfig, NavEnv, SceneContext
+from navcore.eval.env import EnvConfig, SceneContext
 from navcore.eval.episode import Episode
-from navcore.eval.loop import run_episode
+from navcore.eval.loop import evaluate_episodes
 from navcore.eval.metrics import METRICS
-from navcore.gaussians.content import camera_scene
 from navcore.io.licences import redistributable
 from navcore.io.progress_log import ProgressLog
 from navcore.nav.eval_set import EvalSetConfig, listing
-from navcore.nav.geodesic import NavGraph, eligible_cells
 from navcore.seeds import stream_seed
 from stages.evaluate.config import EvaluateConfig
 
@@ -96,57 +93,33 @@ def load_episodes(catalog, scene, ecfg: EvaluateConfig, eval_ids: dict[str, set[
 
 
 def scene_context(scene, cfg, catalog, render: bool, renderer: str) -> SceneContext:
-    """A scene's evaluation context: its costmap for the embodiment, the geodesic graph over the
-    episodes' eligible cells and, with render, the scene as the robot's camera sees it (less the
-    floaters it drives through) on `renderer`."""
-    emb = OmegaConf.to_object(cfg.embodiment)
-    cm = catalog.dataset("costmaps", scene).load(emb.name)
-    graph = NavGraph(cm, eligible_cells(cm, OmegaConf.to_object(cfg.episodes)), cfg.episodes.geodesic_neighbourhood)
-    gs = camera_scene(catalog, scene, emb.name)[0] if render else None
-    return SceneContext(cm, graph, emb, gs, renderer)
+    """SceneContext.from_catalog with the run's embodiment and episodes config."""
+    return SceneContext.from_catalog(catalog, scene, OmegaConf.to_object(cfg.embodiment), cfg.episodes.components,
+                                     cfg.episodes.min_island_area_m2, cfg.episodes.geodesic_neighbourhood, render, renderer)
 
 
 def run(scene, cfg, catalog) -> dict:
     ecfg: EvaluateConfig = OmegaConf.to_object(cfg.evaluate)
     ctx = scene_context(scene, cfg, catalog, ecfg.render, ecfg.renderer)
-    cm = ctx.costmap
     env_cfg = EnvConfig.of(ecfg, OmegaConf.to_object(cfg.episodes).actions)
     episodes = load_episodes(catalog, scene, ecfg, eval_set_ids(catalog, scene, cfg))
-    seed = stream_seed(ecfg.seed, scene.scene_id, "evaluate") % 2**31
-    remote = ecfg.agent.startswith(("ws://", "wss://"))
     run = run_name(ecfg)
     videos = []
     log = ProgressLog(catalog.dataset("eval_progress", scene, run=run).path)
     log.start(len(episodes), scene_id=scene.scene_id, scene=scene.name, run=run)
 
-    def logged(row: dict) -> dict:
+    def logged(row: dict, frames: list | None) -> None:
         log.item(task=row["task"], episode_id=row["episode_id"], success=bool(row["sr"]), spl=row["spl"],
                  steps=int(row["steps"]), end_reason=row["end_reason"], error=row["error"])
-        return row
+        if frames:  # the first evaluate.videos episodes of an unbatched run
+            videos.append(write_video(frames, catalog.dataset("eval_video", scene, run=run, task=row["task"],
+                                                              episode_id=row["episode_id"])))
 
-    if ecfg.batch_slots > 1:  # batched: no videos (frames of many slots interleave)
-        from navcore.eval.loop import InProcessBatch, run_episodes_batched
-
-        if remote:
-            from navcore.eval.protocol.client import RemoteBatchAgent
-
-            client = RemoteBatchAgent(ecfg.agent, timeout=ecfg.timeout_s, **ecfg.agent_args)
-        else:
-            client = InProcessBatch(lambda: agent_for(ecfg.agent, seed, ecfg.timeout_s, **ecfg.agent_args))
-        rows = run_episodes_batched(ctx, episodes, client, ecfg.batch_slots, env_cfg, on_result=logged)
-    else:
-        env, agent, rows = NavEnv(ctx, env_cfg), agent_for(ecfg.agent, seed, ecfg.timeout_s, **ecfg.agent_args), []
-        for ep in episodes:
-            frames = [] if (ecfg.render and len(videos) < ecfg.videos) else None
-            rows.append(logged(run_episode(env, agent, ep, frames)))
-            if frames:
-                videos.append(write_video(frames, catalog.dataset("eval_video", scene, run=run, task=ep.task,
-                                                                  episode_id=ep.episode_id)))
-        client = agent
-    if hasattr(client, "close"):
-        client.close()
+    rows = evaluate_episodes(ctx, episodes, ecfg.agent, env_cfg, seed=stream_seed(ecfg.seed, scene.scene_id, "evaluate") % 2**31,
+                             timeout=ecfg.timeout_s, agent_args=ecfg.agent_args, batch_slots=ecfg.batch_slots,
+                             videos=ecfg.videos, on_result=logged)
     episode_of = {(e.task, e.episode_id): e for e in episodes}
-    plots = [plot_trajectory(cm, r, episode_of[(r["task"], r["episode_id"])],
+    plots = [plot_trajectory(ctx.costmap, r, episode_of[(r["task"], r["episode_id"])],
                              catalog.dataset("eval_plot", scene, run=run, task=r["task"], episode_id=r["episode_id"]))
              for r in rows[:ecfg.trajectory_plots]]
     out = catalog.dataset("eval_results", scene, run=run)

@@ -71,7 +71,7 @@ class CoverageConfig:
     min_support (3), or a voxel seen fewer times cannot be lifted. On 4 generated scenes (oracle,
     moderate corruption, lattice 1 m / 45 deg) k 2 kept 224 views and found 73 % of the objects,
     k 3 358 views and 90 %, k 4 463 views and 100 % (the default 1.5 m / 60 deg lattice: 1,284
-    views, 100 %); docs/bench_semantics_views.md."""
+    views, 100 %); docs/benchmarks/bench_semantics_views.md."""
     sectors: int = 8
     """Directions a voxel's sightings are told apart by: its bearing from the camera, in this many sectors."""
     max_range: float = 4.0
@@ -112,7 +112,7 @@ class SemanticsConfig:
     spacing: float = 1.5
     """free_space: one position per spacing x spacing metres of free space (1.5 m with 60 degree
     headings found every object that 1 m / 45 degrees found, from 0.38 x the views:
-    docs/bench_semantics_views.md; 2 m split objects into several instances)."""
+    docs/benchmarks/bench_semantics_views.md; 2 m split objects into several instances)."""
     yaw_step_deg: float = 60.0
     """free_space: headings every this many degrees (full circle)."""
     view_selection: str = "grid"

@@ -17,7 +17,7 @@ Per-view precision of a small COCO detector on renders is low; what makes a goal
 consistency (lifting: a cell needs votes from `lifting.min_support` views, and a detector instance
 needs `min_views` distinct views whose masks agree in 3D). The per-category thresholds and the
 allow-list below were chosen on the real labelled ScanNet scan (benchmarks/goals/semantics_detector.py):
-see docs/bench_semantics_detector.md.
+see docs/benchmarks/bench_semantics_detector.md.
 """
 from __future__ import annotations
 
@@ -59,7 +59,7 @@ class DetectorConfig:
     """Detector class name -> goal category (COCO_TO_GOAL); classes not in it are ignored."""
     categories: list[str] = field(default_factory=lambda: ["bed", "sofa", "table", "tv_monitor", "plant"])
     """Goal categories the detector may produce, an allow-list chosen by measurement
-    (docs/bench_semantics_detector.md): chair is off, the chairs it lifted were wrong (both on the
+    (docs/benchmarks/bench_semantics_detector.md): chair is off, the chairs it lifted were wrong (both on the
     real fungi room: display-table legs and a panel edge; on the ScanNet room's 3DGS one of two at
     0.3 and none lifted at 0.4); toilet is off, its boxes on real renders land on bins, counters and
     dark doors, and in about 1,000 views of the ScanNet room it never boxed the room's toilet. Table,
@@ -83,7 +83,7 @@ class DetectorConfig:
     """Height of the free-space views' camera for this segmenter, metres (null: the embodiment's).
     A COCO detector learnt from photos taken at eye height looking a little down: on the ScanNet
     room at 1.3 m / -15 deg it boxed the sofa in 7 views (5 right) and lifted it, at the robot's
-    1.0 m / 0 deg in 2 (none right) and never lifted it (docs/bench_semantics_detector.md,
+    1.0 m / 0 deg in 2 (none right) and never lifted it (docs/benchmarks/bench_semantics_detector.md,
     "view geometry"); 1.5 m / -20 to -30 deg mistook the sofa seen from above for a bed."""
     camera_pitch_deg: float | None = -15.0
     """Pitch of the free-space views' camera, degrees, negative looks down (null: the embodiment's)."""

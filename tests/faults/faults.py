@@ -10,7 +10,7 @@ stage), full_disk (a size-limited tmpfs; root only), concurrent (two identical r
 shards, on one data root at once), damaged (outputs truncated or deleted behind their markers),
 determinism (1, 2 and 4 workers, and 3 shards run one after the other).
 
-    python -m benchmarks.robustness.faults [--kills 20] [--only kill_run,full_disk]   # -> data/08_reports/bench_faults.{json,md}
+    PYTHONPATH=tests python -m faults.faults [--kills 20] [--only kill_run,full_disk]   # -> data/08_reports/bench_faults.{json,md}
 """
 from __future__ import annotations
 
@@ -275,7 +275,7 @@ def out_of_memory(ref: Path, work: Path) -> dict:
     """One scene far too large for the worker's memory limit, beside the reference's two: the
     large scene fails with the reason (its worker killed by Dask's nanny on every try), the two
     others complete and match the reference."""
-    from benchmarks.robustness.fuzz_readers import small_scene
+    from faults.fuzz_readers import small_scene
     from navcore.gaussians.formats import write_inria_ply
 
     big = work / "big" / "scene.ply"
@@ -547,7 +547,7 @@ def changed_source(ref: Path, work: Path) -> dict:
     and deleted (ingest fails naming the file, nothing of the scene trusted), restored, then other
     bytes behind the same size and mtime (noticed with verify=checksum). The final root must
     equal, byte for byte, an undisturbed run made from the final files."""
-    from benchmarks.robustness.fuzz_inputs import _boxes, write_labelled_ply
+    from faults.fuzz_inputs import _boxes, write_labelled_ply
     from navcore.gaussians.formats import read_gaussians, write_inria_ply
 
     root = work / "changed_source"
@@ -680,19 +680,19 @@ def markdown(rep: dict) -> str:
         lines += ["", "| reader | cases |", "|---|---|"]
         lines += [f"| {k} | {v:,} |" for k, v in fz["cases_per_reader"].items()]
         lines += ["", f"Reader fuzzing: {fz['fuzz_cases']:,} cases, {fz['fuzz_crashes']} crashes, {fz['fuzz_hangs']} "
-                  "hangs (`python -m benchmarks.robustness.fuzz_readers`)."]
+                  "hangs (`PYTHONPATH=tests python -m faults.fuzz_readers`)."]
     ff = rep.get("fuzz_frames")
     if ff:
         lines += ["", "| agent-server frame (side:type) | cases |", "|---|---|"]
         lines += [f"| {k} | {v:,} |" for k, v in ff["cases_per_frame_type"].items()]
         lines += ["", f"Frame fuzzing: {sum(ff['cases_per_frame_type'].values()):,} cases, {ff['crashes']} crashes "
-                  f"(memory included), {ff['hangs']} hangs (`python -m benchmarks.robustness.fuzz_frames`)."]
+                  f"(memory included), {ff['hangs']} hangs (`PYTHONPATH=tests python -m faults.fuzz_frames`)."]
     fi = rep.get("fuzz_inputs")
     if fi:
         lines += ["", "| input | cases | crashes | hangs |", "|---|---|---|---|"]
         lines += [f"| {k} | {v:,} | {fi['crashes_per_group'].get(k, 0)} | {fi['hangs_per_group'].get(k, 0)} |"
                   for k, v in fi["cases_per_group"].items()]
-        lines += ["", "Catalogs, label folders and labelled meshes: `python -m benchmarks.robustness.fuzz_inputs` (a "
+        lines += ["", "Catalogs, label folders and labelled meshes: `PYTHONPATH=tests python -m faults.fuzz_inputs` (a "
                   "case ends in an accepted input or a ValueError naming the file)."]
     for ch in (rep.get("chaos"), rep.get("chaos_long")):
         if not ch:
@@ -704,7 +704,7 @@ def markdown(rep: dict) -> str:
         lost_text = "n/a (a sample)" if lost is None else \
             f"{lost} s (against {ch.get('time_lost_from') or 'an undisturbed run of the same scenes'})"
         lines += ["", f"## A run under chaos ({ch['minutes_planned']:g} minutes planned)", "",
-                  f"`python -m benchmarks.robustness.chaos --minutes {ch['minutes_planned']:g}`: {ch['scenes']:,} scenes of "
+                  f"`PYTHONPATH=tests python -m faults.chaos --minutes {ch['minutes_planned']:g}`: {ch['scenes']:,} scenes of "
                   "the scale simulation on an external Dask cluster (a scheduler, two workers under nannies); "
                   f"faults: {', '.join(f'{k} {v}' for k, v in kinds.items())}.", "",
                   "| figure | value |", "|---|---|",
@@ -734,7 +734,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--kills", type=int, default=20)
     ap.add_argument("--only", default=",".join(SCENARIOS))
     ap.add_argument("--out", default="data/08_reports")
-    ap.add_argument("--docs", action="store_true", help="also write docs/bench_faults.md")
+    ap.add_argument("--docs", action="store_true", help="also write docs/benchmarks/bench_faults.md")
     ap.add_argument("--merge", nargs="+", type=Path,
                     help="instead of running: bench_faults.json files, later ones replacing earlier scenarios")
     ap.add_argument("--provenance", nargs="+", default=[],
@@ -761,7 +761,7 @@ def main(argv=None) -> dict:
         rep["fuzz"] = {k: f[k] for k in ("fuzz_cases", "fuzz_crashes", "fuzz_hangs", "cases_per_reader")}
         rep.update({k: f[k] for k in ("fuzz_cases", "fuzz_crashes", "fuzz_hangs")})
     ff = Path(args.out) / "fuzz_frames.json"
-    if ff.exists():  # frames (benchmarks.robustness.fuzz_frames) count into the fuzz totals too
+    if ff.exists():  # frames (faults.fuzz_frames) count into the fuzz totals too
         f = json.loads(ff.read_text())
         rep["fuzz_frames"] = {"cases_per_frame_type": {k: v["cases"] for k, v in f["kinds"].items()},
                               "crashes": f["fuzz_frame_crashes"], "hangs": f["fuzz_frame_hangs"],
@@ -770,7 +770,7 @@ def main(argv=None) -> dict:
                              ("fuzz_hangs", "fuzz_frame_hangs")):
             rep[ours] = rep.get(ours, 0) + f[theirs]
     fi = Path(args.out) / "fuzz_inputs.json"
-    if fi.exists():  # catalogs, label folders, labelled meshes (benchmarks.robustness.fuzz_inputs)
+    if fi.exists():  # catalogs, label folders, labelled meshes (faults.fuzz_inputs)
         f = json.loads(fi.read_text())
         per = {"cases_per_group": f["cases_per_group"], "crashes_per_group": {}, "hangs_per_group": {}}
         for r in f["kinds"].values():
@@ -779,7 +779,7 @@ def main(argv=None) -> dict:
         rep["fuzz_inputs"] = per
         for k in ("fuzz_cases", "fuzz_crashes", "fuzz_hangs"):
             rep[k] = rep.get(k, 0) + f[k]
-    for name in ("chaos", "chaos_long"):  # the runs under chaos (benchmarks.robustness.chaos): in the totals
+    for name in ("chaos", "chaos_long"):  # the runs under chaos (faults.chaos): in the totals
         ch = Path(args.out) / f"{name}.json"
         if not ch.exists():
             continue

@@ -8,13 +8,13 @@
 4. 10,000 fuzz cases of an agent-server frame type (fuzz_frames) and of each reader layout
    (fuzz_readers), three processes side by side (the fuzzers are single-threaded; the readers split
    in two halves of about equal time on this 2-core machine), then the halves' reports merged;
-5. data/08_reports/bench_faults.{json,md} and docs/bench_faults.md from all of them.
+5. data/08_reports/bench_faults.{json,md} and docs/benchmarks/bench_faults.md from all of them.
 
 Each step's log is under data/ (fuzz_*.log); the suite stops at the first step that fails, with
 its log's tail, and exits 1.
 
-    python -m benchmarks.robustness.suite                     # make test-faults
-    python -m benchmarks.robustness.suite --chaos-minutes 60  # CHAOS_MINUTES=60
+    PYTHONPATH=tests python -m faults.suite                     # make test-faults
+    PYTHONPATH=tests python -m faults.suite --chaos-minutes 60  # CHAOS_MINUTES=60
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from benchmarks.robustness.faults import PROJECT
+from faults.faults import PROJECT
 
 FUZZ_A = "sog,spz_v2,supersplat_ply,npy_folder"
 FUZZ_B = "spz_v3,inria_ply,splat,spz_v4,sog_lod"
@@ -54,6 +54,8 @@ def _start(cmd: list[str], log: Path) -> tuple[subprocess.Popen, Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    # the steps run as `python -m faults.X`: the suites live in tests/faults, beside the tests that use them
+    os.environ["PYTHONPATH"] = os.pathsep.join(filter(None, (str(PROJECT / "tests"), os.environ.get("PYTHONPATH"))))
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", type=int, default=10000, help="fuzz cases of each fuzzer")
     ap.add_argument("--kills", type=int, default=20, help="worker kills of the kill scenario")
@@ -70,17 +72,17 @@ def main(argv: list[str] | None = None) -> int:
         _run([py, "-m", "pytest", "-q", "-m", "faults", "tests/test_faults.py", *pytest_args],
              env={"NAVARENA_FAULTS_KILLS": str(a.kills),
                   "NAVARENA_FAULTS_REPORT": str(reports / "faults_scenarios.json")})
-        p, log = _start([py, "-m", "benchmarks.robustness.fuzz_inputs", *cases], logs / "fuzz_inputs.log")
+        p, log = _start([py, "-m", "faults.fuzz_inputs", *cases], logs / "fuzz_inputs.log")
         rc = p.wait()
         print(_tail(log, 6), flush=True)
         if rc:
             raise StepFailed(f"fuzz_inputs exited {rc} (log: {log})")
-        _run([py, "-m", "benchmarks.robustness.chaos", "--minutes", str(a.chaos_minutes)])
+        _run([py, "-m", "faults.chaos", "--minutes", str(a.chaos_minutes)])
         side = [
-            _start([py, "-m", "benchmarks.robustness.fuzz_frames", *cases], logs / "fuzz_frames.log"),
-            _start([py, "-m", "benchmarks.robustness.fuzz_readers", *cases, "--kinds", FUZZ_A,
+            _start([py, "-m", "faults.fuzz_frames", *cases], logs / "fuzz_frames.log"),
+            _start([py, "-m", "faults.fuzz_readers", *cases, "--kinds", FUZZ_A,
                     "--work", "/tmp/navarena_fuzz_a", "--out", str(reports / "fuzz_a")], logs / "fuzz_a.log"),
-            _start([py, "-m", "benchmarks.robustness.fuzz_readers", *cases, "--kinds", FUZZ_B,
+            _start([py, "-m", "faults.fuzz_readers", *cases, "--kinds", FUZZ_B,
                     "--work", "/tmp/navarena_fuzz_b", "--out", str(reports / "fuzz_b")], logs / "fuzz_b.log"),
         ]
         failed = []
@@ -91,9 +93,9 @@ def main(argv: list[str] | None = None) -> int:
                 failed.append(f"{log.stem} exited {rc} (log: {log})")
         if failed:
             raise StepFailed("; ".join(failed))
-        _run([py, "-m", "benchmarks.robustness.fuzz_readers", "--merge",
+        _run([py, "-m", "faults.fuzz_readers", "--merge",
               str(reports / "fuzz_a/fuzz_readers.json"), str(reports / "fuzz_b/fuzz_readers.json")])
-        _run([py, "-m", "benchmarks.robustness.faults", "--docs", "--merge", str(reports / "faults_scenarios.json")])
+        _run([py, "-m", "faults.faults", "--docs", "--merge", str(reports / "faults_scenarios.json")])
     except StepFailed as e:
         print(f"test-faults: {e}", file=sys.stderr)
         return 1

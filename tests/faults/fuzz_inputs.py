@@ -13,7 +13,7 @@ an accepted input (a catalog whose every output path stays inside the data root;
 included) naming the file. Anything else is a crash, a case over TIME_LIMIT_S a hang, one over the
 memory budget a blow-up.
 
-    python -m benchmarks.robustness.fuzz_inputs --cases 10000   # -> data/08_reports/fuzz_inputs.json
+    PYTHONPATH=tests python -m faults.fuzz_inputs --cases 10000   # -> data/08_reports/fuzz_inputs.json
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ from types import SimpleNamespace
 import numpy as np
 import yaml
 
-from benchmarks.robustness.fuzz_readers import (
+from faults.fuzz_readers import (
     ALLOC_BASE,
     ALLOC_PER_BYTE,
     OPS,
@@ -301,7 +301,7 @@ def fuzz_kind(kind: str, cases: int, seed: int, work: Path, log=None) -> dict:
     from hypothesis import seed as hseed
     from hypothesis import strategies as st
 
-    from benchmarks.robustness.fuzz_readers import POISON
+    from faults.fuzz_readers import POISON
 
     src = make_seed(kind, work / "seed")
     read_input(kind, src, work / "seed")  # the seed is valid, and the imports are not part of a case's memory

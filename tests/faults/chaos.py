@@ -14,8 +14,8 @@ faults injected and survived, the tasks the killed workers held (retried), the w
 faults (the two runs' wall times: the faults' own cost; every run also estimates a lower bound from itself,
 `time_lost_estimate`, which the whole comparison checks) and the client's peak memory.
 
-    python -m benchmarks.robustness.chaos --minutes 5            # about 5 minutes of chaos (make test-faults)
-    python -m benchmarks.robustness.chaos --minutes 60     # CHAOS_MINUTES=60: 3,300 scenes, about 2 h in all
+    PYTHONPATH=tests python -m faults.chaos --minutes 5            # about 5 minutes of chaos (make test-faults)
+    PYTHONPATH=tests python -m faults.chaos --minutes 60     # CHAOS_MINUTES=60: 3,300 scenes, about 2 h in all
     -> data/08_reports/chaos.json (chaos_long.json for 60 minutes or more)
 """
 from __future__ import annotations
@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.dataset.compare_data import digests
-from benchmarks.robustness.faults import ENV, PROJECT, _external_cluster, _free_port, _stop, held_locks, markers
 from benchmarks.scale.bench_scale import SIM
+from faults.faults import ENV, PROJECT, _external_cluster, _free_port, _stop, held_locks, markers
 
 SCENES_PER_MINUTE = 55
 """Scenes of the simulation one chaos minute covers on this 2-core machine, faults included, with

@@ -17,8 +17,8 @@ packed bytes, deep nesting, a decompression-bomb PNG. Per case: a time limit (a 
 process's memory bounded by RLIMIT_AS (a MemoryError counts as blown memory), the peak of
 tracemalloc's traced allocations recorded on every TRACE_EVERY-th case, the process's peak RSS.
 
-    python -m benchmarks.robustness.fuzz_frames --cases 10000 [--kinds client:action,server:observation] \
-        [--out data/08_reports]   -> fuzz_frames.json (merged into bench_faults by benchmarks.robustness.faults --merge)
+    PYTHONPATH=tests python -m faults.fuzz_frames --cases 10000 [--kinds client:action,server:observation] \
+        [--out data/08_reports]   -> fuzz_frames.json (merged into bench_faults by faults.faults --merge)
 """
 from __future__ import annotations
 

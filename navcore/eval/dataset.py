@@ -24,7 +24,6 @@ from __future__ import annotations
 import json
 from dataclasses import fields
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -192,15 +191,10 @@ class NavDataset:
             graph = NavGraph(cm, ~cm.occupancy, self._neighbourhood())
             gs = load_aligned(asset) if render else None
             return SceneContext(cm, graph, emb, gs, renderer)
-        from navcore.gaussians.content import camera_scene
-        from navcore.nav.geodesic import eligible_cells
-
-        scene = self._catalog.scene(scene_id)
-        cm = self._catalog.dataset("costmaps", scene).load(emb.name)
-        ecfg = SimpleNamespace(**{k: self._episodes_setting(k) for k in ("components", "min_island_area_m2")})
-        graph = NavGraph(cm, eligible_cells(cm, ecfg), self._neighbourhood())
-        gs = camera_scene(self._catalog, scene, emb.name)[0] if render else None
-        return SceneContext(cm, graph, emb, gs, renderer)
+        return SceneContext.from_catalog(self._catalog, self._catalog.scene(scene_id), emb,
+                                         self._episodes_setting("components"),
+                                         self._episodes_setting("min_island_area_m2"), self._neighbourhood(),
+                                         render, renderer)
 
     def _episodes_setting(self, key: str):
         """A key of the episodes config the data was made with (release.json, or the episodes

@@ -6,7 +6,7 @@ in a SceneFormatError naming the file or in a validated scene (finite, unit quat
 else is a crash, a case over the time limit a hang, and a case whose peak traced allocation
 exceeds ALLOC_PER_BYTE x the input's size + ALLOC_BASE a memory blow-up.
 
-    python -m benchmarks.robustness.fuzz_readers --cases 10000   # -> data/08_reports/fuzz_readers.json
+    PYTHONPATH=tests python -m faults.fuzz_readers --cases 10000   # -> data/08_reports/fuzz_readers.json
 """
 from __future__ import annotations
 

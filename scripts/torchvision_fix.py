@@ -7,10 +7,12 @@ exist``). lerobot (loading a LeRobot export) and transformers import torchvision
 which need no operator. The fix declares those operators' schemas before torchvision's first
 import, and does nothing when they exist (a matching torchvision).
 
-`make setup` installs it into the venv as a `.pth` start-up line (``python -m
-navarena.torchvision_fix install``): an import hook that acts only when torchvision is imported,
-so an interpreter that never imports torchvision pays nothing (torch is not imported early).
-Calling ``apply()`` before importing lerobot does the same by hand in another environment.
+An install step of the checkout's venv, not part of the library: `make setup` runs
+``python scripts/torchvision_fix.py install``, which copies this file into the venv's site-packages
+as the module `navarena_torchvision_fix` with a `.pth` start-up line: an import hook that acts only
+when torchvision is imported, so an interpreter that never imports torchvision pays nothing (torch
+is not imported early). Calling ``navarena_torchvision_fix.apply()`` before importing lerobot does
+the same by hand.
 """
 from __future__ import annotations
 
@@ -20,6 +22,8 @@ from importlib.abc import MetaPathFinder
 from pathlib import Path
 
 PTH = "navarena_torchvision_fix.pth"
+MODULE = "navarena_torchvision_fix"
+"""The name this file is installed under in site-packages (the .pth imports it at start-up)."""
 
 
 UNGUARDED = {"nms": "(Tensor dets, Tensor scores, float iou_threshold) -> Tensor",
@@ -62,9 +66,11 @@ def hook() -> None:
 
 
 def install(site: str | None = None) -> Path:
-    """Write the .pth start-up line into this interpreter's site-packages (or `site`)."""
-    target = Path(site or sysconfig.get_paths()["purelib"]) / PTH
-    target.write_text("import navarena.torchvision_fix as _navarena_tv; _navarena_tv.hook()\n")
+    """Copy this module and write the .pth start-up line into this interpreter's site-packages (or `site`)."""
+    folder = Path(site or sysconfig.get_paths()["purelib"])
+    (folder / f"{MODULE}.py").write_text(Path(__file__).read_text())
+    target = folder / PTH
+    target.write_text(f"import {MODULE} as _navarena_tv; _navarena_tv.hook()\n")
     return target
 
 
@@ -72,5 +78,5 @@ if __name__ == "__main__":
     if sys.argv[1:] == ["install"]:
         print(f"installed {install()}")
     else:
-        print("usage: python -m navarena.torchvision_fix install", file=sys.stderr)
+        print("usage: python scripts/torchvision_fix.py install", file=sys.stderr)
         sys.exit(2)
