@@ -732,3 +732,34 @@ def test_a_one_gpu_run_keeps_the_whole_sets_held_out_scenes():
     assert held and set(held) <= set(kept) and len(kept) == len(held) + 5 == len(set(kept))
     assert [s for s in kept if s not in held] == train[:5]
     assert held_out_and_first_train(64, 10_000) == held + train  # more than there are: all of them
+
+
+def test_navarena_card_ships_a_run_and_keeps_its_markdown(trained, tmp_path, capsys):
+    """navarena card ship: the run's model.pt copied beside its card with the copy's sha256 (no
+    machine path left in it), loadable by the registry's checkpoint check; markdown writes the .md
+    that --check then finds current; evaluation adds a table the .md shows; a folder that is not a
+    run is refused with its name and exit 2."""
+    from navarena.card import main
+    from navcore.baselines.checkpoint import load_checkpoint, sha256_of
+
+    models = tmp_path / "models"
+    assert main(["--models", str(models), "ship", str(trained[0]), "tiny_bc"]) == 0
+    card = json.loads((models / "tiny_bc" / "model_card.json").read_text())
+    assert card["sha256"] == sha256_of(models / "tiny_bc" / "model.pt") == sha256_of(trained[0] / "model.pt")
+    assert "/" not in card["data"]["root"] and card["name"] == "tiny_bc"
+    load_checkpoint(models / "tiny_bc" / "model.pt", kind="pointnav", sha256=card["sha256"])
+    assert main(["--models", str(models), "markdown", "--check"]) == 1  # no .md yet
+    assert main(["--models", str(models), "markdown"]) == 0
+    assert main(["--models", str(models), "markdown", "--check"]) == 0
+    summ = tmp_path / "tiny_distance" / "summary.json"
+    summ.parent.mkdir()
+    summ.write_text(json.dumps({"root": "/x/data", "agent": "learned", "label": "tiny_bc", "protocol": "distance",
+                                "render": None, "tasks": {"pointnav": {"overall": {"episodes": 4, "sr": 0.75}}}}))
+    assert main(["--models", str(models), "evaluation", "tiny_bc", str(summ), "--conditions", "four episodes",
+                 "--command", "navarena eval ..."]) == 0
+    assert main(["--models", str(models), "markdown", "--check"]) == 1  # the card changed: its .md is stale
+    main(["--models", str(models), "markdown"])
+    assert "| tiny_bc | distance | no | overall | 4 | 0.750 |" in (models / "tiny_bc" / "model_card.md").read_text()
+    capsys.readouterr()
+    assert main(["--models", str(models), "ship", str(tmp_path), "x"]) == 2
+    assert str(tmp_path) in capsys.readouterr().err
