@@ -24,6 +24,7 @@ a test checks that every page is listed and stamped.
 
     python -m benchmarks.pages stale [--strict]     # the stale pages and the changed files
     python -m benchmarks.pages list                 # every page with its commit and command
+    python -m benchmarks.pages mark                 # section markers around every page's tables
 """
 from __future__ import annotations
 
@@ -172,15 +173,60 @@ def stamp(name: str, root: Path = ROOT, date: str | None = None, stage_hashes: d
             f"<!-- bench-inputs: {inputs} -->\n")
 
 
+SECTION_LINE = re.compile(r"<!-- --8<-- \[(?:start|end):[a-z0-9-]+\] -->")
+
+
+def mark_sections(markdown: str) -> str:
+    """Every table of a page between snippet section markers, `table-1`, `table-2`, ... in page
+    order, so that a hand-written page includes a generated table instead of copying it:
+
+        --8<-- "benchmarks/bench_episodes.md:table-1"
+
+    (pymdownx.snippets, mkdocs.yml). Idempotent: markers already there are replaced."""
+    lines = [line for line in markdown.split("\n") if not SECTION_LINE.fullmatch(line)]
+    out, n, inside = [], 0, False
+    for line in lines:
+        table = line.startswith("|")
+        if table and not inside:
+            n += 1
+            out.append(f"<!-- --8<-- [start:table-{n}] -->")
+        elif not table and inside:
+            out.append(f"<!-- --8<-- [end:table-{n}] -->")
+        inside = table
+        out.append(line)
+    if inside:
+        out.append(f"<!-- --8<-- [end:table-{n}] -->")
+    return "\n".join(out)
+
+
 def write_page(name: str, markdown: str, root: Path = ROOT, stage_hashes: dict[str, str] | None = None) -> Path:
-    """Write docs/<name> (a page of PAGES) with its stamp; returns the path."""
+    """Write docs/benchmarks/<name> (a page of PAGES) with its tables' section markers and its stamp;
+    returns the path."""
     if name not in PAGES:
         raise KeyError(f"{name} is not a benchmark page of benchmarks.pages.PAGES")
     path = root / PAGES_DIR / name
     body = re.sub(r"Measured on commit `[0-9a-f]+`[^\n]*\n(?=<!-- bench-page)", "", markdown)
-    body = STAMP_RE.sub("", body).rstrip() + "\n\n"
+    body = mark_sections(STAMP_RE.sub("", body).rstrip()) + "\n\n"
     path.write_text(body + stamp(name, root, stage_hashes=stage_hashes))
     return path
+
+
+def mark_pages(root: Path = ROOT) -> list[str]:
+    """Section markers into every page as it stands (its figures and stamp untouched: a page
+    measured before write_page emitted them); the pages changed."""
+    changed = []
+    for name in PAGES:
+        path = root / PAGES_DIR / name
+        if not path.is_file():
+            continue
+        text = path.read_text()
+        m = re.search(r"Measured on commit `[0-9a-f]+`[^\n]*\n(?=<!-- bench-page)", text) or STAMP_RE.search(text)
+        head, tail = (text[:m.start()], text[m.start():]) if m else (text, "")
+        new = mark_sections(head.rstrip()) + "\n\n" + tail if m else mark_sections(text)
+        if new != text:
+            path.write_text(new)
+            changed.append(name)
+    return changed
 
 
 def read_stamp(path: Path) -> dict | None:
@@ -226,12 +272,15 @@ def stale_pages(root: Path = ROOT, stage_hashes: dict[str, str] | None = None) -
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("what", choices=("stale", "list"))
+    ap.add_argument("what", choices=("stale", "list", "mark"))
     ap.add_argument("--strict", action="store_true", help="exit 1 when a page is stale")
     args = ap.parse_args(argv)
+    if args.what == "mark":
+        print("section markers into:", *mark_pages() or ["none (every page has them)"])
+        return 0
     if args.what == "list":
         for name, page in PAGES.items():
-            st = read_stamp(DOCS / name) if (DOCS / name).exists() else None
+            st = read_stamp(ROOT / PAGES_DIR / name) if (ROOT / PAGES_DIR / name).exists() else None
             print(f"{name:28s} {st['commit'][:7] if st else '-':8s} {st['date'] if st else '-':11s} {page.command}")
         return 0
     stale = stale_pages()

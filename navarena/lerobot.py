@@ -43,6 +43,7 @@ from navcore.io.tool_progress import ToolProgress
 from navcore.io.video import H264Writer
 from navcore.nav.embodiment import Embodiment
 from navcore.nav.poses import wrap_angle
+from navcore.nav.tasks import TASK_TYPES
 
 CODEBASE_VERSION = "v3.0"
 CHUNKS_SIZE = 1000
@@ -78,7 +79,7 @@ def _stats(a: np.ndarray, axis) -> dict:
             "std": a.std(axis=axis).tolist(), "count": [int(a.shape[0])]}
 
 
-def export_lerobot(root, out, split: str | None = "train", tasks=("pointnav", "imagenav", "objectnav"),
+def export_lerobot(root, out, split: str | None = "train", tasks=TASK_TYPES,
                    fps: int = 5, width: int = 160, height: int = 120, depth: bool = True,
                    episodes_per_scene: int | None = None, scenes=None, renderer: str = "auto",
                    embodiment: Embodiment | None = None, episodes_per_file: int = 100, crf: int = 18,

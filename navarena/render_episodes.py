@@ -29,6 +29,7 @@ import pandas as pd
 from navcore.io.catalog import Catalog
 from navcore.io.tool_progress import ToolProgress
 from navcore.nav.embodiment import Embodiment
+from navcore.nav.tasks import TASK_TYPES
 
 FREE, INFLATED, OBSTACLE = (255, 255, 255), (170, 170, 170), (20, 20, 20)
 
@@ -149,7 +150,7 @@ def _goals(e: dict) -> np.ndarray:
     return np.array([[e["goal_position_x"], e["goal_position_y"]]], float)
 
 
-def render_episodes(root, out, scenes=None, tasks=("pointnav", "imagenav", "objectnav"), episodes=None,
+def render_episodes(root, out, scenes=None, tasks=TASK_TYPES, episodes=None,
                     count: int = 6, run: str | None = None, width: int = 320, height: int = 240, fps: int = 10,
                     stride: int = 2, renderer: str = "auto", embodiment: Embodiment | None = None,
                     report: bool = True, quiet: bool = False, per_scene_task: int | None = None) -> dict:
@@ -283,7 +284,7 @@ def write_report(cat: Catalog, sid: str, folder: Path, vids: list[dict], emb: Em
 
     folder.mkdir(parents=True, exist_ok=True)
     cm = cat.dataset("costmaps", cat.scene(sid)).load(emb.name)
-    eps = {t: _episodes(cat, sid, t) for t in ("pointnav", "imagenav", "objectnav")}
+    eps = {t: _episodes(cat, sid, t) for t in TASK_TYPES}
     eps = {t: e for t, e in eps.items() if len(e)}
     ny, nx = cm.clearance.shape
     ext = [cm.origin[0], cm.origin[0] + nx * cm.resolution, cm.origin[1], cm.origin[1] + ny * cm.resolution]
@@ -391,7 +392,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--quiet", action="store_true", help="no progress display")
     args = ap.parse_args(argv)
     w, h = (int(v) for v in args.size.lower().split("x"))
-    res = render_episodes(args.root, args.out, args.scene, args.task or ("pointnav", "imagenav", "objectnav"),
+    res = render_episodes(args.root, args.out, args.scene, args.task or TASK_TYPES,
                           args.episodes.split(",") if args.episodes else None, args.count, args.run, w, h, args.fps,
                           renderer=args.renderer, report=not args.no_report, quiet=args.quiet,
                           per_scene_task=args.per_scene_task)

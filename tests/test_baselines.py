@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 import torch
 
-from navcore.baselines.checkpoint import CheckpointError, load_checkpoint, save_checkpoint, sha256_of
+from navcore.baselines.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from navcore.baselines.model import NavNet, NavSpec, depth_input, goal_input
+from navcore.io.release import sha256_file
 
 TINY = ["--rounds", "2", "--episodes-per-round", "6", "--grad-steps", "12", "--batch-episodes", "4", "--slots", "6",
         "--width", "32", "--height", "24", "--val-episodes", "0", "--renderer", "cpu", "--max-learner-steps", "40",
@@ -38,7 +39,7 @@ def test_tiny_training_loss_falls_and_one_seed_gives_one_checkpoint(trained):
     assert bc["loss"] < bc["loss_first"], bc  # behaviour cloning learns
     assert dagger["frames"] == bc["frames"] + dagger["new_frames"] > bc["frames"]  # DAgger aggregates
     assert (a / "model.pt").read_bytes() == (b / "model.pt").read_bytes()
-    assert card["sha256"] == sha256_of(a / "model.pt")
+    assert card["sha256"] == sha256_file(a / "model.pt")
     for r in ("round_0.npz", "round_1.npz"):
         assert (a / "rounds" / r).read_bytes() == (b / "rounds" / r).read_bytes()
     ck = load_checkpoint(a / "model.pt", kind="pointnav")
@@ -64,7 +65,7 @@ def test_init_fine_tunes_from_a_checkpoint(trained, episode_run, tmp_path, monke
     assert len(reads) == 1  # the checkpoint is read once, for its network and its weights
     fresh, tuned = (json.loads((tmp_path / r / "model_card.json").read_text()) for r in ("fresh", "tuned"))
     assert tuned["curve"][0]["loss_first"] < fresh["curve"][0]["loss_first"]
-    assert tuned["config"]["init"] == str(model) and tuned["config"]["init_sha256"] == sha256_of(model)
+    assert tuned["config"]["init"] == str(model) and tuned["config"]["init_sha256"] == sha256_file(model)
     assert "init_sha256" not in fresh["config"]
     assert tuned["data"]["groups"] == {"synthetic": len(tuned["data"]["train_scenes"])}  # the generator's scenes
     for bad, why in ((["--task", "objectnav"], "not 'objectnav'"), ([], "does not exist"), ([], "no shipped baseline")):
@@ -91,7 +92,7 @@ def test_init_with_aux_goal_adds_the_head_to_the_checkpoints_network(episode_run
             "--init", str(f), "--aux-goal"]
     assert main(args) == 0
     card = json.loads((tmp_path / "tuned" / "model_card.json").read_text())
-    assert card["config"]["spec"]["aux_goal"] and card["config"]["init_sha256"] == sha256_of(f)
+    assert card["config"]["spec"]["aux_goal"] and card["config"]["init_sha256"] == sha256_file(f)
     assert "aux_loss" in card["curve"][0]
     other = NavNet(NavSpec(task="objectnav", hidden=32))
     g = tmp_path / "other.pt"
@@ -424,7 +425,7 @@ def test_checkpoint_round_trip_and_refusals(tmp_path):
     net = NavNet(NavSpec(hidden=16, embed=16))
     f = tmp_path / "p.pt"
     digest = save_checkpoint(f, "pointnav", net.spec.to_dict(), net.state_dict(), {"seed": 3})
-    assert digest == sha256_of(f)
+    assert digest == sha256_file(f)
     ck = load_checkpoint(f, kind="pointnav", sha256=digest)
     again = NavNet(NavSpec(**ck["spec"]))
     again.load_state_dict(ck["state_dict"])
@@ -545,7 +546,7 @@ def test_shipped_baseline_is_checked_and_registered(name):
     from navcore.eval.agents import AGENTS, agent_for
 
     path, digest = shipped(name)
-    assert sha256_of(path) == digest
+    assert sha256_file(path) == digest
     assert name in AGENTS
     agent = agent_for(name, device="cpu")
     assert agent.task == name.removesuffix("_bc")  # the registry name loads its own track's network
@@ -740,12 +741,13 @@ def test_navarena_card_ships_a_run_and_keeps_its_markdown(trained, tmp_path, cap
     that --check then finds current; evaluation adds a table the .md shows; a folder that is not a
     run is refused with its name and exit 2."""
     from navarena.card import main
-    from navcore.baselines.checkpoint import load_checkpoint, sha256_of
+    from navcore.baselines.checkpoint import load_checkpoint
+    from navcore.io.release import sha256_file
 
     models = tmp_path / "models"
     assert main(["--models", str(models), "ship", str(trained[0]), "tiny_bc"]) == 0
     card = json.loads((models / "tiny_bc" / "model_card.json").read_text())
-    assert card["sha256"] == sha256_of(models / "tiny_bc" / "model.pt") == sha256_of(trained[0] / "model.pt")
+    assert card["sha256"] == sha256_file(models / "tiny_bc" / "model.pt") == sha256_file(trained[0] / "model.pt")
     assert "/" not in card["data"]["root"] and card["name"] == "tiny_bc"
     load_checkpoint(models / "tiny_bc" / "model.pt", kind="pointnav", sha256=card["sha256"])
     assert main(["--models", str(models), "markdown", "--check"]) == 1  # no .md yet

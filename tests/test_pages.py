@@ -78,3 +78,53 @@ def test_pages_follow_stages_by_their_hash_not_their_code():
     hashes = default_stage_hashes()
     assert set(hashes) >= {s for page in PAGES.values() for s in page.stages}
     assert hashes == default_stage_hashes()
+
+
+def _tables(text: str) -> list[list[str]]:
+    """The markdown tables of a page: each a list of its rows (header first)."""
+    out, cur = [], []
+    for line in text.splitlines() + [""]:
+        if line.startswith("|"):
+            cur.append(line.strip())
+        elif cur:
+            out.append(cur)
+            cur = []
+    return out
+
+
+def test_hand_written_pages_include_the_generated_figures_instead_of_copying_them():
+    """A benchmark page's tables reach a hand-written page only through a snippet include of their
+    section (`--8<-- "benchmarks/bench_x.md:table-N"`, markers written by write_page): no hand-written
+    page holds a table with a generated table's header or one of its rows, and every include names a
+    page and a section that exist (so `make bench-stale` covers every figure the tables show)."""
+    import re
+
+    generated = {p.name: p.read_text() for p in (ROOT / PAGES_DIR).glob("bench_*.md")}
+    headers, rows = {}, {}
+    for name, text in generated.items():
+        for table in _tables(text):
+            headers[table[0]] = name
+            rows.update({r: name for r in table[2:]})
+    written = [p for p in (ROOT / "docs").rglob("*.md") if not p.name.startswith("bench_")] + [ROOT / "README.md"]
+    copies, broken = [], []
+    for page in written:
+        text = page.read_text()
+        for table in _tables(text):
+            if table[0] in headers:
+                copies.append(f"{page.relative_to(ROOT)}: a table headed as {headers[table[0]]}'s: {table[0][:60]}")
+            copies += [f"{page.relative_to(ROOT)}: a row of {rows[r]}: {r[:60]}" for r in table[2:] if r in rows]
+        for target, section in re.findall(r'^--8<-- "benchmarks/(bench_[a-z_]+\.md):([a-z0-9-]+)"', text, re.M):
+            if f"[start:{section}]" not in generated.get(target, ""):
+                broken.append(f"{page.relative_to(ROOT)}: {target}:{section}")
+    assert not copies, "include the section instead (python -m benchmarks.pages mark):\n" + "\n".join(copies)
+    assert not broken, broken
+
+
+def test_section_markers_wrap_every_table_and_are_idempotent():
+    from benchmarks.pages import mark_sections
+
+    page = "# t\n\n| a | b |\n|---|---|\n| 1 | 2 |\n\ntext\n\n| c |\n|---|\n| 3 |"
+    once = mark_sections(page)
+    assert once == mark_sections(once)
+    assert once.count("[start:table-1]") == once.count("[end:table-2]") == 1
+    assert once.index("[start:table-1]") < once.index("| a | b |") < once.index("[end:table-1]") < once.index("text")

@@ -37,11 +37,12 @@ from navcore.nav.costmap import Costmap
 from navcore.nav.embodiment import Embodiment, Limits
 from navcore.nav.geodesic import eligible_cells
 from navcore.nav.poses import in_region, object_regions, point_regions
+from navcore.nav.tasks import TASK_TYPES
 from stages.episodes.config import EpisodesConfig
 from stages.episodes.validity import check_trajectory
 
 RELEASE_EPISODES = 22.2e6
-TASKS = ("pointnav", "imagenav", "objectnav")
+TASKS = TASK_TYPES
 
 
 class VisibilityReference:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from navcore.baselines.agent import MODELS
 from navcore.io.release import sha256_file
+from navcore.nav.tasks import TASK_TYPES
 
 CARD_COMMAND = "navarena card"
 """The command line that writes cards (named in the generated markdown)."""
@@ -261,7 +262,7 @@ def set_note(name: str, text: str, models: Path = MODELS) -> None:
     write_card(models, name, card)
 
 
-TRACKS = ["pointnav", "imagenav", "objectnav"]
+TRACKS = list(TASK_TYPES)
 ORDER = ["overall", "easy", "medium", "hard"]
 COLUMNS = [("SR", "sr"), ("SPL", "spl"), ("NE m", "ne"), ("CR", "collision_rate"), ("AvgSteps", "steps"),
            ("Stop SR", "stop_sr")]

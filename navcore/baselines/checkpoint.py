@@ -22,20 +22,13 @@ from pathlib import Path
 import torch
 
 from navcore.io.atomic import atomic_path
+from navcore.io.release import sha256_file
 
 FORMAT = "navarena-policy/1"
 
 
 class CheckpointError(ValueError):
     """A checkpoint that cannot be used (damaged, unsafe, of another kind or format)."""
-
-
-def sha256_of(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def save_checkpoint(path, kind: str, spec: dict, state_dict: dict, meta: dict | None = None) -> str:
@@ -57,7 +50,7 @@ def load_checkpoint(path, kind: str | None = None, sha256: str | None = None) ->
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"policy checkpoint {path} does not exist")
-    if sha256 is not None and (got := sha256_of(path)) != sha256:
+    if sha256 is not None and (got := sha256_file(path)) != sha256:
         raise CheckpointError(f"{path}: sha256 {got[:12]}... differs from the published {sha256[:12]}...; the file "
                               f"is damaged or not the shipped one (reinstall the package)")
     try:

@@ -582,14 +582,15 @@ NO_AUX = (math.nan, math.nan)
 def init_checkpoint(init: str, task: str) -> dict:
     """The checkpoint --init names (a file, else a shipped baseline's name), with its "sha256"."""
     from navcore.baselines.agent import shipped
-    from navcore.baselines.checkpoint import CheckpointError, sha256_of
+    from navcore.baselines.checkpoint import CheckpointError
+    from navcore.io.release import sha256_file
 
     try:
         path, sha = (Path(init), None) if Path(init).is_file() or "/" in init or init.endswith(".pt") else shipped(init)
         ck = load_checkpoint(path, kind=task, sha256=sha)
     except (FileNotFoundError, CheckpointError) as e:
         raise SystemExit(f"navarena train: --init {init}: {e}") from None
-    ck["sha256"] = sha or sha256_of(path)
+    ck["sha256"] = sha or sha256_file(path)
     return ck
 
 

@@ -31,8 +31,9 @@ from navcore.eval.env import EnvConfig, SceneContext
 from navcore.eval.episode import Episode
 from navcore.nav.actions import ActionSpace
 from navcore.nav.embodiment import Embodiment
+from navcore.nav.tasks import TASK_TYPES
 
-TASKS = ("pointnav", "imagenav", "objectnav")
+TASKS = TASK_TYPES
 REFERENCE_STRIDE = 10
 """Expert rows kept as an episode's reference path (DTW): every 0.5 s at the trajectories' 20 Hz."""
 

@@ -2,9 +2,10 @@
 with their published sha256 checked, and other models of the same kinds from a user's folder."""
 from __future__ import annotations
 
-import hashlib
 from importlib import resources
 from pathlib import Path
+
+from navcore.io.release import sha256_file
 
 MODEL_DIR = Path(str(resources.files("navcore") / "models" / "yolo_fastest_1.1_coco"))
 """The `detector` segmenter's default weights: Yolo-Fastest-1.1-XL, COCO (its README.md)."""
@@ -14,14 +15,6 @@ MODEL_FILES = {
     "coco.names": "634a1132eb33f8091d60f2c346ababe8b905ae08387037aed883953b7329af84",
 }
 """sha256 of the shipped files (as published by dog-qiuqiu/Yolo-Fastest)."""
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def load_net(model: str | None):
@@ -36,7 +29,7 @@ def load_net(model: str | None):
             p = MODEL_DIR / name
             if not p.is_file():
                 raise FileNotFoundError(f"the shipped detector weights {p} are missing (reinstall the project)")
-            if _sha256(p) != digest:
+            if sha256_file(p) != digest:
                 raise ValueError(f"{p}: sha256 differs from the shipped model's; the file is damaged")
         folder = MODEL_DIR
     else:

@@ -124,6 +124,8 @@ def schema_fields(schema) -> list[list[str]]:
 
 
 def sha256_file(path: str | Path, chunk: int = 1 << 22) -> str:
+    """sha256 (hex) of a file's bytes, read in chunks: the one file digest of the project (release manifests, shipped
+    models and checkpoints, the pipeline's source checks)."""
     h = hashlib.sha256()
     with open(path, "rb") as f:
         while block := f.read(chunk):

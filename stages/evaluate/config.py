@@ -4,6 +4,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from navcore.eval.env import EnvSettings
+from navcore.nav.tasks import TASK_TYPES
 
 
 @dataclass
@@ -20,7 +21,7 @@ class EvaluateConfig(EnvSettings):
     """Keyword arguments of the agent's constructor."""
     renderer: str = "auto"
     """auto (gsplat on CUDA, else CPU) | cpu | gsplat."""
-    tasks: list[str] = field(default_factory=lambda: ["pointnav", "imagenav", "objectnav"])
+    tasks: list[str] = field(default_factory=lambda: list(TASK_TYPES))
     """Tasks to evaluate."""
     split: str | None = None
     """Only this split (null = all); the name of the release's zero-shot evaluation set

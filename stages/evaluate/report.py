@@ -6,8 +6,9 @@ import math
 import pandas as pd
 
 from navcore.eval.metrics import aggregate
+from navcore.nav.tasks import TASK_TYPES
 
-TASKS = ("pointnav", "imagenav", "objectnav")
+TASKS = TASK_TYPES
 DIFFICULTIES = ("easy", "medium", "hard")
 TABLE6 = [("sr", "SR"), ("distance_sr", "Dist. SR"), ("stop_sr", "Stop SR"), ("osr", "OSR"), ("spl", "SPL"),
           ("soft_spl", "SoftSPL"), ("ne", "NE (m)"), ("ne_geodesic", "NE geo. (m)"),

@@ -31,13 +31,6 @@ def free_space_poses(costmap, valid: np.ndarray, spacing: float = 1.0, yaw_step_
     return np.column_stack([np.repeat(pts, len(yaws), 0), np.tile(yaws, len(pts))])
 
 
-def source_camera_poses(cameras: list[dict], to_aligned: np.ndarray) -> np.ndarray:
-    """[M, 4, 4] camera -> world (aligned frame, OpenCV axes) from a scene's camera list
-    (each {"camera_to_world": 4x4} in the source frame, OpenCV axes) and the source -> aligned transform."""
-    return np.stack([to_aligned @ np.asarray(c["camera_to_world"], float) for c in cameras]) if cameras else \
-        np.zeros((0, 4, 4))
-
-
 def yaw_coverage(poses: np.ndarray) -> float:
     """Largest angular gap (radians) between the headings of a pose set (a full circle: 2 pi / n)."""
     y = np.sort(np.mod(poses[:, 2], 2 * math.pi))
