@@ -136,7 +136,7 @@ import pandas as pd; pd.read_pickle("x")
 
 
 def test_names_read_from_files_stay_in_their_folder(tmp_path):
-    from navcore.io.paths import PathEscapeError, contained
+    from navcore.paths import PathEscapeError, contained
 
     (tmp_path / "f").mkdir()
     (tmp_path / "secret").write_text("x")
@@ -167,7 +167,7 @@ def test_a_sog_meta_cannot_read_outside_its_folder(tmp_path):
 
 def test_asset_files_cannot_name_files_outside_the_asset(tmp_path):
     from navcore.io.asset_files import aligned_model, read_nav_map
-    from navcore.io.paths import PathEscapeError
+    from navcore.paths import PathEscapeError
 
     (tmp_path / "a").mkdir()
     (tmp_path / "x.ply").write_text("x")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from navcore.io.paths import contained
+from navcore.paths import contained
 
 ALIGNED_FILES = {"ply": "aligned.ply", "spz": "aligned.spz", "source": None}
 """asset.aligned_format -> the aligned model's file in the asset (source: none, the asset's link to

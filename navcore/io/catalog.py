@@ -24,8 +24,8 @@ import yaml
 from navcore.gaussians.formats import detect_format
 from navcore.io.datasets import TYPES, Dataset
 from navcore.io.licences import PROJECT_LICENSE
-from navcore.io.paths import usable_path
 from navcore.labels.shipped import LabelSpec
+from navcore.paths import usable_path
 
 LAYOUT_FILE = resources.files("navcore.io") / "layout.yaml"
 """The shared data layout, package data of navcore: logical dataset -> path template and type (a

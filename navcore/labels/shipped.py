@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from navcore.io.paths import usable_path
 from navcore.labels import GoalVocabulary, LabelSet, as_category, is_structure, normalise, read_table, resolve
+from navcore.paths import usable_path
 
 CLASS_NAME_FILES = ("classes.txt", "class_names.txt")
 SPEC_KEYS = ("classes", "id_offset", "ignore", "mesh", "mesh_classes", "max_distance", "goal_map")

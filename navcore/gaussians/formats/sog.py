@@ -29,7 +29,7 @@ import numpy as np
 from navcore.gaussians.errors import SceneFormatError
 from navcore.gaussians.formats.limits import check_inflation
 from navcore.gaussians.model import GaussianScene
-from navcore.io.paths import PathEscapeError, contained
+from navcore.paths import PathEscapeError, contained
 
 _SQRT2 = np.sqrt(2.0)
 _SH_COEFFS = {0: 0, 1: 3, 2: 8, 3: 15}
