@@ -135,6 +135,30 @@ def evaluate(args) -> tuple[list[dict], bool]:
     return rows, interrupted
 
 
+def check_agent(spec: str) -> str | None:
+    """A user's own agent (`package.module:Class`) resolved before anything runs, from the current
+    folder as `python -m` does (it goes first on the import path); the one-line reason when it cannot
+    be, else None. Registry names and agent servers are left to the run."""
+    import os
+
+    from navcore.eval.agents import AGENTS
+    from navcore.registry import load_entry
+
+    if spec in AGENTS or spec.startswith(("ws://", "wss://")) or ":" not in spec:
+        return None
+    if os.getcwd() not in sys.path and "" not in sys.path:
+        sys.path.insert(0, os.getcwd())
+    try:
+        load_entry(spec)
+    except ImportError as e:
+        name = getattr(e, "name", None) or spec.partition(":")[0]
+        return (f"--agent {spec}: cannot import {name!r} ({e}), looked for in the current folder ({os.getcwd()}) "
+                "and the environment's packages")
+    except AttributeError as e:
+        return f"--agent {spec}: {e}"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="navarena eval", description="Evaluate an agent in closed loop on the episodes "
                                  "of a data root or a release folder (navcore.eval: the pipeline's environment and metrics).")
@@ -161,6 +185,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
     import re
+
+    bad = check_agent(args.agent)
+    if bad:
+        print(f"navarena eval: {bad}", file=sys.stderr)
+        return 2
 
     name = re.sub(r"[^A-Za-z0-9_.-]+", "_", f"{args.agent}_{args.protocol}").strip("_")
     out = Path(args.out or Path("navarena_eval") / name)

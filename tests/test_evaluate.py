@@ -481,3 +481,29 @@ def test_depth_reactive_explores_where_there_is_no_point_goal(ctx, make_episode)
     ep = make_episode(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), radius=0.3, max_steps=60, task="objectnav")
     row = run_episode(NavEnv(ctx, EnvConfig(protocol="distance", width=32, height=24)), make_agent("depth_reactive"), ep)
     assert row["end_reason"] in ("entered", "budget") and not row["error"] and row["path_length"] > 0.5
+
+
+def test_a_users_agent_is_imported_from_the_current_folder_or_refused_in_one_line(tmp_path):
+    """navarena eval --agent pkg.module:Class finds the package in the folder it runs from (as
+    python -m does) before anything runs; an agent that cannot be imported is one line naming the
+    module and the folder, exit 2, no traceback."""
+    import subprocess
+    import sys
+
+    pkg = tmp_path / "my_pkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "policy.py").write_text("class MyAgent:\n    def reset(self, task):\n        pass\n\n"
+                                   "    def act(self, obs):\n        return 0\n")
+    from pathlib import Path
+
+    script = Path(sys.executable).parent / "navarena"  # the console script: its folder, not the current one, is on sys.path
+    run = lambda agent: subprocess.run([str(script), "eval", str(tmp_path / "no_root"), "--agent", agent],  # noqa: E731
+                                       cwd=tmp_path, capture_output=True, text=True)
+    bad = run("my_pkgx.policy:MyAgent")
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1 and "'my_pkgx'" in bad.stderr and str(tmp_path) in bad.stderr
+    missing = run("my_pkg.policy:Nope")
+    assert missing.returncode == 2 and "has no attribute 'Nope'" in missing.stderr
+    good = run("my_pkg.policy:MyAgent")  # the agent imports; the run stops at the missing data root instead
+    assert good.returncode == 2 and "my_pkg" not in good.stderr and "no_root" in good.stderr, good.stderr
