@@ -36,7 +36,6 @@ def execute(cfg, console: Console | None = None) -> dict:
     if unknown:  # a misspelt key added with `+` would otherwise be accepted and ignored
         raise UnknownKeysError(unknown_keys_message(unknown))
     catalog, scenes, cat_file = open_catalog(cfg, PROJECT_ROOT)
-    root = catalog.root
     missing = [sc for sc in scenes if not sc.synthetic and sc.path and not Path(sc.path).exists()]
     for sc in missing:  # before any worker starts: each named, the other scenes still run
         console.print(f"[red]missing source[/]: scene {escape(sc.name)} ({sc.scene_id}): {escape(sc.path)} does not "
@@ -47,17 +46,18 @@ def execute(cfg, console: Console | None = None) -> dict:
     hashes = config_hashes(cfg)
     selected = set(selection(list(cfg.stages)))
     started = dt.datetime.now(dt.timezone.utc)
+    shard = [cfg.scenes.shard, cfg.scenes.num_shards]
     console.print(f"[bold]navarena[/]: {len(scenes)} scene(s) from {cat_file.name} "
                   f"(shard {cfg.scenes.shard}/{cfg.scenes.num_shards}), stages {[s.name for s in stages]}, "
-                  f"data in {root}")
+                  f"data in {catalog.root}")
     changes = config_changes(cfg, catalog, scenes, stages, hashes)
     blocked = [] if cfg.force else [s for s, c in changes.items() if s not in selected and not c["storage_only"]]
     if blocked:  # outputs of stages the run does not name would be overwritten: refuse, touch nothing
         msg = refusal(changes, blocked, command_overrides())
         console.print(f"[red]refused[/]: {escape(msg)}")
-        summary = build_summary([], started, cat_file, [cfg.scenes.shard, cfg.scenes.num_shards], stages, hashes)
+        summary = build_summary([], started, cat_file, shard, stages, hashes)
         summary["refused"] = msg
-        summary["config_changes"] = {k: v | {"keys": [list(x) for x in v["keys"]]} for k, v in changes.items()}
+        summary["config_changes"] = _changes_record(changes)
         summary["failures"].append({"stage": "run", "scene_id": "*", "scene": "dataset", "status": "failed",
                                     "error": "refused: " + msg.splitlines()[0]})
         return summary
@@ -65,8 +65,47 @@ def execute(cfg, console: Console | None = None) -> dict:
         console.print("[yellow]recomputing because the settings changed[/] (old -> new):")
         for line in describe(changes):
             console.print(f"  {escape(line)}")
+    interrupted = run_graph(cfg, catalog, scenes, stages, hashes, selected, results, started, console)
+    order = {s.name: i for i, s in enumerate(stages)}
+    results.sort(key=lambda r: (r["scene_id"], order[r["stage"]]))
+    if any(r["status"] in ("done", "failed") for r in results) and catalog.root.exists():
+        # partial outputs of killed runs whose final name this run did not write again
+        for p in sweep_stale_temporaries(catalog.root):
+            console.print(f"removed a killed writer's partial output: {p}")
+    # dataset-level steps of the stages that have one and computed at least one scene in this run
+    # (a fully cached stage leaves its dataset-level files as they are)
+    if not interrupted:
+        results += [run_finalize(st, cfg, catalog) for st in stages if finalize_due(st, results, catalog)]
+    summary = build_summary(results, started, cat_file, shard, stages, hashes)
+    summary["interrupted"] = interrupted
+    if changes:
+        summary["config_changes"] = _changes_record(changes)
+    summary["allow_failures"] = bool(cfg.get("allow_failures", False))
+    names = {sc.name for sc in scenes}
+    summary["paths_outside_catalog"] = [o for o in catalog.outside if o["scene"] in names]
+    print_summary(summary, console)
+    try:
+        latest = write_summary(summary, catalog, started, cfg.scenes.shard)
+        console.print(f"run summary: {latest}")
+    except OSError as e:  # e.g. a full disk: the table above is all there is
+        summary["failures"].append({"stage": "run summary", "scene_id": "*", "scene": "dataset", "status": "failed",
+                                    "error": f"the run summary could not be written: {e}"})
+        console.print(f"[red]the run summary could not be written[/]: {e}")
+    return summary
+
+
+def _changes_record(changes: dict) -> dict:
+    """The config changes as the run summary records them (key tuples as lists)."""
+    return {k: v | {"keys": [list(x) for x in v["keys"]]} for k, v in changes.items()}
+
+
+def run_graph(cfg, catalog, scenes, stages, hashes: dict, selected: set, results: list, started, console) -> bool:
+    """Every (stage, scene) task, each after its own scene's upstream stages only, here (executor
+    sync) or on Dask, with the progress display; each result appended to `results` as it finishes.
+    Returns whether Ctrl-C interrupted the run (what finished is kept)."""
     progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                         rate_column(), console=console, transient=False)
+    total = len(scenes) * len(stages)
 
     def chain(submit):
         """Submit every (stage, scene), each after its own scene's upstream stages only."""
@@ -86,27 +125,15 @@ def execute(cfg, console: Console | None = None) -> dict:
         elif not progress.console.is_terminal and r["status"] not in ("n/a", "cached"):
             # a log without a terminal gets no bar redrawn: a line per (stage, scene) task run instead
             took = f", {r['duration_s']:.0f} s" if isinstance(r.get("duration_s"), (int, float)) else ""
-            progress.console.print(f"[{len(results)}/{len(scenes) * len(stages)}] {r['status']} {r['stage']} "
+            progress.console.print(f"[{len(results)}/{total}] {r['status']} {r['stage']} "
                                    f"{r['scene_id']} ({r['scene']}){took}")
         progress.advance(bar)
 
-    watchers = []  # entered with the progress display
-    if any(st.name == "evaluate" for st in stages):  # one task a scene for hours: a bar of episodes too
-        from stages.evaluate.stage import run_name
-
-        run = run_name(OmegaConf.to_object(cfg.evaluate))
-        watchers.append(EpisodeWatcher(progress, catalog.path("eval_progress", run=run, scene_id="x").parent,
-                                       started.timestamp()))
-    if any(st.name == "semantics" for st in stages):  # minutes a scene with a detector on a CPU: a bar of views
-        watchers.append(EpisodeWatcher(progress, catalog.path("semantics_progress", scene_id="x").parent,
-                                       started.timestamp(), log_each=False, name="semantics views",
-                                       count="views", rate="views", unit="views"))
-    interrupted = False
     try:
         with progress, contextlib.ExitStack() as watch, sources.one_listing_a_run():  # a source listed once a run
-            for w in watchers:
+            for w in progress_watchers(cfg, catalog, stages, progress, started):
                 watch.enter_context(w)
-            bar = progress.add_task("tasks", total=len(scenes) * len(stages))
+            bar = progress.add_task("tasks", total=total)
             run = new_run()
             if not scenes:
                 pass  # nothing to run (every source missing): no workers started
@@ -119,35 +146,27 @@ def execute(cfg, console: Console | None = None) -> dict:
             else:
                 run_on_dask(cfg, catalog, chain, record, console, run)
     except KeyboardInterrupt:  # Ctrl-C: keep what finished (every output is written whole), summarise it
-        interrupted = True
-        console.print(f"[yellow]interrupted[/]: {len(results)} of {len(scenes) * len(stages)} (stage, scene) tasks "
+        console.print(f"[yellow]interrupted[/]: {len(results)} of {total} (stage, scene) tasks "
                       "finished and are kept; run the same command again to go on")
-    order = {s.name: i for i, s in enumerate(stages)}
-    results.sort(key=lambda r: (r["scene_id"], order[r["stage"]]))
-    if any(r["status"] in ("done", "failed") for r in results) and root.exists():
-        # partial outputs of killed runs whose final name this run did not write again
-        for p in sweep_stale_temporaries(root):
-            console.print(f"removed a killed writer's partial output: {p}")
-    # dataset-level steps of the stages that have one and computed at least one scene in this run
-    # (a fully cached stage leaves its dataset-level files as they are)
-    if not interrupted:
-        results += [run_finalize(st, cfg, catalog) for st in stages if finalize_due(st, results, catalog)]
-    summary = build_summary(results, started, cat_file, [cfg.scenes.shard, cfg.scenes.num_shards], stages, hashes)
-    summary["interrupted"] = interrupted
-    if changes:
-        summary["config_changes"] = {k: v | {"keys": [list(x) for x in v["keys"]]} for k, v in changes.items()}
-    summary["allow_failures"] = bool(cfg.get("allow_failures", False))
-    names = {sc.name for sc in scenes}
-    summary["paths_outside_catalog"] = [o for o in catalog.outside if o["scene"] in names]
-    print_summary(summary, console)
-    try:
-        latest = write_summary(summary, catalog, started, cfg.scenes.shard)
-        console.print(f"run summary: {latest}")
-    except OSError as e:  # e.g. a full disk: the table above is all there is
-        summary["failures"].append({"stage": "run summary", "scene_id": "*", "scene": "dataset", "status": "failed",
-                                    "error": f"the run summary could not be written: {e}"})
-        console.print(f"[red]the run summary could not be written[/]: {e}")
-    return summary
+        return True
+    return False
+
+
+def progress_watchers(cfg, catalog, stages, progress, started) -> list:
+    """Bars of the long tasks' own items beside the tasks' bar: evaluate's episodes (one task a
+    scene for hours) and semantics' views (minutes a scene with a detector on a CPU)."""
+    watchers = []
+    if any(st.name == "evaluate" for st in stages):
+        from stages.evaluate.stage import run_name
+
+        run = run_name(OmegaConf.to_object(cfg.evaluate))
+        watchers.append(EpisodeWatcher(progress, catalog.path("eval_progress", run=run, scene_id="x").parent,
+                                       started.timestamp()))
+    if any(st.name == "semantics" for st in stages):
+        watchers.append(EpisodeWatcher(progress, catalog.path("semantics_progress", scene_id="x").parent,
+                                       started.timestamp(), log_each=False, name="semantics views",
+                                       count="views", rate="views", unit="views"))
+    return watchers
 
 
 def missing_source_result(stage, scene, catalog) -> dict:

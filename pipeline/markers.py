@@ -25,11 +25,6 @@ def read_marker(path: Path) -> dict | None:
         return None
 
 
-def is_done(path: Path, config_hash: str) -> bool:
-    m = read_marker(path)
-    return m is not None and m.get("config_hash") == config_hash
-
-
 def write_marker(path: Path, payload: dict) -> None:
     write_text_atomic(path, jsonio.dumps(payload, indent=1, sort_keys=True, default=str))
 

@@ -97,17 +97,25 @@ def _table(rows: list[dict], by: str | None) -> list[str]:
 
 
 def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: list[str], rcfg) -> None:
+    """The release card (README.md with the Hub's YAML front matter): a section a function, in order."""
     cfg = info["config"]
     info = {**info, "scene_rows": scene_rows,
             "counts_total": {t: sum(n for sp, n in s.items() if sp not in stats.extra_splits)
                              for t, s in info["counts"].items()}}
     fm = front_matter(info, rcfg)
-    es = info["eval_set"]
     L = ["---", yaml.safe_dump(fm, sort_keys=False, width=120).rstrip(), "---", "",
          f"# {rcfg.name} {info['version']}", ""]
     if not info["public"]:
         L += ["> **Internal release (release.public=false): not for redistribution.** It keeps every scene "
               "whatever its licence; scenes whose licence does not allow redistribution are marked below.", ""]
+    L += _introduction(info, stats, scene_rows) + _fields() + _statistics(stats, plots) + _eval_set(info["eval_set"])
+    L += _embodiment(cfg) + _protocol(cfg) + _scenes(scene_rows, info["scenes"]["excluded"]) + _closing(info, rcfg)
+    Path(path).write_text("\n".join(L))
+
+
+def _introduction(info: dict, stats, scene_rows: list[dict]) -> list[str]:
+    """What the release is, and how to load it."""
+    L: list[str] = []
     total = stats.total_episodes()
     L += [f"Goal-directed navigation episodes (PointNav, ImageNav, ObjectNav) with expert trajectories, generated "
           f"by NavArena from frozen 3D Gaussian Splatting scenes: {total:,} episodes in {len(scene_rows)} scene(s), "
@@ -141,19 +149,37 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
           "when the data root was made with `goal_images.enabled=true`).", "",
           "Schemas: `release.json` (`schemas`; `key_columns`: the columns every table file holds), from "
           "`navcore/io/episode_schema.py`. Frame: the scene's aligned "
-          "frame (z up, metres, floor at z = 0); headings are yaw about +z.", "",
-          "## Fields", "", "Every episode and trajectory file starts with the key columns `task` (pointnav | imagenav | "
+          "frame (z up, metres, floor at z = 0); headings are yaw about +z.", ""]
+    return L
+
+
+def _fields() -> list[str]:
+    """The episode and trajectory tables' fields, from their schemas."""
+    L: list[str] = []
+    L += ["## Fields", "", "Every episode and trajectory file starts with the key columns `task` (pointnav | imagenav | "
           "objectnav), `split` and `scene_id` (string; equal to the file's path), then:", "",
           "Episodes (`episodes/<task>/<split>/<scene_id>.parquet`, one row per episode):", "",
           *field_table("episodes", skip=KEY_COLUMNS), "",
           "Expert trajectories (`trajectories/<task>/<split>/<scene_id>.parquet`, one row per 20 Hz step):", "",
           *field_table("trajectories", skip=KEY_COLUMNS), ""]
+    return L
+
+
+def _statistics(stats, plots: list[str]) -> list[str]:
+    """Episode counts and lengths per task, split, group and difficulty."""
+    L: list[str] = []
     L += ["## Statistics", "", "Per task (the layout of the paper's Table 4; every split except the evaluation set, "
           "whose episodes repeat test episodes):", "", *_table(stats.rows(), None), ""]
     for by, title in (("split", "Per split"), ("group", "Per source group"), ("difficulty", "Per difficulty")):
         L += [f"{title}:", "", *_table(stats.rows(by), by), ""]
     if plots:
         L += ["Plots:", ""] + [f"![{Path(p).stem}]({p})" for p in plots] + [""]
+    return L
+
+
+def _eval_set(es: dict) -> list[str]:
+    """The zero-shot evaluation set: what was drawn against what was asked."""
+    L: list[str] = []
     L += [f"## Zero-shot evaluation set (`{es['name']}`)", "",
           f"A fixed, stratified sample of the `{', '.join(es['from_splits'])}` split (scenes held out of training by "
           f"`episodes.scene_splits`), {es['size']} episodes a task at {' / '.join(f'{k} {v:.0%}' for k, v in es['proportions'].items())} "
@@ -177,6 +203,12 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
     if not es["per_task"]:
         L += ["", "Empty: none of this release's scenes is in the held-out splits (episodes.scene_splits assigns "
               "scenes by a hash of their id; a small scene set may have none there)."]
+    return L
+
+
+def _embodiment(cfg: dict) -> list[str]:
+    """The robot the episodes were made for."""
+    L: list[str] = []
     emb = cfg["embodiment"]
     L += ["", "## Embodiment", "",
           f"`{emb['name']}`: footprint radius {emb['radius']} m, body {emb['h_min']}-{emb['h_max']} m above the floor, "
@@ -185,6 +217,12 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
           f"{emb['max_angular_velocity']} rad/s. Expert trajectories at {1 / cfg['episodes']['dt']:.0f} Hz; "
           f"discrete actions: forward {cfg['episodes']['actions']['forward_step']} m, turns "
           f"{cfg['episodes']['actions']['turn_angle_deg']} deg.", ""]
+    return L
+
+
+def _protocol(cfg: dict) -> list[str]:
+    """Success rules and step budgets."""
+    L: list[str] = []
     diff = cfg["episodes"]["difficulty"]
     L += ["## Evaluation protocol", "",
           "| task | success radius (m) | rule |", "|---|---|---|"]
@@ -198,6 +236,12 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
           + ". An episode ends when the agent stops (protocol `explicit_stop`) or reaches the goal region (`distance`), or "
           "when its step budget runs out; metrics (SR, SPL, DTW, collisions) are defined in the evaluation docs and "
           f"computed by `make eval` (dynamics: blocked moves `{cfg['evaluate']['dynamics']['blocked']}`).", ""]
+    return L
+
+
+def _scenes(scene_rows: list[dict], excluded: list[dict]) -> list[str]:
+    """Every scene (and those a public release left out)."""
+    L: list[str] = []
     L += ["## Scenes", "", "ObjectNav goals: the segmenter whose instances the scene's ObjectNav goals are (`oracle`: the "
           "scene's own per-Gaussian labels; `detector`, `sam3`, `open_vocab`: masks lifted from rendered views, "
           "see the semantics stage) and how many instances it found.", "",
@@ -209,12 +253,17 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
         L.append(f"| {r['name']} | {r['scene_id']} | {r['group']} | {lic} | "
                  f"{r['source_url'] or '-'} | {r['attribution'] or '-'} | {r['screening_verdict'] or '-'} | {goals} | "
                  f"`{(r['content_sha256'] or '')[:16]}` |")
-    excluded = info["scenes"]["excluded"]
     if excluded:
         L += ["", "### Scenes left out of this public release", "", "| scene | id | group | licence | reason |",
               "|---|---|---|---|---|"]
         L += [f"| {e['name']} | {e['scene_id']} | {e['group']} | {e['license'] or 'unknown'} | {e['reason']} |"
               for e in excluded]
+    return L
+
+
+def _closing(info: dict, rcfg) -> list[str]:
+    """Limitations, how to reproduce, citation and licence."""
+    L: list[str] = []
     code = info["code"]
     L += ["", "## Known limitations", "",
           "- Geometry is what the 3DGS shows: free space is derived from the Gaussians' opacity, so glass, mirrors "
@@ -230,4 +279,4 @@ def write_card(path: Path, info: dict, stats, scene_rows: list[dict], plots: lis
     L += ["## Citation", "", "```bibtex", citation(info, rcfg), "```", ""]
     L += ["## Licence", "", f"The code that made it: {PROJECT_LICENSE} (`LICENSE`). Each scene and what is derived from "
           "it keeps the scene's licence (table above, `scenes.parquet`); credit the attribution it names.", ""]
-    Path(path).write_text("\n".join(L))
+    return L
