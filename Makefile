@@ -10,7 +10,7 @@ CUDA ?=
 WHEELS ?=
 GSPLAT_BUILD ?=
 
-.PHONY: bench-tour docs release verify-release bench-release bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
+.PHONY: bench-realism bench-tour docs release verify-release bench-release bench-stale setup-gpu test-gpu bench-gpu bench-multi-gpu bench-render-check bench-screening bench-trained-scan setup dataset test lint test-all test-faults test-slurm bench-scale bench bench-real bench-spatial bench-spatial-gpu bench-episodes bench-eval bench-eval-gpu bench-semantics bench-semantics-gpu eval submit clean
 
 # pip byte-compiles every package at install (torch: 18 s, 8 s with --no-compile): once, in one
 # process; with --no-compile every process that first imports a module compiles it, and make test's
@@ -153,6 +153,12 @@ eval: $(STAMP)
 
 # the real indoor scenes of ../shared/data/real_indoor end to end (catalogs/real_indoor.yaml), the
 # render-based costmap check, and the realistic synthetic scenes against the mesh
+# the generated world against the real captures (issue 82): image statistics of frames at matched camera
+# heights and pitches, and a generated-vs-real classifier's held-out accuracy -> docs/benchmarks/bench_realism.md
+bench-realism: $(STAMP)
+	$(BIN)/python -m pipeline stages=[episodes] scenes=real_indoor data_root=data/real_indoor
+	$(BIN)/python -m benchmarks.captures.realism --generated data --real data/real_indoor --docs $(ARGS)
+
 bench-real: $(STAMP)
 	$(BIN)/python -m benchmarks.captures.real $(ARGS)
 

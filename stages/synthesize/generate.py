@@ -15,9 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from navcore.gaussians.formats import write_inria_ply
-from navcore.gaussians.model import GaussianScene, rotmat_to_quat
+from navcore.gaussians.model import GaussianScene, quat_to_rotmat, rotmat_to_quat
 from navcore.io.datasets import FolderWriter, SyntheticSourceDataset
-from stages.synthesize.layout import CATEGORIES, Layout, LayoutConfig, make_layout
+from stages.synthesize.furnish import furnish
+from stages.synthesize.layout import CATEGORIES, Layout, LayoutConfig, Part, make_layout
+from stages.synthesize.materials import LookConfig, dress
 from stages.synthesize.realism import RealismConfig, add_artefacts, up_rotation
 from stages.synthesize.surface import layout_mesh, surface_gaussians, total_area
 
@@ -46,6 +48,10 @@ class SyntheticConfig:
     realism: RealismConfig = field(default_factory=RealismConfig)
     """Artefacts of trained reconstructions (reflections, far floaters, noisy floors, haze, sparse
     coverage, any up axis); level none keeps the clean procedural scene."""
+    look: LookConfig = field(default_factory=LookConfig)
+    """How the scene looks: textured materials, painted details, baked light and a ceiling
+    (stages/synthesize/materials.py). Colours and the ceiling only: the geometry of a seed is the same
+    either way. The ceiling adds its own Gaussians (at the surfaces' density) to num_gaussians."""
 
 
 @dataclass
@@ -108,6 +114,36 @@ def generate_scene(seed: int, cfg: SyntheticConfig) -> SyntheticScene:
     density = n_surface / total_area(lay.parts)
     palette = {o.instance_id: rng.uniform(0.1, 0.9, 3) for o in lay.objects}
     means, quats, scales, alphas, rgb, inst = surface_gaussians(lay.parts, rng, density, palette, cfg.flatness)
+    # the ceiling and the furniture's details, each from its own stream and added after everything
+    # else: the Gaussians of the layout's own parts, the floaters and the artefacts stay a seed's
+    added, details = [], []
+    if cfg.look.ceiling:
+        parts = ceiling_parts(lay, cfg.layout.wall_thickness_m)
+        added.append(surface_gaussians(parts, np.random.default_rng([seed, 3]), density, {}, cfg.flatness))
+        lay.parts += parts  # into the ground-truth mesh too
+    if cfg.look.furnish:
+        details = furnish(lay, np.random.default_rng([seed, 4]))
+        drng = np.random.default_rng([seed, 5])
+        per = [surface_gaussians([d.part], drng, density, palette, cfg.flatness) for d in details]
+        if per:
+            added.append(tuple(np.concatenate([g[k] for g in per]) for k in range(6)))
+        detail_of = np.concatenate([np.full(len(g[0]), k) for k, g in enumerate(per)]) if per else np.zeros(0, int)
+        lay.parts += [d.part for d in details]
+    if cfg.look.enabled:  # colours only, from their own stream: the geometry's draws are untouched
+        extra = tuple(np.concatenate([g[k] for g in added]) for k in range(6)) if added else None
+        pts = means if extra is None else np.concatenate([means, extra[0]])
+        q = quats if extra is None else np.concatenate([quats, extra[1]])
+        ins = inst if extra is None else np.concatenate([inst, extra[5]])
+        of = np.full(len(pts), -1)
+        if details:
+            of[len(pts) - len(detail_of):] = detail_of
+        look = dress(lay, pts, quat_to_rotmat(q)[:, :, 2], ins, np.random.default_rng([seed, 2]), cfg.look,
+                     cfg.layout.door_height_m, details, of)
+        rgb = look[:len(means)]
+        start = len(means)
+        for k, g in enumerate(added):
+            added[k] = (*g[:4], look[start:start + len(g[0])], g[5])
+            start += len(g[0])
 
     # floaters: low-opacity fuzz inside the rooms (never opaque enough to be an obstacle alone)
     n_fl = int(cfg.num_gaussians * cfg.floater_fraction)
@@ -155,6 +191,9 @@ def generate_scene(seed: int, cfg: SyntheticConfig) -> SyntheticScene:
                       (all_inst == 0) & (np.abs(all_means[:, 2]) < 0.01),
                       np.array([c[:3, 3] for c in _capture_path(lay, cfg.camera_height_m, np.random.default_rng(0))]),
                       real, rrng, np.asarray(lay.rooms))
+    for extra in added:  # after the artefacts, which draw per Gaussian: theirs stay those of a scene without them
+        for key, arr in zip(("means", "quats", "scales", "alphas", "rgb", "inst"), extra):
+            g[key] = np.concatenate([g[key], arr])
     all_inst, defects = g["inst"], g["defects"]
     canonical = GaussianScene.from_colors(g["means"], g["quats"], g["scales"], g["alphas"], g["rgb"])
     if cfg.sh_degree > 0:
@@ -170,6 +209,14 @@ def generate_scene(seed: int, cfg: SyntheticConfig) -> SyntheticScene:
     cams = [transform @ c for c in _capture_path(lay, cfg.camera_height_m, rng)]
     cameras = [{"position": c[:3, 3].tolist(), "quat_wxyz": rotmat_to_quat(c[:3, :3]).tolist()} for c in cams]
     return SyntheticScene(canonical.transformed(transform), all_inst, lay, transform, cameras, defects)
+
+
+def ceiling_parts(lay: Layout, wall_thickness: float) -> list[Part]:
+    """A ceiling slab over every room, its underside at the walls' top (structure, instance 0)."""
+    t = wall_thickness
+    return [Part("box", np.array([(x0 + x1) / 2, (y0 + y1) / 2, lay.wall_height + 0.025]),
+                 np.array([x1 - x0 + 2 * t, y1 - y0 + 2 * t, 0.05]), 0.0, 0, skip_top=True, skip_sides=True)
+            for x0, y0, x1, y1 in lay.rooms]
 
 
 def object_records(layout: Layout) -> list[dict]:
