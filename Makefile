@@ -154,10 +154,13 @@ eval: $(STAMP)
 # the real indoor scenes of ../shared/data/real_indoor end to end (catalogs/real_indoor.yaml), the
 # render-based costmap check, and the realistic synthetic scenes against the mesh
 # the generated world against the real captures (issue 82): image statistics of frames at matched camera
-# heights and pitches, and a generated-vs-real classifier's held-out accuracy -> docs/benchmarks/bench_realism.md
-bench-realism: $(STAMP)
+# heights and pitches, and a generated-vs-real classifier's held-out accuracy, before (the same scenes without
+# synthetic.look, data/flat_world) and after (make dataset's) -> docs/benchmarks/bench_realism.md
+bench-realism: dataset
 	$(BIN)/python -m pipeline stages=[episodes] scenes=real_indoor data_root=data/real_indoor
-	$(BIN)/python -m benchmarks.captures.realism --generated data --real data/real_indoor --docs $(ARGS)
+	$(BIN)/python -m pipeline stages=[episodes] data_root=data/flat_world synthetic.look.enabled=false \
+		synthetic.look.ceiling=false synthetic.look.furnish=false
+	$(BIN)/python -m benchmarks.captures.realism --generated data --before data/flat_world --real data/real_indoor --docs $(ARGS)
 
 bench-real: $(STAMP)
 	$(BIN)/python -m benchmarks.captures.real $(ARGS)
