@@ -155,13 +155,13 @@ eval: $(STAMP)
 # render-based costmap check, and the realistic synthetic scenes against the mesh
 # the generated world against the real captures (issue 82): image statistics of frames at matched camera
 # heights and pitches, and a generated-vs-real classifier's held-out accuracy, before (the same scenes without
-# synthetic.look, data/flat_world) and after (make dataset's) -> docs/benchmarks/bench_realism.md
+# synthetic.look, data/realism/before) and after (make dataset's) -> docs/benchmarks/bench_realism.md
 REALISM_STAGES := stages=[synthesize,ingest,voxelize,align,costmap,screen,episodes]
 bench-realism: dataset
-	$(BIN)/python -m pipeline $(REALISM_STAGES) scenes=real_indoor data_root=data/real_indoor
-	$(BIN)/python -m pipeline $(REALISM_STAGES) data_root=data/flat_world synthetic.look.enabled=false \
+	$(BIN)/python -m pipeline $(REALISM_STAGES) scenes=real_indoor data_root=data/realism/captures
+	$(BIN)/python -m pipeline $(REALISM_STAGES) data_root=data/realism/before synthetic.look.enabled=false \
 		synthetic.look.ceiling=false synthetic.look.furnish=false
-	$(BIN)/python -m benchmarks.captures.realism --generated data --before data/flat_world --real data/real_indoor --docs $(ARGS)
+	$(BIN)/python -m benchmarks.captures.realism --generated data --before data/realism/before --real data/realism/captures --docs $(ARGS)
 
 bench-real: $(STAMP)
 	$(BIN)/python -m benchmarks.captures.real $(ARGS)

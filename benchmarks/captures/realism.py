@@ -18,7 +18,7 @@ frames of one scene never on both sides of the split: generated scenes split by 
 capture's frames by pose blocks), and its held-out accuracy is reported: 0.5 is indistinguishable.
 Medians over 3 seeds.
 
-    python -m benchmarks.captures.realism --generated data --real data/real_indoor [--before data_flat] [--frames 120] [--docs]
+    python -m benchmarks.captures.realism --generated data --real data/realism/captures [--before data/realism/before] [--frames 120] [--docs]
 
 Writes data/08_reports/realism.json, and with --docs docs/benchmarks/bench_realism.md with a picture of
 generated frames (docs/benchmarks/bench_realism_generated.png). Real captures' renders are never
@@ -302,7 +302,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--generated", type=Path, default=Path("data"), help="a data root of generated scenes (make dataset)")
     ap.add_argument("--before", type=Path, default=None,
                     help="a data root of the same scenes as they looked before (synthetic.look.enabled=false ...)")
-    ap.add_argument("--real", type=Path, default=Path("data/real_indoor"), help="a data root of the real captures")
+    ap.add_argument("--real", type=Path, default=Path("data/realism/captures"), help="a data root of the real captures")
     ap.add_argument("--frames", type=int, default=120, help="frames a scene")
     ap.add_argument("--size", default="160x120", help="render size WxH")
     ap.add_argument("--out", type=Path, default=Path("data/08_reports"))
