@@ -457,3 +457,22 @@ def test_verify_release_bounds_a_geodesic_from_both_sides_of_a_binary_map(tmp_pa
     fallback = EpisodesConfig().geodesic_neighbourhood  # the episodes stage's default, where release.json is silent
     for info in ({}, {"config": None}, {"config": {"embodiment": {"radius": "x"}}}, {"config": {"embodiment": {"radius": True}}}):
         assert map_settings(info) == (None, fallback)
+
+
+def test_scene_ids_by_split_agree_between_the_release_and_its_data_root(release, release_root):
+    """NavDataset.scene_ids(task, split): the scenes holding episodes of that split, the same for a
+    release (split in the path) and the data root it came from (split a column); every listed
+    scene's episodes of the split exist, and an unknown split lists none."""
+    from navcore.eval.dataset import NavDataset
+
+    out, _ = release
+    rel, root = NavDataset(out), NavDataset(release_root[0])
+    eval_set = json.loads((out / RELEASE_JSON).read_text())["eval_set"]["name"]  # a release's own split
+    splits = {s for sid in rel.scene_ids("pointnav") for s in rel.episode_table(sid, "pointnav")["split"]} - {eval_set}
+    assert splits
+    for split in splits:
+        in_release = rel.scene_ids("pointnav", split=split)
+        assert in_release and set(in_release) <= set(root.scene_ids("pointnav", split=split))
+        for sid in in_release:
+            assert rel.episodes(sid, "pointnav", split=split, limit=1)
+    assert rel.scene_ids("pointnav", split="nope") == root.scene_ids("pointnav", split="nope") == []

@@ -101,11 +101,18 @@ class NavDataset:
             return sorted(self.path.glob(f"episodes/{task}/*/{scene_id or '*'}.parquet"))
         return sorted(self.path.glob(f"05_episodes/task={task}/scene_id={scene_id or '*'}/part-0.parquet"))
 
-    def scene_ids(self, task: str | None = None) -> list[str]:
-        """Scenes with episodes (of `task`, or of any task), sorted."""
+    def scene_ids(self, task: str | None = None, split: str | None = None) -> list[str]:
+        """Scenes with episodes (of `task`, or of any task; of `split`, or of any split), sorted:
+        `ds.scene_ids("pointnav", split="test")[0]` is a scene that has PointNav test episodes."""
+        import pyarrow.parquet as pq
+
         out = set()
         for t in ([task] if task else TASKS):
-            out |= {p.stem if self.is_release else p.parent.name.split("=", 1)[1] for p in self._episode_files(t)}
+            for p in self._episode_files(t):
+                sid = p.stem if self.is_release else p.parent.name.split("=", 1)[1]
+                if split is None or (p.parent.name == split if self.is_release else
+                                     split in set(pq.read_table(p, columns=["split"]).column("split").to_pylist())):
+                    out.add(sid)
         return sorted(out)
 
     def episode_table(self, scene_id: str, task: str):
