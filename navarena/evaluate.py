@@ -56,8 +56,9 @@ def chosen_episodes(ds: NavDataset, args) -> dict[str, list]:
 
 
 def summary_table(summary: dict) -> str:
-    """The per-task table printed at the end: SR, SPL, NE, CR, steps, overall and per difficulty."""
-    cols = [("episodes", "n", "{:.0f}"), ("sr", "SR", "{:.3f}"), ("spl", "SPL", "{:.3f}"), ("ne", "NE m", "{:.2f}"),
+    """The per-task table printed at the end: SR, SPL, NE, CR, steps, overall and per difficulty (n: the
+    episodes measured; errored: those that ended in an agent error, apart)."""
+    cols = [("episodes", "n", "{:.0f}"), ("errored", "errored", "{:.0f}"), ("sr", "SR", "{:.3f}"), ("spl", "SPL", "{:.3f}"), ("ne", "NE m", "{:.2f}"),
             ("collision_rate", "CR", "{:.3f}"), ("steps", "steps", "{:.0f}"), ("pose_sr", "Pose SR", "{:.3f}"),
             ("stop_sr", "Stop SR", "{:.3f}")]
     fmt = lambda f, v: "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f.format(v)  # noqa: E731
@@ -103,9 +104,13 @@ def write_results(table, out: Path, meta: dict) -> dict:
     return clean
 
 
-def evaluate(args) -> tuple[list[dict], bool]:
-    """Every chosen episode, scene by scene; (rows, interrupted)."""
-    from navcore.eval.loop import evaluate_episodes
+def evaluate(args) -> tuple[list[dict], bool, str]:
+    """Every chosen episode, scene by scene; (rows, interrupted, why the run stopped early: '' when it
+    did not). Ctrl-C and SIGTERM stop it after the episode in flight; an agent server that cannot be
+    reached for several episodes in a row stops it too."""
+    import signal
+
+    from navcore.eval.loop import AgentUnreachable, evaluate_episodes
     from navcore.io.tool_progress import ToolProgress
     from navcore.seeds import stream_seed
 
@@ -117,12 +122,18 @@ def evaluate(args) -> tuple[list[dict], bool]:
                          f"difficulty {args.difficulty} (scenes: {', '.join(ds.scene_ids()) or 'none'})")
     cfg = ds.env_config(protocol=args.protocol, width=args.width, height=args.height, render=not args.no_render)
     rows: list[dict] = []
-    interrupted = False
-    with ToolProgress("eval", total, args.quiet) as progress:
+    interrupted, stopped = False, ""
+    budget = {(e.task, e.episode_id, e.scene_id): int(e.max_steps) for eps in plan.values() for e in eps}
+
+    def terminate(signum, frame):  # SIGTERM (a batch system's, kill): as Ctrl-C, keep what finished
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, terminate)
+    with ToolProgress("eval", total, args.quiet, budget=sum(budget.values())) as progress:
 
         def done(row: dict, frames) -> None:
             rows.append(row)
-            progress.advance(frames=int(row["steps"]))
+            progress.advance(frames=int(row["steps"]), budget=budget.get((row["task"], row["episode_id"], row["scene_id"]), 0))
 
         try:
             for sid, eps in plan.items():
@@ -132,7 +143,11 @@ def evaluate(args) -> tuple[list[dict], bool]:
                                   on_result=done)
         except KeyboardInterrupt:
             interrupted = True
-    return rows, interrupted
+        except AgentUnreachable as e:
+            stopped = str(e)
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+    return rows, interrupted, stopped
 
 
 def check_agent(spec: str) -> str | None:
@@ -194,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
     name = re.sub(r"[^A-Za-z0-9_.-]+", "_", f"{args.agent}_{args.protocol}").strip("_")
     out = Path(args.out or Path("navarena_eval") / name)
     try:
-        rows, interrupted = evaluate(args)
+        rows, interrupted, stopped = evaluate(args)
     except (FileNotFoundError, KeyError, ValueError) as e:
         print(f"navarena eval: {e}", file=sys.stderr)
         return 2
@@ -203,15 +218,20 @@ def main(argv: list[str] | None = None) -> int:
             "split": args.split, "difficulty": args.difficulty, "episodes_per_scene": args.episodes_per_scene,
             "seed": args.seed, "render": None if args.no_render else
             {"width": args.width, "height": args.height, "renderer": args.renderer},
-            "interrupted": interrupted}
+            "interrupted": interrupted, "stopped": stopped or None}
     if not rows:
-        print("navarena eval: interrupted before any episode finished; nothing written", file=sys.stderr)
-        return 130
+        why = f"stopped: {stopped}" if stopped else "interrupted"
+        print(f"navarena eval: {why} before any episode finished; nothing written", file=sys.stderr)
+        return 3 if stopped else 130
     summary = write_outputs(rows, out, meta)
     print(summary_table(summary))
     errors = sum(bool(r["error"]) for r in rows)
-    print(f"{len(rows)} episodes{' (interrupted)' if interrupted else ''}, {errors} agent errors; "
-          f"results: {out / 'results.parquet'}, {out / 'summary.json'}")
+    print(f"{len(rows)} episodes{' (interrupted)' if interrupted else ''}, {errors} errored (apart: not in the "
+          f"metrics); results: {out / 'results.parquet'}, {out / 'summary.json'}")
+    if stopped:
+        print(f"navarena eval: stopped: {stopped}; the {len(rows) - errors} episodes that finished are kept in {out}",
+              file=sys.stderr)
+        return 3
     return 130 if interrupted else 0
 
 

@@ -507,3 +507,100 @@ def test_a_users_agent_is_imported_from_the_current_folder_or_refused_in_one_lin
     assert missing.returncode == 2 and "has no attribute 'Nope'" in missing.stderr
     good = run("my_pkg.policy:MyAgent")  # the agent imports; the run stops at the missing data root instead
     assert good.returncode == 2 and "my_pkg" not in good.stderr and "no_root" in good.stderr, good.stderr
+
+
+def test_errored_episodes_are_counted_apart_never_as_failures():
+    rows = [{"sr": 1.0, "spl": 0.8, "difficulty": "easy", "error": ""},
+            {"sr": 0.0, "spl": 0.0, "difficulty": "easy", "error": "ConnectionError: agent server unreachable"},
+            {"sr": 0.0, "spl": 0.0, "difficulty": "hard", "error": ""}]
+    agg = aggregate(rows)
+    assert agg["overall"]["episodes"] == 2 and agg["overall"]["errored"] == 1
+    assert agg["overall"]["sr"] == 0.5 and agg["easy"]["sr"] == 1.0 and agg["easy"]["errored"] == 1
+
+
+def test_the_evaluate_verb_stops_when_the_agent_server_cannot_be_reached(ctx, make_episode):
+    """evaluate_episodes: an agent server unreachable for max_connect_failures episodes in a row
+    stops the run (AgentUnreachable naming its address) instead of waiting out every episode, one at a
+    time or batched; the episodes it tried were reported."""
+    import time
+
+    from navcore.eval.loop import AgentUnreachable, evaluate_episodes
+
+    eps = [make_episode(start=(1.0, 0.5, 0.1 * i)) for i in range(8)]
+    for i, e in enumerate(eps):
+        e.episode_id = f"u{i}"
+    for slots in (1, 2):
+        seen = []
+        t0 = time.perf_counter()
+        with pytest.raises(AgentUnreachable, match="ws://127.0.0.1:9"):
+            evaluate_episodes(ctx, eps, "ws://127.0.0.1:9", EnvConfig(render=False), timeout=0.3,
+                              agent_args={"retries": 1}, batch_slots=slots, max_connect_failures=3,
+                              on_result=lambda row, frames: seen.append(row))
+        assert time.perf_counter() - t0 < 10
+        assert seen and all("unreachable" in r["error"] for r in seen)
+        if slots == 1:
+            assert len(seen) == 3  # stopped at the third failure in a row, not after all 8
+
+
+def test_navarena_eval_keeps_what_finished_when_the_agent_server_is_gone(episode_run, tmp_path):
+    """navarena eval against an agent server that is not there: exit 3 with one line naming its
+    address, summary.json written with the episodes apart as errored and the reason it stopped."""
+    import json
+    import subprocess
+    import sys
+
+    out = tmp_path / "gone"
+    p = subprocess.run([sys.executable, "-m", "navarena", "eval", str(episode_run[0]), "--agent", "ws://127.0.0.1:9",
+                        "--agent-arg", "retries=1", "--timeout", "0.3", "--no-render", "--tasks", "pointnav",
+                        "--episodes-per-scene", "5", "--out", str(out), "--quiet"], capture_output=True, text=True,
+                       timeout=120)
+    assert p.returncode == 3, p.stderr[-2000:]
+    assert "ws://127.0.0.1:9" in p.stderr and "Traceback" not in p.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["stopped"] and summary["tasks"]["pointnav"]["overall"]["errored"] == 3
+    assert summary["tasks"]["pointnav"]["overall"]["episodes"] == 0
+
+
+def test_sigterm_stops_an_evaluation_and_keeps_the_finished_episodes(episode_run, tmp_path):
+    """SIGTERM (a batch system's stop) ends navarena eval within seconds, as Ctrl-C does: the episodes
+    that finished are written and marked interrupted."""
+    import json
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    (tmp_path / "slow_agent.py").write_text(
+        "import time\n\nclass Slow:\n    def __init__(self, **_):\n        pass\n\n    def reset(self, task):\n"
+        "        self.t = 0\n\n    def act(self, obs):\n        time.sleep(0.02)\n        self.t += 1\n"
+        "        return 1 if self.t < 15 else 0\n")
+    out = tmp_path / "term"
+    p = subprocess.Popen([sys.executable, "-m", "navarena", "eval", str(episode_run[0]), "--agent", "slow_agent:Slow",
+                          "--protocol", "explicit_stop", "--no-render", "--tasks", "pointnav", "--out", str(out),
+                          "--quiet"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(6)  # start-up, then a few episodes of about 0.3 s
+    assert p.poll() is None, p.communicate()[1][-2000:]
+    t0 = time.perf_counter()
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=30)
+    assert p.returncode == 130, err[-2000:]
+    assert time.perf_counter() - t0 < 10
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] and summary["episodes"] >= 1
+
+
+def test_progress_time_left_counts_the_step_budgets_still_to_run():
+    """With a budget, the time left is the unfinished episodes' step budgets at the frame rate so far,
+    an upper bound that an episode running its whole budget cannot exceed."""
+    import time
+
+    from navcore.io.tool_progress import ToolProgress
+
+    with ToolProgress("eval", 4, quiet=True, budget=4000) as p:
+        time.sleep(0.05)
+        p.advance(frames=100, budget=1000)  # an episode that stopped after 100 of its 1,000 steps
+        rate = p.frames / (time.perf_counter() - p.t0)
+        left = p.budget_left_s()
+        assert left == pytest.approx(3000 / rate, rel=0.2)
+    with ToolProgress("eval", 4, quiet=True) as q:
+        assert q.budget_left_s() is None

@@ -175,8 +175,18 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
     return rows
 
 
+class AgentUnreachable(ConnectionError):
+    """An agent server that could not be reached for several episodes in a row: the evaluation
+    stops (what finished is kept) instead of waiting out every remaining episode."""
+
+
+def _unreachable(row: dict) -> bool:
+    return row["error"].startswith("ConnectionError")
+
+
 def evaluate_episodes(ctx, episodes, agent: str, cfg: EnvConfig, *, seed: int = 0, timeout: float = 60.0,
-                      agent_args: dict | None = None, batch_slots: int = 1, videos: int = 0, on_result=None) -> list[dict]:
+                      agent_args: dict | None = None, batch_slots: int = 1, videos: int = 0, on_result=None,
+                      max_connect_failures: int = 3) -> list[dict]:
     """The evaluate verb: one agent on one scene's episodes, the loop both `navarena eval` and the
     pipeline's `evaluate` stage run. Picks the agent's form (an agent server over the protocol,
     batched or one episode at a time; in-process agents, one per slot when batched), drives the
@@ -194,9 +204,13 @@ def evaluate_episodes(ctx, episodes, agent: str, cfg: EnvConfig, *, seed: int = 
         videos: with batch_slots 1, the first `videos` episodes' egocentric RGB frames are passed to on_result.
         on_result: called as each episode finishes, on_result(row, frames) (frames: a list of
             HxWx3 uint8, or None when not recorded).
+        max_connect_failures: an agent server that cannot be reached for this many episodes in a row
+            stops the evaluation (AgentUnreachable, naming its address).
 
     Returns:
         The episodes' result rows (navcore.eval.loop.result_row), in the order of `episodes`.
+    Raises:
+        AgentUnreachable: the agent server could not be reached; the rows reported so far stand.
     """
     kwargs = dict(agent_args or {})
     report = on_result or (lambda row, frames: None)
@@ -206,12 +220,21 @@ def evaluate_episodes(ctx, episodes, agent: str, cfg: EnvConfig, *, seed: int = 
         if batch_slots > 1:
             client = agent_for(agent, seed, timeout, batch=True, **kwargs) if remote else \
                 InProcessBatch(lambda: agent_for(agent, seed, timeout, **kwargs))
-            return run_episodes_batched(ctx, episodes, client, batch_slots, cfg, on_result=lambda row: report(row, None))
+            rows = run_episodes_batched(ctx, episodes, client, batch_slots, cfg, max_connect_failures,
+                                        on_result=lambda row: report(row, None))
+            if remote and len(rows) >= max_connect_failures and all(_unreachable(r) for r in rows[-max_connect_failures:]):
+                raise AgentUnreachable(f"agent server {agent} unreachable for {max_connect_failures} episodes in a row")
+            return rows
         env, client, rows = NavEnv(ctx, cfg), agent_for(agent, seed, timeout, **kwargs), []
+        failed = 0
         for k, ep in enumerate(episodes):
             frames = [] if cfg.render and k < videos else None
             rows.append(run_episode(env, client, ep, frames))
             report(rows[-1], frames)
+            failed = failed + 1 if remote and _unreachable(rows[-1]) else 0
+            if failed >= max_connect_failures:
+                raise AgentUnreachable(f"agent server {agent} unreachable for {failed} episodes in a row "
+                                       f"({rows[-1]['error']})")
         return rows
     finally:
         if client is not None and hasattr(client, "close"):

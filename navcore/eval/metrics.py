@@ -206,9 +206,13 @@ def episode_metrics(s, d0: float, d_final: float, protocol: str, names=None) -> 
 
 def aggregate(rows: list[dict], by: str | None = "difficulty") -> dict:
     """Means of the metric columns overall and per value of `by` (NaNs ignored), plus Pose
-    Retention = Pose SR / SR."""
+    Retention = Pose SR / SR. Episodes that ended in an error (an agent that raised or could not be
+    reached: the row's `error`) measure no navigation: they are counted apart (`errored`) and left
+    out of every mean, never counted as failures of the policy."""
     def summary(rs):
-        out = {"episodes": len(rs)}
+        errored = sum(bool(r.get("error")) for r in rs)
+        rs = [r for r in rs if not r.get("error")]
+        out = {"episodes": len(rs), "errored": errored}
         for n in METRICS:
             vals = np.array([r[n] for r in rs if n in r], float)
             vals = vals[~np.isnan(vals)]
