@@ -58,7 +58,8 @@ def chosen_episodes(ds: NavDataset, args) -> dict[str, list]:
 def summary_table(summary: dict) -> str:
     """The per-task table printed at the end: SR, SPL, NE, CR, steps, overall and per difficulty (n: the
     episodes measured; errored: those that ended in an agent error, apart)."""
-    cols = [("episodes", "n", "{:.0f}"), ("errored", "errored", "{:.0f}"), ("sr", "SR", "{:.3f}"), ("spl", "SPL", "{:.3f}"), ("ne", "NE m", "{:.2f}"),
+    cols = [("episodes", "n", "{:.0f}"), ("errored", "errored", "{:.0f}"), ("sr", "SR", "{:.3f}"), ("spl", "SPL", "{:.3f}"),
+            ("ne", "NE m", "{:.2f}"),
             ("collision_rate", "CR", "{:.3f}"), ("steps", "steps", "{:.0f}"), ("pose_sr", "Pose SR", "{:.3f}"),
             ("stop_sr", "Stop SR", "{:.3f}")]
     fmt = lambda f, v: "-" if v is None or (isinstance(v, float) and math.isnan(v)) else f.format(v)  # noqa: E731

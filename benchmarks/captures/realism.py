@@ -18,7 +18,8 @@ frames of one scene never on both sides of the split: generated scenes split by 
 capture's frames by pose blocks), and its held-out accuracy is reported: 0.5 is indistinguishable.
 Medians over 3 seeds.
 
-    python -m benchmarks.captures.realism --generated data --real data/realism/captures [--before data/realism/before] [--frames 120] [--docs]
+    python -m benchmarks.captures.realism --generated data --real data/realism/captures \
+        [--before data/realism/before] [--frames 120] [--docs]
 
 Writes data/08_reports/realism.json, and with --docs docs/benchmarks/bench_realism.md with a picture of
 generated frames (docs/benchmarks/bench_realism_generated.png). Real captures' renders are never
