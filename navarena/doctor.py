@@ -7,8 +7,10 @@ torch, its CUDA build and the GPUs it sees; gsplat and
 whether its CUDA kernels are built (they compile once on first use, `make setup-gpu`); FFmpeg's
 libraries for torchcodec (LeRobot loading) and PyAV's encoder (videos); Chromium (the HTML report
 test); OMPL; and the optional features: the GPU renderer, the `detector` segmenter's shipped
-weights, `open_vocab` (transformers), `sam3`, the LeRobot export. Exit status 0 when the core
-(what `make dataset` needs) is there, 1 otherwise.
+weights, `open_vocab` (transformers), `sam3`, the LeRobot export. The report has two parts: the
+library (navcore, navarena: what a release's consumer installs with pip) and, from a checkout, the
+pipeline (what `make dataset` needs besides: OMPL, OpenCV, the pipeline group). Exit status 0 when
+the core of each part present is there (a consumer install needs no OMPL or OpenCV), 1 otherwise.
 
     navarena doctor [--json]
 """
@@ -33,6 +35,8 @@ class Check:
     ok: bool
     detail: str
     core: bool = False
+    part: str = "library"
+    """library (navcore, navarena) or pipeline (a checkout's pipeline project)."""
 
 
 def _version(dist: str) -> str | None:
@@ -88,16 +92,19 @@ def _try(module: str) -> tuple[bool, str]:
 
 
 def checks() -> list[Check]:
+    group = pipeline_group()
+    checkout = group is not None
+    setup = "make setup" if checkout else "pip install navarena"  # the hint a user of this install can follow
     out = [Check("python", sys.version_info >= (3, 10), f"{platform.python_version()} ({sys.executable})", True)]
     missing = [d for d in declared() if _version(d) is None]
     out.append(Check("packages", not missing, f"{len(declared()) - len(missing)} of {len(declared())} declared "
-                     "dependencies installed" + (f"; missing: {', '.join(missing)} (make setup)" if missing else ""), True))
-    group = pipeline_group()
-    if group is not None:
+                     "dependencies installed" + (f"; missing: {', '.join(missing)} ({setup})" if missing else ""), True))
+    if checkout:
         names, gone = group
         out.append(Check("pipeline packages", not gone, f"{len(names) - len(gone)} of {len(names)} of the checkout's "
                          "pipeline group installed" + (f"; missing: {', '.join(gone)} (make setup; offline: add their "
-                                                       "wheels to the WHEELS folder of make setup-gpu)" if gone else "")))
+                                                       "wheels to the WHEELS folder of make setup-gpu)" if gone else ""),
+                         part="pipeline"))
     try:
         import torch
 
@@ -107,7 +114,8 @@ def checks() -> list[Check]:
         out.append(Check("gpu", cuda, ", ".join(gpus) if gpus else
                          "no CUDA GPU visible: the CPU renderer is used (gsplat needs CUDA; make setup-gpu on a GPU machine)"))
     except ImportError as e:
-        out.append(Check("torch", False, f"not importable: {e} (make setup)", True))
+        out.append(Check("torch", False, f"not importable: {e} ({setup}; without a GPU first pip install torch "
+                         "--index-url https://download.pytorch.org/whl/cpu)", True))
         cuda = False
     gs = _version("gsplat")
     if gs is None:
@@ -119,17 +127,17 @@ def checks() -> list[Check]:
         out.append(Check("gsplat", cuda and gsplat_available(), f"{gs}; " + (
             ("kernels built" if built else "kernels not built yet: they compile on first use (about 90 s), "
              "or run make setup-gpu") if cuda else "installed, unused without CUDA")))
-    ok, why = _try("ompl")
-    out.append(Check("ompl", ok, _version("ompl") or why, True))
+    ok, why = _try("ompl")  # the pipeline's: a consumer install has neither, and needs neither
+    out.append(Check("ompl", ok, _version("ompl") or why, checkout, "pipeline"))
     ok, why = _try("cv2")
-    out.append(Check("opencv (detector)", ok, _version("opencv-python-headless") or why, True))
+    out.append(Check("opencv (detector)", ok, _version("opencv-python-headless") or why, checkout, "pipeline"))
     try:
         from navcore.io.models import load_net
 
         load_net(None)
-        out.append(Check("detector weights", True, "shipped Yolo-Fastest-1.1-XL loads (sha256 checked)"))
+        out.append(Check("detector weights", True, "shipped Yolo-Fastest-1.1-XL loads (sha256 checked)", part="pipeline"))
     except Exception as e:  # noqa: BLE001
-        out.append(Check("detector weights", False, f"{type(e).__name__}: {e}"))
+        out.append(Check("detector weights", False, f"{type(e).__name__}: {e}", part="pipeline"))
     ok, why = _try("av")
     out.append(Check("video (PyAV)", ok, (_version("av") or "") if ok else why, True))
     ffmpeg = shutil.which("ffmpeg")
@@ -139,9 +147,10 @@ def checks() -> list[Check]:
                                 "libraries: sh scripts/system_packages.sh"))
     browser = next((shutil.which(b) for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)), None)
     out.append(Check("chromium", browser is not None, browser or "not found (only the HTML report's browser test uses it)"))
-    for name, module, extra in (("open_vocab segmenter", "transformers", "pip install -e '.[open_vocab]'"),
-                                ("sam3 segmenter", "sam3", "pip install -e '.[sam3]' on a CUDA machine, weights: docs"),
-                                ("lerobot export", "datasets", "pip install -e '.[lerobot]'")):
+    pkg = "-e '.[{}]'" if checkout else "'navarena[{}]'"
+    for name, module, extra in (("open_vocab segmenter", "transformers", f"pip install {pkg.format('open_vocab')}"),
+                                ("sam3 segmenter", "sam3", f"pip install {pkg.format('sam3')} on a CUDA machine, weights: docs"),
+                                ("lerobot export", "datasets", f"pip install {pkg.format('lerobot')}")):
         ok, why = _try(module)
         out.append(Check(name, ok, (_version(module) or "importable") if ok else f"{why} ({extra})"))
     ok, why = _try("lerobot.datasets.lerobot_dataset")
@@ -166,9 +175,13 @@ def main(argv=None) -> int:
         print(json.dumps([asdict(c) for c in res], indent=1))
     else:
         w = max(len(c.name) for c in res)
-        for c in res:
-            mark = "ok " if c.ok else ("FAIL" if c.core else "-- ")
-            print(f"{mark:4} {c.name:<{w}}  {c.detail}")
+        for part, title in (("library", "the library (navcore, navarena)"),
+                            ("pipeline", "the pipeline (a checkout: make dataset)" if pipeline_group() is not None else
+                             "the pipeline: not here (a checkout's; none of it is needed to use a release)")):
+            print(title)
+            for c in (c for c in res if c.part == part):
+                mark = "ok " if c.ok else ("FAIL" if c.core else "-- ")
+                print(f"  {mark:4} {c.name:<{w}}  {c.detail}")
     return 0 if all(c.ok for c in res if c.core) else 1
 
 

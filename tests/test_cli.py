@@ -106,3 +106,21 @@ def test_ctrl_c_in_any_command_exits_130_without_a_traceback(monkeypatch, capsys
     assert e.value.code == 130
     err = capsys.readouterr().err
     assert "navarena doctor: interrupted" in err and "Traceback" not in err
+
+
+def test_doctor_passes_a_consumer_install_without_the_pipelines_packages(monkeypatch, capsys):
+    """navarena doctor on a library install (no checkout, no OMPL or OpenCV): exit 0, the pipeline
+    reported as not here and its packages not counted as failures, hints a pip user can follow; from
+    a checkout the same missing OMPL fails it."""
+    import navarena.doctor as doctor
+
+    real_try = doctor._try
+    monkeypatch.setattr(doctor, "_try", lambda m: (False, "ModuleNotFoundError") if m in ("ompl", "cv2") else real_try(m))
+    monkeypatch.setattr(doctor, "pipeline_group", lambda: None)
+    assert doctor.main([]) == 0
+    out = capsys.readouterr().out
+    assert "the library (navcore, navarena)" in out and "the pipeline: not here" in out
+    assert "FAIL" not in out and "make setup" not in out.split("the pipeline")[0].replace("make setup-gpu", "")
+    monkeypatch.setattr(doctor, "pipeline_group", lambda: (["ompl"], ["ompl"]))
+    assert doctor.main([]) == 1
+    assert "FAIL" in capsys.readouterr().out
