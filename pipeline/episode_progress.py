@@ -60,6 +60,8 @@ class EpisodeWatcher:
                 continue
             if log not in self.seen:
                 total = int(header.get("total", 0))
+                if header.get("hint"):  # what a long task says before it starts: its size, time, the fast path
+                    self.progress.console.print(header["hint"])
                 if not self.seen:  # steps/s from the first evaluation's start, not the run's
                     self.t0 = time.monotonic()
             done += sum(int(it.get(self.count) or 0) if self.count else 1 for it in items)

@@ -389,3 +389,35 @@ def test_coverage_wanting_fewer_sightings_than_the_lifting_votes_is_refused():
         covering_cameras(scene, None, dataclasses.replace(scfg, coverage=CoverageConfig(k=1),
                                                           lifting=dataclasses.replace(scfg.lifting, min_support=2)),
                          None, np.eye(4))
+
+
+def test_a_long_semantics_task_says_its_size_time_and_fast_path_before_it_starts(tmp_path):
+    """A scene with thousands of views to segment gets a line before its first view: the view count,
+    the minutes it takes on a CPU at the segmenter's seen rate, and the overrides that cut it; the
+    run's console prints it once; a short task says nothing."""
+    from types import SimpleNamespace
+
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from navcore.io.progress_log import ProgressLog
+    from pipeline.episode_progress import EpisodeWatcher
+    from stages.semantics.stage import long_run_hint
+
+    scene = SimpleNamespace(name="apartment")
+    hint = long_run_hint(scene, 7980, SimpleNamespace(segmenter="detector", view_selection="grid"))
+    assert "7,980 views" in hint and "about 53 min" in hint and "semantics.view_selection=coverage" in hint
+    assert "semantics.max_views=N" in hint
+    assert long_run_hint(scene, 200, SimpleNamespace(segmenter="detector", view_selection="grid")) == ""
+    assert long_run_hint(scene, 7980, SimpleNamespace(segmenter="oracle", view_selection="grid")) == ""
+    log = ProgressLog(tmp_path / "p" / "a.jsonl")
+    log.start(7980, scene="apartment", hint=hint)
+    log.item(views=16)
+    out = tmp_path / "console.txt"
+    with open(out, "w") as f:
+        w = EpisodeWatcher(Progress(console=Console(file=f, width=300)), tmp_path / "p", since=0, log_each=False,
+                           name="semantics views", count="views", rate="views", unit="views")
+        w.poll()
+        log.item(views=16)
+        w.poll()
+    assert out.read_text().count("7,980 views for the detector segmenter") == 1

@@ -158,6 +158,24 @@ def predict_instances(renderer, segmenter, c2w, Ks, means: np.ndarray, scfg: Sem
     return labels, support, timings
 
 
+SLOW_VIEWS_PER_S = {"detector": 2.5, "open_vocab": 0.5}
+"""Views a second a segmenter was seen to do on a 2-core CPU (the detector on a 747 k-Gaussian apartment:
+issue 86), for the estimate said before a long semantics task starts."""
+
+
+def long_run_hint(scene, views: int, scfg, threshold: int = 500) -> str:
+    """The line the run's console prints before a scene's semantics starts when it has many views:
+    how many, about how long on a CPU, and the overrides that cut them ('' for a short task)."""
+    rate = SLOW_VIEWS_PER_S.get(scfg.segmenter)
+    if views < threshold or rate is None:
+        return ""
+    faster = ("semantics.view_selection=coverage (10-100x fewer views, docs/own-capture.md) or "
+              if scfg.view_selection != "coverage" else "")
+    return (f"semantics {scene.name}: {views:,} views for the {scfg.segmenter} segmenter, about "
+            f"{views / rate / 60:.0f} min on a 2-core CPU ({rate:g} views/s; a GPU is far faster); to cut them: "
+            f"{faster}semantics.max_views=N")
+
+
 def run(scene, cfg, catalog) -> dict:
     from omegaconf import OmegaConf
 
@@ -205,7 +223,8 @@ def run(scene, cfg, catalog) -> dict:
     # views done / total while it runs, for the run's console (pipeline/episode_progress.py): the detector
     # on a large capture's thousands of views runs for many minutes on a CPU
     log = ProgressLog(catalog.dataset("semantics_progress", scene).path)
-    log.start(len(c2w), scene=scene.name, scene_id=scene.scene_id, segmenter=scfg.segmenter)
+    log.start(len(c2w), scene=scene.name, scene_id=scene.scene_id, segmenter=scfg.segmenter,
+              hint=long_run_hint(scene, len(c2w), scfg))
     labels, support, timings = predict_instances(renderer, seg, c2w, ks, gs.means, scfg,
                                                  on_batch=lambda n: log.item(views=n))
     table = labels_to_table(labels, support)
