@@ -85,7 +85,7 @@ STAGES: tuple[Stage, ...] = (
     # PointNav and ImageNav episodes (and their goal images) before semantics, which can take an hour on a
     # large capture on a CPU: the graph's order is also the order a scene's tasks are started in
     Stage("episodes", episodes.run, ("costmap", "screen"), ("episodes", "planner", "embodiment", "screen"),
-          version="9", inputs=episodes.hashed_inputs),
+          version="10", inputs=episodes.hashed_inputs),  # 10: a point goal that cannot fill the bin whose turn it is gives way
     Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",), gpu=True, memory_gb=2.0),
     Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), version="3", gpu=True,
           memory_gb=3.0, added=semantics.ADDED_KEYS),

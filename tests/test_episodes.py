@@ -849,3 +849,20 @@ def test_first_episodes_benchmark_watches_the_layouts_paths(episode_run):
         files = list(root.glob(f"05_episodes/task={task}/scene_id=*/part-0.parquet"))
         assert n == sum(len(pd.read_parquet(f)) for f in files), task
     assert counts["pointnav"] > 0
+
+
+def test_difficulty_bins_fill_evenly_where_few_goals_reach_the_far_bin(grid_costmap):
+    """A long corridor: only goals near its ends have starts in the far bin. A point goal that cannot
+    fill the bin whose turn it is gives way to another goal, so the bins still fill evenly (before:
+    the draw fell to a nearer bin, and a capture's episodes came out mostly easy)."""
+    free = np.zeros((24, 200), bool)  # 10 m x 1.2 m at 0.05 m
+    free[2:-2, 2:-2] = True
+    cm = grid_costmap(free)
+    g = NavGraph(cm, cm.clearance >= cm.radius)
+    ecfg = EpisodesConfig()
+    ecfg.difficulty.upper = [2.5, 6.5, 1e9]
+    tcfg = TaskConfig(type="pointnav", episodes_per_scene=30, success_radius=0.3, starts_per_goal=3)
+    res = EpisodeGenerator(cm, g, tcfg, ecfg, PlannerConfig(), Embodiment(radius=cm.radius), "t/corridor", 5).generate()
+    diff = [e["difficulty"] for e in res.episodes]
+    assert len(diff) == 30 and [diff.count(n) for n in ("easy", "medium", "hard")] == [10, 10, 10], diff
+    assert res.rejections["goal_cannot_fill_bin"] > 0  # the goals that could not were passed over

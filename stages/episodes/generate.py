@@ -351,9 +351,11 @@ class EpisodeGenerator:
         b_of = np.searchsorted(np.asarray(dc.upper), d[nodes], side="right")
         return [(b, nodes[b_of == b], np.cumsum(w[b_of == b])) for b in self.bins if (b_of == b).any()]
 
-    def _draw_start(self, pool, produced: int) -> tuple[int, int]:
+    def _draw_start(self, pool, produced: int, strict: bool = False) -> tuple[int, int]:
         """A start node and its bin: the target bin is round robin over all bins, falling to the
-        next one this goal can fill. Returns (-1, -1) when the pool is empty."""
+        next one this goal can fill. Returns (-1, -1) when the pool is empty; strict: (-1, the target
+        bin) when this goal cannot fill the target bin (the caller draws another goal, so that a
+        scene whose goals mostly lie in the middle still gets its share of far starts)."""
         if not pool:
             return -1, -1
         have = {b: (nodes, cw) for b, nodes, cw in pool}
@@ -364,13 +366,15 @@ class EpisodeGenerator:
                 nodes, cw = have[b]
                 i = int(np.searchsorted(cw, self.rng.random() * cw[-1], side="right"))
                 return int(nodes[min(i, len(nodes) - 1)]), b
+            if strict:
+                return -1, b
         return -1, -1
 
     def generate(self) -> TaskResult:
         t = self.task
         t0, c0 = time.perf_counter(), time.process_time()
         n_req = t.episodes_per_scene
-        rows, trajs, from_expert = [], [], 0
+        rows, trajs, from_expert, misses = [], [], 0, 0
         attempts, max_attempts = 0, n_req * self.ecfg.max_attempts_factor
         if t.type == "objectnav":
             goal_sets = self._object_goals()
@@ -412,9 +416,13 @@ class EpisodeGenerator:
                 if len(rows) >= n_req or attempts >= max_attempts:
                     break
                 attempts += 1
-                node, b = self._draw_start(pool, len(rows))
+                # a point goal that cannot fill the bin whose turn it is gives way to another goal, up to
+                # a bound (then the next bin it can fill): the bins fill evenly where the free space allows
+                strict = t.type != "objectnav" and self.ecfg.difficulty.balance and misses < n_req * 2
+                node, b = self._draw_start(pool, len(rows), strict)
                 if node < 0:
-                    self.rejections["no_start_in_range"] += 1
+                    misses += b >= 0
+                    self.rejections["goal_cannot_fill_bin" if b >= 0 else "no_start_in_range"] += 1
                     break
                 budget = self.ecfg.difficulty.max_steps[b] if b >= 0 else max(self.ecfg.difficulty.max_steps)
                 out = self._episode(goal, fld, node, budget, b)

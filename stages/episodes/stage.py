@@ -85,6 +85,13 @@ def screening(scene, cfg, catalog, cm) -> tuple[dict, np.ndarray | None]:
     return entry, (grow(flagged, sc.margin_m, cm.resolution) if sc.avoid else None)
 
 
+def difficulty_shares(episodes: list[dict], dc) -> dict[str, float]:
+    """Share of a task's episodes in each difficulty bin, in the bins' order (the run summary reports
+    them; a share more than 10 points off an even split is a shortfall, with the reason)."""
+    n = max(len(episodes), 1)
+    return {name: round(sum(e["difficulty"] == name for e in episodes) / n, 4) for name in dc.names}
+
+
 def run(scene, cfg, catalog) -> dict:
     """PointNav and ImageNav (every task without object goals)."""
     return generate(scene, cfg, catalog, objects=False)
@@ -152,9 +159,18 @@ def generate(scene, cfg, catalog, objects: bool) -> dict:
             "rejections": dict(sorted(res.rejections.items())), "cpu_s": round(res.cpu_s, 3),
             "wall_s": round(res.wall_s, 3), "geodesic_from_expert": res.geodesic_from_expert,
             "expert_fallbacks": res.expert_fallbacks}
+        shares = difficulty_shares(res.episodes, ecfg.difficulty)
+        result["tasks"][name]["difficulty"] = shares
         if len(res.episodes) < res.requested:
             shortfalls.append({"task": name, "episodes": len(res.episodes), "requested": res.requested,
                                "rejections": dict(sorted(res.rejections.items()))})
+        elif ecfg.difficulty.balance and res.episodes and max(abs(s - 1 / len(shares)) for s in shares.values()) > 0.1:
+            longest = max(e["geodesic_distance"] for e in res.episodes)
+            shortfalls.append({"task": name, "episodes": len(res.episodes), "requested": res.requested, "rejections": {},
+                               "reason": "difficulty " + " / ".join(f"{k} {v:.0%}" for k, v in shares.items())
+                               + f" against {1 / len(shares):.0%} each: the free space holds few starts that far from "
+                               f"a goal (longest geodesic {longest:.1f} m; bins end at "
+                               f"{', '.join(f'{u:g}' for u in ecfg.difficulty.upper[:-1])} m)"})
     if shortfalls:
         result["shortfall"] = shortfalls
     result["view_checks"] = views.checks if views else 0
