@@ -72,8 +72,8 @@ PAGES: dict[str, Page] = {
                           ("episodes", "objectnav_episodes")),
     "bench_real.md": Page("make bench-real", ("benchmarks/captures/real.py", "benchmarks/captures/scan_truth.py",
                                               "catalogs/real_indoor.yaml"), ("costmap", "screen", "episodes")),
-    "bench_realism.md": Page("make bench-realism", ("benchmarks/captures/realism.py", *_RENDER),
-                             ("synthesize", "costmap", "episodes")),
+    # frames of the aligned scenes at poses the costmap allows (the episodes stage only names the embodiment)
+    "bench_realism.md": Page("make bench-realism", ("benchmarks/captures/realism.py", *_RENDER), ("synthesize", "costmap")),
     "bench_screening.md": Page("make bench-screening", ("benchmarks/captures/screening.py", *_RENDER), ("screen",)),
     "bench_reflections.md": Page("python -m benchmarks.map.reflections --docs",
                                  ("benchmarks/map/reflections.py", "benchmarks/map/spatial.py"), ("align",)),
