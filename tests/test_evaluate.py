@@ -570,16 +570,20 @@ def test_sigterm_stops_an_evaluation_and_keeps_the_finished_episodes(episode_run
     import sys
     import time
 
-    (tmp_path / "slow_agent.py").write_text(
-        "import time\n\nclass Slow:\n    def __init__(self, **_):\n        pass\n\n    def reset(self, task):\n"
-        "        self.t = 0\n\n    def act(self, obs):\n        time.sleep(0.02)\n        self.t += 1\n"
-        "        return 1 if self.t < 15 else 0\n")
+    started = tmp_path / "second_episode_started"
+    (tmp_path / "slow_agent.py").write_text(  # marks the start of its second episode: one has finished
+        "import pathlib, time\n\nclass Slow:\n    episodes = 0\n\n    def __init__(self, **_):\n        pass\n\n"
+        "    def reset(self, task):\n        self.t = 0\n        Slow.episodes += 1\n        if Slow.episodes == 2:\n"
+        f"            pathlib.Path({str(started)!r}).touch()\n\n"
+        "    def act(self, obs):\n        time.sleep(0.02)\n        self.t += 1\n        return 1 if self.t < 15 else 0\n")
     out = tmp_path / "term"
     p = subprocess.Popen([sys.executable, "-m", "navarena", "eval", str(episode_run[0]), "--agent", "slow_agent:Slow",
                           "--protocol", "explicit_stop", "--no-render", "--tasks", "pointnav", "--out", str(out),
                           "--quiet"], cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    time.sleep(6)  # start-up, then a few episodes of about 0.3 s
-    assert p.poll() is None, p.communicate()[1][-2000:]
+    deadline = time.monotonic() + 120
+    while not started.exists() and p.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert started.exists() and p.poll() is None, p.communicate()[1][-2000:]
     t0 = time.perf_counter()
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=30)
