@@ -83,6 +83,7 @@ def execute(cfg, console: Console | None = None) -> dict:
     summary["allow_failures"] = bool(cfg.get("allow_failures", False))
     names = {sc.name for sc in scenes}
     summary["paths_outside_catalog"] = [o for o in catalog.outside if o["scene"] in names]
+    summary["data_root"] = _shown(catalog.root)
     print_summary(summary, console)
     try:
         latest = write_summary(summary, catalog, started, cfg.scenes.shard)
@@ -92,6 +93,14 @@ def execute(cfg, console: Console | None = None) -> dict:
                                     "error": f"the run summary could not be written: {e}"})
         console.print(f"[red]the run summary could not be written[/]: {e}")
     return summary
+
+
+def _shown(path: Path) -> str:
+    """A path as the user would type it: relative to the current folder when under it."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd().resolve()))
+    except ValueError:
+        return str(path)
 
 
 def _changes_record(changes: dict) -> dict:

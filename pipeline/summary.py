@@ -203,10 +203,11 @@ def print_summary(summary: dict, console: Console) -> None:
                       f"[{style[r['verdict']]}]{r['verdict']}[/]" if r.get("verdict") else "-",
                       "-" if r.get("kept") is None else "kept" if r["kept"] else "rejected")
         console.print(f)
+        root = summary.get("data_root") or "data"  # the run's own (data_root=...), as a user would type it
         console.print("  blobs: floor under blurry blobs; holes: floor holes; blur / v.holes: rendered views blurred / "
                       "with holes; unseen: cells no view covers. A warn keeps the scene, its episodes avoid the flagged "
-                      "cells: look at data/03_costmaps/screen/<scene_id>.png (legend on it); screen.reject=true drops "
-                      "rejected scenes. Scene ids: data/_runs/latest.json.", style="dim")
+                      f"cells: look at {root}/03_costmaps/screen/<scene_id>.png (legend on it); screen.reject=true drops "
+                      f"rejected scenes. Scene ids: {root}/_runs/latest.json.", style="dim")
     placed = summary.get("placement")
     if placed and any(w["gpu"] for w in placed["workers"].values()):
         f = Table(title="where tasks ran (GPU workers; CPU workers summed)")

@@ -1062,3 +1062,23 @@ def test_an_objectnav_setting_recomputes_objectnav_episodes_only(tmp_path, make_
     assert st["episodes"] == "done" and st["objectnav_episodes"] == "cached"
     assert pd.read_parquet(tmp_path / "05_episodes" / "task=pointnav").shape[0] == 5
     assert pd.read_parquet(tmp_path / "05_episodes" / "task=objectnav").shape[0] == 4
+
+
+def test_the_screening_hint_names_the_runs_own_data_root(tmp_path):
+    """The run summary's screening note points at the run's data root (data_root=...), not at data/."""
+    import datetime as dt
+
+    from rich.console import Console
+
+    from pipeline.summary import build_summary, print_summary
+
+    summary = build_summary([], dt.datetime.now(dt.timezone.utc), tmp_path / "c.yaml", [0, 1], [], {})
+    summary["screening"] = [{"scene": "hall", "score": 0.64, "blur_share": 0.2, "hole_share": 0.1,
+                             "view_blur_share": 0.0, "view_hole_share": 0.0, "unseen_share": 0.0,
+                             "verdict": "warn", "kept": True}]
+    summary["data_root"] = "data/real_indoor"
+    out = tmp_path / "console.txt"
+    with open(out, "w") as f:
+        print_summary(summary, Console(file=f, width=400))
+    text = out.read_text()
+    assert "data/real_indoor/03_costmaps/screen/<scene_id>.png" in text and "data/real_indoor/_runs/latest.json" in text
