@@ -175,8 +175,9 @@ def main(argv=None) -> int:
         print(json.dumps([asdict(c) for c in res], indent=1))
     else:
         w = max(len(c.name) for c in res)
+        checkout = any(c.name == "pipeline packages" for c in res)  # checks() found the checkout's pipeline group
         for part, title in (("library", "the library (navcore, navarena)"),
-                            ("pipeline", "the pipeline (a checkout: make dataset)" if pipeline_group() is not None else
+                            ("pipeline", "the pipeline (a checkout: make dataset)" if checkout else
                              "the pipeline: not here (a checkout's; none of it is needed to use a release)")):
             print(title)
             for c in (c for c in res if c.part == part):

@@ -422,6 +422,7 @@ def dress(lay, points: np.ndarray, normals: np.ndarray, inst: np.ndarray, rng: n
     floor = structure & (normals[:, 2] > 0.7) & (points[:, 2] < 0.2)
     ceiling = structure & (normals[:, 2] < -0.7) & (points[:, 2] > h - 0.2)
     wall = structure & ~floor & ~ceiling
+    emissive = np.zeros(len(points), bool)  # windows are light, not lit
     for k, (room, look) in enumerate(zip(rooms, looks)):
         mine = room_of == k
         for sel, mat in ((floor & mine, look.floor), (wall & mine, look.wall), (ceiling & mine, look.ceiling)):
@@ -437,6 +438,10 @@ def dress(lay, points: np.ndarray, normals: np.ndarray, inst: np.ndarray, rng: n
                 hit = (side == s) & _in_rect(u, v, dec.rect)
                 if hit.any():
                     rgb[idx[hit]] = _decal_colour(dec, u[hit], v[hit], rgb[idx[hit]])
+                if dec.kind == "window":  # its glass inside the frame is light, not lit
+                    x0, y0, x1, y1 = dec.rect
+                    emissive[idx[(side == s) & _in_rect(u, v, (x0 + dec.frame, y0 + dec.frame, x1 - dec.frame,
+                                                                y1 - dec.frame))]] = True
         fidx = np.flatnonzero(floor & mine)
         for s, dec in look.decals:
             if s < 0:
@@ -495,15 +500,6 @@ def dress(lay, points: np.ndarray, normals: np.ndarray, inst: np.ndarray, rng: n
                 mat.accent = mat.base * 0.7
             rgb[sel] = pattern(mat, surface_coords(points[sel] - det.part.center, normals[sel]))
             shade[sel] *= 1 - cfg.occlusion * 0.5 * np.exp(-points[sel, 2] / 0.1)
-    emissive = np.zeros(len(points), bool)  # windows are light, not lit
-    for k, look in enumerate(looks):
-        idx = np.flatnonzero(wall & (room_of == k))
-        side = _room_side(points[idx], rooms[k])
-        u, v = _along(points[idx], side), points[idx, 2]
-        for s, dec in look.decals:
-            if dec.kind == "window":
-                emissive[idx[(side == s) & _in_rect(u, v, (dec.rect[0] + dec.frame, dec.rect[1] + dec.frame,
-                                                           dec.rect[2] - dec.frame, dec.rect[3] - dec.frame))]] = True
     lit = rgb * (shade[:, None] * tint[None])
     lit = np.where(emissive[:, None], np.minimum(rgb * 1.05, 1.0), lit)
     lit = lit * np.exp(rng.normal(0, cfg.speckle, (len(lit), 1))) if cfg.speckle else lit
