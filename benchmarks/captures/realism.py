@@ -121,7 +121,7 @@ def standing_poses(costmap, radius: float, n: int, rng: np.random.Generator) -> 
 
 def render_root(root: Path, frames: int, width: int, height: int, seed: int,
                 poses: dict[str, np.ndarray] | None = None) -> dict[str, dict]:
-    """scene id -> {"name", "rgb" [F, H, W, 3] uint8, "depth" [F, H, W], "poses" [F, 3], "seconds"} of every
+    """scene id -> {"name", "rgb" [F, H, W, 3] uint8, "depth" [F, H, W], "poses" [F, 3], "seconds", "gaussians"} of every
     scene of a data root with a costmap, rendered by the CPU renderer from standing poses (or from the
     given poses of a scene: the same scene of another data root, before and after)."""
     from navcore.eval.dataset import NavDataset
@@ -136,7 +136,8 @@ def render_root(root: Path, frames: int, width: int, height: int, seed: int,
     for sid in cat.scene_ids("costmaps"):
         scene = cat.scene(sid)
         cm = cat.dataset("costmaps", scene).load(emb.name)
-        ctx = SceneContext(cm, None, emb, camera_scene(cat, scene, emb.name)[0], "cpu")
+        gs = camera_scene(cat, scene, emb.name)[0]
+        ctx = SceneContext(cm, None, emb, gs, "cpu")
         if poses and sid in poses:
             at = poses[sid]
         else:
@@ -148,7 +149,7 @@ def render_root(root: Path, frames: int, width: int, height: int, seed: int,
             rgb.append(r)
             depth.append(d)
         out[sid] = {"name": scene.name, "rgb": np.concatenate(rgb), "depth": np.concatenate(depth), "poses": at,
-                    "seconds": time.perf_counter() - t0}
+                    "seconds": time.perf_counter() - t0, "gaussians": len(gs)}
     return out
 
 
@@ -219,12 +220,11 @@ def picture(frames: np.ndarray, path: Path, cols: int = 6) -> None:
     Image.fromarray(np.concatenate(rows, axis=0)).save(path, optimize=True)
 
 
-def measure(generated: Path, real: Path, frames: int, width: int, height: int, seeds=(0, 1, 2),
+def measure(generated: Path, real: Path, cap: dict, frames: int, width: int, height: int, seeds=(0, 1, 2),
             poses: dict | None = None) -> tuple[dict, dict]:
     """(the report, the generated scenes' frames and poses) of a generated data root against the real
-    one; poses: a scene's poses to render it from (another data root's)."""
+    one's frames `cap` (render_root of `real`); poses: a scene's poses to render it from (another data root's)."""
     gen = render_root(generated, frames, width, height, 0, poses)
-    cap = render_root(real, frames, width, height, 0)
     per = {}
     for kind, scenes in (("generated", gen), ("real", cap)):
         for sid, s in scenes.items():
@@ -237,20 +237,11 @@ def measure(generated: Path, real: Path, frames: int, width: int, height: int, s
               for k in ("colour_entropy", "gradient_energy")}
     accs = [classifier_accuracy([s["rgb"] for s in gen.values()], [s["rgb"] for s in cap.values()], seed)
             for seed in seeds]
-    gaussians = {sid: int(_gaussians(generated, sid)) for sid in gen}
     rep = {"machine": machine(), "generated_root": str(generated), "real_root": str(real), "frames_per_scene": frames,
            "size": [width, height], "renderer": "cpu", "sets": sets, "ratios": ratios, "scenes": per,
-           "generated_gaussians_median": float(np.median(list(gaussians.values()))),
+           "generated_gaussians_median": float(np.median([s["gaussians"] for s in gen.values()])),
            "classifier_accuracy": float(np.median(accs)), "classifier_accuracies": accs, "targets": TARGETS}
     return rep, {sid: {"rgb": s["rgb"], "poses": s["poses"]} for sid, s in gen.items()}
-
-
-def _gaussians(root: Path, sid: str) -> int:
-    """The Gaussians of a scene's aligned model."""
-    from navcore.io.catalog import Catalog
-
-    cat = Catalog.for_root(Path(root))
-    return len(cat.dataset("aligned", cat.scene(sid)).load()[0])
 
 
 def markdown(after: dict, picture_name: str | None, before: dict | None = None) -> str:
@@ -263,7 +254,7 @@ def markdown(after: dict, picture_name: str | None, before: dict | None = None) 
              "poses where the robot may stand (the same height, pitch and field of view in every set), scenes of each data "
              "root: " + "; ".join(f"{name} `{Path(rep['generated_root']).name}` "
                                   f"({sum(s['kind'] == 'generated' for s in rep['scenes'].values())} scenes, median "
-                                  f"{rep['generated_gaussians_median']:,.0f} Gaussians)" for name, rep in runs)
+                                  f"{rep['generated_gaussians_median']:,.0f} Gaussians rendered)" for name, rep in runs)
              + f"; real: `{Path(after['real_root']).name}` "
              f"({', '.join(s['name'] for s in after['scenes'].values() if s['kind'] == 'real')}).",
              "", "| figure | " + " | ".join(name for name, _ in runs) + " | real captures | "
@@ -310,8 +301,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--docs", action="store_true", help="also write docs/benchmarks/bench_realism.md and its picture")
     a = ap.parse_args(argv)
     w, h = (int(v) for v in a.size.lower().split("x"))
-    before, old = measure(a.before, a.real, a.frames, w, h) if a.before else (None, None)
-    after, gen = measure(a.generated, a.real, a.frames, w, h, poses={k: v["poses"] for k, v in (old or {}).items()})
+    cap = render_root(a.real, a.frames, w, h, 0)  # the captures' frames, once for both comparisons
+    before, old = measure(a.before, a.real, cap, a.frames, w, h) if a.before else (None, None)
+    after, gen = measure(a.generated, a.real, cap, a.frames, w, h, poses={k: v["poses"] for k, v in (old or {}).items()})
     rep = {**after, "before": before}
     write_report(a.out, "realism.json", rep, omit=("scenes", "before"))
     if a.docs:
