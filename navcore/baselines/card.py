@@ -14,6 +14,7 @@ import shutil
 from pathlib import Path
 
 from navcore.baselines.agent import MODELS
+from navcore.io import jsonio
 from navcore.io.release import sha256_file
 from navcore.nav.tasks import TASK_TYPES
 
@@ -30,7 +31,7 @@ def read_card(models: Path, name: str) -> dict:
 
 
 def write_card(models: Path, name: str, card: dict) -> None:
-    (models / name / "model_card.json").write_text(json.dumps(card, indent=1) + "\n")
+    (models / name / "model_card.json").write_text(jsonio.dumps(card, indent=1) + "\n")  # strict: a NaN is null
 
 
 def cards(models: Path = MODELS, weights: bool = True) -> dict[str, dict]:
@@ -57,7 +58,7 @@ def ship(run: Path, name: str, models: Path = MODELS, weights: bool = True, samp
         card["decoding"] = {"sample": True}
     card["data"]["root"] = Path(card["data"]["root"]).name  # no machine's paths in a shipped card
     card.setdefault("evaluation", {})
-    (dst / "model_card.json").write_text(json.dumps(card, indent=1) + "\n")
+    write_card(models, name, card)
     return dst
 
 
