@@ -163,6 +163,12 @@ bench-realism: dataset
 		synthetic.look.ceiling=false synthetic.look.furnish=false
 	$(BIN)/python -m benchmarks.captures.realism --generated data --before data/realism/before --real data/realism/captures --docs $(ARGS)
 
+# the costmap of one room at several densities (issue 84): the trained ScanNet 3DGS (make bench-trained-scan,
+# a GPU machine) pruned to 50, 25, 12 % and to 81 k, and a SceneSplat-like version, against the scan
+# -> data/08_reports/bench_density.json, docs/benchmarks/bench_density.md
+bench-density: $(STAMP)
+	$(BIN)/python -m benchmarks.captures.density --docs $(ARGS)
+
 bench-real: $(STAMP)
 	$(BIN)/python -m benchmarks.captures.real $(ARGS)
 

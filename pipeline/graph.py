@@ -80,7 +80,7 @@ STAGES: tuple[Stage, ...] = (
           storage=(("voxelize", "store_opacity", False),)),
     Stage("align", align.run, ("voxelize",), ("align",), version="5"),
     Stage("costmap", costmap.run, ("align",), ("costmap", "voxelize", "embodiment"), version="7",
-          inputs=costmap.hashed_inputs),
+          inputs=costmap.hashed_inputs, added=costmap.ADDED_KEYS),
     Stage("screen", screen.run, ("costmap",), ("screen.layer", "embodiment")),
     # PointNav and ImageNav episodes (and their goal images) before semantics, which can take an hour on a
     # large capture on a CPU: the graph's order is also the order a scene's tasks are started in

@@ -84,8 +84,13 @@ def cell_rates(cm, pts: np.ndarray, is_floor: np.ndarray, emb, step: float = 0.0
     truth = scan_blocked(xy, pts[~is_floor], emb.radius, emb.h_min, emb.h_max)
     ours = ~cm.are_states_valid(xy)
     fn, fp = int((~ours & truth).sum()), int((ours & ~truth).sum())
+    band = pts[~is_floor]
+    band = band[(band[:, 2] >= emb.h_min) & (band[:, 2] <= emb.h_max)]
+    fp_d = cKDTree(band[:, :2]).query(xy[ours & ~truth])[0] if fp and len(band) else np.zeros(0)
     return {"step_m": step, "points": len(xy), "scan_blocked": int(truth.sum()), "fn": fn, "fp": fp,
-            "fn_rate": fn / max(int(truth.sum()), 1), "fp_rate": fp / max(int((~truth).sum()), 1)}
+            "fn_rate": fn / max(int(truth.sum()), 1), "fp_rate": fp / max(int((~truth).sum()), 1),
+            "fp_distance_m": {"p10_p50_p90": np.percentile(fp_d, [10, 50, 90]).round(3).tolist() if len(fp_d) else None,
+                              "share_within_radius_plus_0.1": float(np.mean(fp_d <= emb.radius + 0.1)) if len(fp_d) else None}}
 
 
 def measure(scan: Path, poses: int, seed: int = 0) -> dict:
@@ -102,19 +107,21 @@ def measure(scan: Path, poses: int, seed: int = 0) -> dict:
         return {**per[cfg.embodiment.name], "embodiments": per}
 
 
-def measure_model(model: Path, scan: Path, poses: int, seed: int = 0) -> dict:
+def measure_model(model: Path, scan: Path, poses: int, seed: int = 0, overrides: tuple[str, ...] = (),
+                  stage: str = "screen", keep_map: bool = False) -> dict:
     """A 3DGS trained in the scan's frame (benchmarks.captures.train_on_scan: model.ply with its
     cameras.json) through the pipeline up to the screen stage; its costmap against the scan's
     points moved by the model's own alignment (the body band measured from the scanned floor; also
     from the model's z = 0, which adds the alignment's floor offset), the aligned scan floor's
-    height and tilt, and the screen stage's score."""
+    height and tilt, and the screen stage's score (stage="costmap": no screening). `overrides`: more
+    config overrides; keep_map: the costmap itself under "map"."""
     from omegaconf import OmegaConf
 
     from benchmarks.goals.semantics_real import prepare_scan
 
     with tempfile.TemporaryDirectory() as tmp:
-        catalog, scene, cfg = prepare_scan(model, Path(tmp), "scannet_trained", fmt=None, stage="screen",
-                                           group="real_trained")
+        catalog, scene, cfg = prepare_scan(model, Path(tmp), "scannet_trained", fmt=None, stage=stage,
+                                           group="real_trained", overrides=overrides)
         emb = OmegaConf.to_object(cfg.embodiment)
         t = catalog.dataset("aligned", scene).transform()
         pts = np.load(scan / "coord.npy").astype(np.float64) @ t[:3, :3].T + t[:3, 3]
@@ -124,7 +131,7 @@ def measure_model(model: Path, scan: Path, poses: int, seed: int = 0) -> dict:
         a = np.c_[fl[:, :2], np.ones(len(fl))]
         coef = np.linalg.lstsq(a, fl[:, 2], rcond=None)[0]  # the scanned floor's plane in the model's frame
         gs, _ = catalog.dataset("aligned", scene).load(view_dependent=False)
-        _, qattrs = catalog.dataset("quality", scene).load_layers()
+        qattrs = catalog.dataset("quality", scene).load_layers()[1] if stage == "screen" else {}
         align = catalog.dataset("alignment", scene).load()
         cm = catalog.dataset("costmaps", scene).load(emb.name)
         above = pts.copy()  # heights above the scanned floor: the body band is measured from the real floor
@@ -136,7 +143,8 @@ def measure_model(model: Path, scan: Path, poses: int, seed: int = 0) -> dict:
                 "screen": {k: qattrs[k] for k in qattrs if k.endswith("_share") or k in ("score", "capture_cameras")},
                 **compare(cm, above, is_floor, emb, poses, seed),
                 "in_aligned_heights": {k: v for k, v in compare(cm, pts, is_floor, emb, poses, seed).items()
-                                       if k in ("fp", "fn", "fp_rate", "fn_rate", "fp_ci95", "fn_ci95")}}
+                                       if k in ("fp", "fn", "fp_rate", "fn_rate", "fp_ci95", "fn_ci95")},
+                **({"map": cm} if keep_map else {})}
 
 
 def main(argv=None) -> dict:

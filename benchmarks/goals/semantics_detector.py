@@ -20,6 +20,7 @@ import argparse
 import json
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -46,20 +47,22 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
                transfer_radius: float = 0.05, spacing: float | None = None, yaw_step: float | None = None,
                camera_height: float | None = None, pitch: float | None = None, robot_camera: bool = False,
                overrides: tuple[str, ...] = (), detector: str | None = None,
-               detector_models: dict[str, str] | None = None, final=None) -> dict:
+               detector_models: dict[str, str] | None = None, final=None,
+               candidates: dict[str, str | None] | None = None) -> dict:
     """The measures of the module doc on the scan (or, with `model`, on a 3DGS trained in the scan's
     frame, whose Gaussians take the instance of the nearest scanned point within transfer_radius).
     `overrides`: more config overrides of both runs (e.g. semantics.view_selection=coverage);
     `detector`: the detector model (semantics.detector.model: None is the shipped default);
     `detector_models`: categories boxed by other models (semantics.detector.models); `final`: the
     DetectorConfig whose thresholds, allow-list and min_views make the "defaults" figures (None:
-    the shipped defaults)."""
+    the shipped defaults). `candidates` ({label: model}): several detectors on the same rendered views,
+    one report each ({label: report}; `detector` and `detector_models` are then unused)."""
     from omegaconf import OmegaConf
 
     from navcore.instances import shipped_instances, table_to_labels
+    from navcore.io.models import DEFAULT_MODEL
     from navcore.render import Renderer
     from stages.semantics.detector import COCO_TO_GOAL, DetectorConfig, DetectorSegmenter, box_mask
-    from stages.semantics.lifting import lift
     from stages.semantics.segmenters import OracleSegmenter, real_truth
     from stages.semantics.stage import covering_cameras, render_views
 
@@ -110,92 +113,133 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
         c2w, ks, _ = covering_cameras(scene, catalog, scfg, emb, t, cm, gs, coverage)  # semantics.view_selection decides
         select_s = time.perf_counter() - t_sel
         all_cats = sorted(set(COCO_TO_GOAL.values()))
-        dcfg = DetectorConfig(categories=all_cats, confidence={}, default_confidence=min(THRESHOLDS), input_size=input_size,
-                              model=detector, models=dict(detector_models or {}))
-        det = DetectorSegmenter(dcfg, {c: scfg.prompt(c) for c in all_cats})
+        runs = candidates if candidates is not None else {None: detector}
+        dcfg = {label: DetectorConfig(categories=all_cats, confidence={}, default_confidence=min(THRESHOLDS),
+                                      model_thresholds=False, input_size=input_size, model=m,
+                                      models=dict(detector_models or {}) if candidates is None else {})
+                for label, m in runs.items()}
+        dets = {label: DetectorSegmenter(c, {k: scfg.prompt(k) for k in all_cats}) for label, c in dcfg.items()}
         box_cfg = DetectorConfig(mask="box")
-        views, render_s, detect_s = [], 0.0, 0.0
+        views: dict = {label: [] for label in runs}
+        render_s, detect_s = 0.0, dict.fromkeys(runs, 0.0)
         t1 = time.perf_counter()
         for rgb, depth, extra, vm, kk, cw in render_views(renderer, c2w, ks, scfg, oracle.gaussian_features):
             render_s += time.perf_counter() - t1
             for i in range(len(vm)):
                 imap = oracle.instance_map(vm[i], kk[i], width, height, extra[i])
-                t2 = time.perf_counter()
-                seg = det.segment(rgb[i], [scfg.prompt(c) for c in all_cats],
-                                  {"depth": depth[i], "K": kk[i], "cam_to_world": cw[i]})
-                detect_s += time.perf_counter() - t2
-                del seg
-                boxes = []
-                for cat, box, score in det.last_boxes:
-                    dm = box_mask(box, depth[i], kk[i], cw[i], dcfg)
-                    bm = box_mask(box, depth[i], kk[i], cw[i], box_cfg)
-                    boxes.append({"category": cat, "score": score, "depth_mask": dm, "box_mask": bm,
-                                  "right_depth": right(dm, imap, cat_of_id, prompt_to_cat, cat),
-                                  "right_box": right(bm, imap, cat_of_id, prompt_to_cat, cat)})
-                views.append((depth[i], kk[i], cw[i], boxes))
+                for label, det in dets.items():
+                    t2 = time.perf_counter()
+                    det.segment(rgb[i], [scfg.prompt(c) for c in all_cats],
+                                {"depth": depth[i], "K": kk[i], "cam_to_world": cw[i]})
+                    detect_s[label] += time.perf_counter() - t2
+                    boxes = []
+                    for cat, box, score in det.last_boxes:
+                        dm = box_mask(box, depth[i], kk[i], cw[i], dcfg[label])
+                        bm = box_mask(box, depth[i], kk[i], cw[i], box_cfg)
+                        boxes.append({"category": cat, "score": score, "depth_mask": dm, "box_mask": bm,
+                                      "right_depth": right(dm, imap, cat_of_id, prompt_to_cat, cat),
+                                      "right_box": right(bm, imap, cat_of_id, prompt_to_cat, cat)})
+                    views[label].append((depth[i], kk[i], cw[i], boxes))
             t1 = time.perf_counter()
         gt_cats_present = sorted({x["category"] for x in truth if x["category"] in all_cats})
-        d = scfg.detector
-        rep = {"scene": name, "camera_height_m": emb.camera_height if d.camera_height is None else d.camera_height,
-               "camera_pitch_deg": emb.camera_pitch_deg if d.camera_pitch_deg is None else d.camera_pitch_deg,
-               "spacing_m": scfg.detector.spacing,
-               "yaw_step_deg": scfg.detector.yaw_step_deg,
-               "gaussians": int(renderer.num_gaussians), "views": len(views), "input": det.input_size,
-               "detector": detector or "yolo_fastest_1.1 (shipped)", "detector_models": dict(detector_models or {}),
-               "view_selection": scfg.view_selection, "coverage": coverage,
-               "resolution": [width, height], "renderer": renderer.backend, "tolerance_m": tol,
-               "ground_truth": {c: sum(1 for x in truth if x["category"] == c) for c in all_cats},
-               "seconds": {"pipeline_to_costmap": round(prep_s, 1), "view_selection": round(select_s, 1),
-                           "render": round(render_s, 1),
-                           "detect": round(detect_s, 1), "detect_per_view": round(detect_s / max(len(views), 1), 4)},
-               "boxes": {}, "lifted": {}}
-        for cat in all_cats:
-            rows = [b for _, _, _, bs in views for b in bs if b["category"] == cat]
-            rep["boxes"][cat] = {str(th): {"boxes": sum(b["score"] >= th for b in rows),
-                                           "right_depth_mask": sum(b["score"] >= th and b["right_depth"] for b in rows),
-                                           "right_box": sum(b["score"] >= th and b["right_box"] for b in rows)}
-                                 for th in THRESHOLDS}
-        cat_index = {c: k for k, c in enumerate(scfg.categories)}
-        for th in (0.3, 0.4, 0.5):
-            for mode in ("depth_mask", "box_mask"):
-                frames = []
-                for d, k, c, bs in views:
-                    masks: dict[int, list] = {}
-                    for b in bs:
-                        if b["score"] >= th and b[mode] is not None and b["category"] in cat_index:
-                            masks.setdefault(cat_index[b["category"]], []).append(b[mode])
-                    frames.append((d, k, c, masks))
-                t3 = time.perf_counter()
-                cands = lift(frames, gs.means, scfg.lifting)  # min_views 1: filtered below
-                lift_s = time.perf_counter() - t3
-                for mv in MIN_VIEWS:
-                    pred = [{"category": scfg.categories[x["label"]], "position": x["center"], "views": x["views"]}
-                            for x in cands if x["views"] >= mv]
-                    s = score_real(pred, truth, all_cats, tol)
-                    rep["lifted"][f"{th}/{mode}/{mv}"] = {
-                        "threshold": th, "mask": mode, "min_views": mv, "lift_s": round(lift_s, 2),
-                        "predicted": s["predicted"], "valid": s["valid"], "valid_center_rate": s["valid_center_rate"],
-                        "objects": s["objects"], "found": s["found"], "centre_error_m": s["centre_error_m"],
-                        "per_category": per_category(pred, truth, all_cats, tol)}
-        # the defaults: per-category thresholds (detector.confidence), the allow-list, detector.min_views
-        d0 = final or DetectorConfig()
-        frames = []
-        for d, k, c, bs in views:
-            masks = {}
-            for b in bs:
-                if b["category"] in d0.categories and b["category"] in cat_index and b["depth_mask"] is not None \
-                        and b["score"] >= d0.confidence.get(b["category"], d0.default_confidence):
-                    masks.setdefault(cat_index[b["category"]], []).append(b["depth_mask"])
-            frames.append((d, k, c, masks))
-        pred = [{"category": scfg.categories[x["label"]], "position": x["center"], "views": x["views"]}
-                for x in lift(frames, gs.means, scfg.lifting) if x["views"] >= d0.min_views]
+        reps = {}
+        for label, det in dets.items():
+            rep = scan_report(views[label], scfg, gs, truth, all_cats, tol, final if candidates is None else None)
+            d = scfg.detector
+            rep.update({"scene": name, "camera_height_m": emb.camera_height if d.camera_height is None else d.camera_height,
+                        "camera_pitch_deg": emb.camera_pitch_deg if d.camera_pitch_deg is None else d.camera_pitch_deg,
+                        "spacing_m": d.spacing, "yaw_step_deg": d.yaw_step_deg,
+                        "gaussians": int(renderer.num_gaussians), "views": len(views[label]), "input": det.input_size,
+                        "detector": (runs[label] or f"{DEFAULT_MODEL} (shipped default)") if candidates is not None
+                        else (detector or f"{DEFAULT_MODEL} (shipped default)"),
+                        "detector_models": dict(detector_models or {}) if candidates is None else {},
+                        "view_selection": scfg.view_selection, "coverage": coverage,
+                        "resolution": [width, height], "renderer": renderer.backend, "tolerance_m": tol,
+                        "ground_truth": {c: sum(1 for x in truth if x["category"] == c) for c in all_cats},
+                        "seconds": {"pipeline_to_costmap": round(prep_s, 1), "view_selection": round(select_s, 1),
+                                    "render": round(render_s, 1), "detect": round(detect_s[label], 1),
+                                    "detect_per_view": round(detect_s[label] / max(len(views[label]), 1), 4)},
+                        "categories_in_scan": gt_cats_present})
+            if candidates is not None:  # the views and what lifting them needs: defaults_report with chosen thresholds
+                rep["_context"] = (views[label], scfg, gs, truth, all_cats, tol)
+            reps[label] = rep
+        return reps if candidates is not None else reps[None]
+
+
+def scan_report(views: list, scfg, gs, truth: list[dict], all_cats: list[str], tol: float, final) -> dict:
+    """Boxes per category and threshold, lifted instances per threshold, mask and min views, and what
+    `final`'s (or the shipped defaults') thresholds lift, from one detector's boxes on the views."""
+    from stages.semantics.lifting import lift
+
+    rep: dict = {"boxes": {}, "lifted": {}}
+    for cat in all_cats:
+        rows = [b for _, _, _, bs in views for b in bs if b["category"] == cat]
+        rep["boxes"][cat] = {str(th): {"boxes": sum(b["score"] >= th for b in rows),
+                                       "right_depth_mask": sum(b["score"] >= th and b["right_depth"] for b in rows),
+                                       "right_box": sum(b["score"] >= th and b["right_box"] for b in rows)}
+                             for th in THRESHOLDS}
+    cat_index = {c: k for k, c in enumerate(scfg.categories)}
+    for th in (0.3, 0.4, 0.5):
+        for mode in ("depth_mask", "box_mask"):
+            frames = []
+            for d, k, c, bs in views:
+                masks: dict[int, list] = {}
+                for b in bs:
+                    if b["score"] >= th and b[mode] is not None and b["category"] in cat_index:
+                        masks.setdefault(cat_index[b["category"]], []).append(b[mode])
+                frames.append((d, k, c, masks))
+            t3 = time.perf_counter()
+            cands = lift(frames, gs.means, scfg.lifting)  # min_views 1: filtered below
+            lift_s = time.perf_counter() - t3
+            for mv in MIN_VIEWS:
+                pred = [{"category": scfg.categories[x["label"]], "position": x["center"], "views": x["views"]}
+                        for x in cands if x["views"] >= mv]
+                s = score_real(pred, truth, all_cats, tol)
+                rep["lifted"][f"{th}/{mode}/{mv}"] = {
+                    "threshold": th, "mask": mode, "min_views": mv, "lift_s": round(lift_s, 2),
+                    "predicted": s["predicted"], "valid": s["valid"], "valid_center_rate": s["valid_center_rate"],
+                    "objects": s["objects"], "found": s["found"], "centre_error_m": s["centre_error_m"],
+                    "per_category": per_category(pred, truth, all_cats, tol)}
+    rep["defaults"] = defaults_report(views, scfg, gs, truth, all_cats, tol, final)
+    return rep
+
+
+def defaults_report(views: list, scfg, gs, truth: list[dict], all_cats: list[str], tol: float, final) -> dict:
+    """What `final`'s (or the shipped defaults') thresholds, allow-list, min_views and class vote lift
+    from one detector's boxes on the views."""
+    from stages.semantics.detector import DetectorConfig, resolved
+    from stages.semantics.lifting import lift
+
+    cat_index = {c: k for k, c in enumerate(scfg.categories)}
+    # the defaults: per-category thresholds (detector.confidence), the allow-list, detector.min_views
+    d0 = resolved(final or DetectorConfig())
+    frames = []
+    for d, k, c, bs in views:
+        masks = {}
+        for b in bs:
+            if b["category"] in d0.categories and b["category"] in cat_index and b["depth_mask"] is not None \
+                    and b["score"] >= d0.confidence.get(b["category"], d0.default_confidence):
+                masks.setdefault(cat_index[b["category"]], []).append(b["depth_mask"])
+        frames.append((d, k, c, masks))
+    groups = [[cat_index[c] for c in g if c in cat_index] for g in d0.confusable]
+    lcfg = replace(scfg.lifting, min_views=max(scfg.lifting.min_views, d0.min_views),  # the stage's lifting_config
+                   min_top_m=max(scfg.lifting.min_top_m, d0.min_top_m), confusable=[g for g in groups if len(g) > 1] or None)
+    out = {"confidence": d0.confidence, "default_confidence": d0.default_confidence, "min_views": d0.min_views,
+           "categories": d0.categories}
+    for key, cfg in (("", lcfg), ("without_class_vote", replace(lcfg, confusable=None))):
+        lifted = lift(frames, gs.means, cfg)
+        pred = [{"category": scfg.categories[x["label"]], "position": x["center"], "views": x["views"]} for x in lifted]
         s = score_real(pred, truth, all_cats, tol)
-        rep["defaults"] = {"confidence": d0.confidence, "default_confidence": d0.default_confidence,
-                           "min_views": d0.min_views, "categories": d0.categories, "predicted": s["predicted"],
-                           "valid": s["valid"], "valid_center_rate": s["valid_center_rate"],
-                           "centre_error_m": s["centre_error_m"], "per_category": per_category(pred, truth, all_cats, tol)}
-        rep["categories_in_scan"] = gt_cats_present
-        return rep
+        row = {"predicted": s["predicted"], "valid": s["valid"], "valid_center_rate": s["valid_center_rate"],
+               "found": s["found"], "objects": s["objects"], "centre_error_m": s["centre_error_m"],
+               "per_category": per_category(pred, truth, all_cats, tol),
+               "merged": [{"category": scfg.categories[x["label"]], "votes": {scfg.categories[k]: v for k, v in x["label_votes"].items()}}
+                          for x in lifted if "label_votes" in x]}
+        if key:
+            out[key] = row
+        else:
+            out.update(row)
+    return out
 
 
 def right(mask, imap: np.ndarray, cat_of_id: dict, prompt_to_cat: dict, cat: str) -> bool:
@@ -287,13 +331,15 @@ def gpu_section(gpu: dict, cpu_seconds: dict) -> list[str]:
 
 
 def markdown(reps: list[dict], machine_name: str, geometry: list[dict] | None = None, gpu: dict | None = None,
-             cpu_seconds: dict | None = None) -> str:
+             cpu_seconds: dict | None = None, candidates: dict | None = None) -> str:
     L = [f"# bench-semantics: the detector on real scenes ({machine_name})", "",
-         "The `detector` segmenter (the shipped Yolo-Fastest-1.1-XL, COCO, through OpenCV DNN; masks from the rendered "
+         "The `detector` segmenter (its default model, PP-PicoDet-S 416, COCO, through OpenCV DNN; masks from the rendered "
          "depth inside each box) against the real labelled ScanNet scene0000_02: the scan itself (one Gaussian a "
          "scanned point) and the 3DGS trained on views of it (`make bench-trained-scan`; its Gaussians take the "
          "instance of the nearest scanned point within 5 cm). Ground truth per pixel: the scan's labels rendered in "
          "the same views; per instance: its cleaned instance table (paper Table 5 measure: 92.25 % valid centres).", ""]
+    if candidates:
+        L += candidates_section(candidates)
     for rep in reps:
         L += section(rep)
     if geometry:
@@ -301,6 +347,105 @@ def markdown(reps: list[dict], machine_name: str, geometry: list[dict] | None = 
     if gpu:
         L += gpu_section(gpu, cpu_seconds or {})
     return "\n".join(L)
+
+
+SHARED_MODELS = Path(__file__).resolve().parents[3] / "shared" / "models"
+CANDIDATES = {"picodet_s_416_coco": "picodet_s_416_coco", "yolo_fastest_1.1_coco": "yolo_fastest_1.1_coco",
+              "picodet_s_320_coco": str(SHARED_MODELS / "picodet_s_320_coco" / "picodet_s_320_coco.onnx"),
+              "yolox_nano_416_coco": str(SHARED_MODELS / "yolox_nano_416_coco" / "yolox_nano.onnx")}
+"""The detectors compared (label -> semantics.detector.model): the two shipped ones and the other
+permissively licensed COCO models of ../shared/models (measured where that folder exists)."""
+
+
+def compare_candidates(scan: Path, model: Path | None, width: int, height: int, tol: float,
+                       candidates: dict[str, str] | None = None, **views) -> dict:
+    """Every candidate on the same renders of the scan (and of the 3DGS trained on it): boxes per
+    category and threshold, the thresholds `choose_thresholds` picks from both, and what those
+    thresholds lift with and without the class vote. {label: {"chosen": ..., "scenes": [rep, ...]}}.
+    `views`: bench_scan's pose options (spacing, yaw_step, camera_height, pitch)."""
+    from stages.semantics.detector import DetectorConfig
+
+    cands = {k: v for k, v in (candidates or CANDIDATES).items() if not v.endswith(".onnx") or Path(v).is_file()}
+    runs = [bench_scan(scan, width, height, tol, candidates=cands, **views)]
+    if model is not None:
+        runs.append(bench_scan(scan, width, height, tol, model=model, candidates=cands, **views))
+    out = {}
+    for label in cands:
+        reps = [r[label] for r in runs]
+        chosen = choose_thresholds(reps)
+        final = DetectorConfig(categories=chosen["categories"], confidence=chosen["confidence"], model_thresholds=False)
+        for rep in reps:
+            rep["defaults"] = defaults_report(*rep["_context"], final)
+        out[label] = {"model": cands[label], "chosen": chosen, "scenes": reps}
+    # per category, the candidate whose chosen threshold keeps the most right boxes (pooled): one model a category
+    best: dict[str, tuple[int, str]] = {}
+    for label, c in out.items():
+        for cat, th in c["chosen"]["confidence"].items():
+            right = int(c["chosen"]["counts_right_of_boxes"][cat][str(th)].split(" / ")[0])
+            if right > best.get(cat, (-1, ""))[0]:
+                best[cat] = (right, label)
+    if best:
+        mix = {cat: label for cat, (_, label) in sorted(best.items())}
+        conf = {cat: out[label]["chosen"]["confidence"][cat] for cat, label in mix.items()}
+        final = DetectorConfig(categories=sorted(mix), confidence=conf, model_thresholds=False)
+        reps = []
+        for k in range(len(runs)):
+            views0, scfg, gs, truth, all_cats, tol_ = runs[k][next(iter(cands))]["_context"]
+            views = [(d, kk, cw, [b for label in set(mix.values()) for b in out[label]["scenes"][k]["_context"][0][i][3]
+                                  if mix.get(b["category"]) == label])
+                     for i, (d, kk, cw, _) in enumerate(views0)]
+            rep = {"scene": runs[k][next(iter(cands))]["scene"], "views": len(views), "boxes": {},
+                   "seconds": {"detect_per_view": sum(out[label]["scenes"][k]["seconds"]["detect_per_view"]
+                                                      for label in set(mix.values()))},
+                   "defaults": defaults_report(views, scfg, gs, truth, all_cats, tol_, final)}
+            reps.append(rep)
+        out["per-category mix"] = {"model": mix, "chosen": {"confidence": conf, "categories": sorted(mix)}, "scenes": reps}
+    for label in cands:
+        for rep in out[label]["scenes"]:
+            rep.pop("_context", None)
+    return out
+
+
+def candidates_section(comp: dict) -> list[str]:
+    L = ["## Candidate detectors", "",
+         "Every candidate on the same renders: the labelled ScanNet scan (one Gaussian a scanned point) and the 3DGS "
+         "trained on it, at the detector's free-space poses. Per category, boxes right (most of the depth mask on a "
+         "labelled instance of the category) of all boxes at each score; the threshold chosen (`choose_thresholds`: "
+         f"the lowest score at which at least {PRECISION:.0%} of the boxes are right, with at least {MIN_RIGHT} right, "
+         "pooled over both renders; a category that never gets there is left off); what those thresholds lift "
+         f"(`min_views` {resolved_min_views()}, the bed / sofa class vote), and seconds per view on this machine.", "",
+         "| model | scene | category | " + " | ".join(f">= {t}" for t in THRESHOLDS) + " | chosen |",
+         "|---|---|---|" + "---|" * len(THRESHOLDS) + "---|"]
+    for label, c in comp.items():
+        for rep in c["scenes"]:
+            for cat, by in rep["boxes"].items():
+                if any(v["boxes"] for v in by.values()):
+                    cells = " | ".join(f"{v['right_depth_mask']} / {v['boxes']}" for v in by.values())
+                    L.append(f"| {label} | {short(rep['scene'])} | {cat} | {cells} | {c['chosen']['confidence'].get(cat, 'off')} |")
+    L += ["", "Lifted at the chosen thresholds (valid: centre inside a labelled instance of its category; found: labelled "
+          "goal instances with a valid centre), with the class vote and without it:", "",
+          "| model | scene | ms a view | instances | valid | valid-centre rate | found | found per category | "
+          "without the vote: instances / valid / found | merged by the vote |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for label, c in comp.items():
+        for rep in c["scenes"]:
+            d, w = rep["defaults"], rep["defaults"]["without_class_vote"]
+            vcr = d["valid_center_rate"]
+            per = ", ".join(f"{k} {v['found']}/{v['objects']}" for k, v in d["per_category"].items() if v["objects"] and v["found"])
+            merged = "; ".join(f"{m['category']} ({', '.join(f'{k} {n}' for k, n in m['votes'].items())})" for m in d["merged"])
+            L.append(f"| {label} | {short(rep['scene'])} | {rep['seconds']['detect_per_view'] * 1000:.0f} | {d['predicted']} | "
+                     f"{d['valid']} | {'-' if vcr != vcr else f'{vcr:.0%}'} | {d['found']} of {d['objects']} | {per or '-'} | "
+                     f"{w['predicted']} / {w['valid']} / {w['found']} | {merged or '-'} |")
+    return L + [""]
+
+
+def short(scene: str) -> str:
+    return "trained 3DGS" if "trained" in scene else "scan"
+
+
+def resolved_min_views() -> int:
+    from stages.semantics.detector import DetectorConfig
+
+    return DetectorConfig().min_views
 
 
 def main(argv=None) -> list[dict]:
@@ -319,6 +464,8 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--geometry", default="robot 1.2,-10 1.5,-20 1.5,-30",
                     help="view geometries of the sweep on the scan besides the defaults: 'robot' (the embodiment's "
                          "camera) or HEIGHT,PITCH, space-separated; '' skips the sweep")
+    ap.add_argument("--choose", action="store_true",
+                    help="write each shipped model's thresholds.json from the candidates' figures (navcore/models)")
     ap.add_argument("--gpu", default="data/08_reports/semantics_detector_gpu.json",
                     help="output of `python -m benchmarks.goals.semantics_detector_gpu run` (a GPU machine); skipped when absent")
     ap.add_argument("--real-root", default=None,
@@ -326,10 +473,17 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--docs", action="store_true")
     a = ap.parse_args(argv)
+    from navcore.io.models import DEFAULT_MODEL, SHIPPED
+
     scan = Path(a.scan).resolve()
-    models = [None] + ([Path(a.model).resolve()] if a.model and Path(a.model).is_file() else [])
-    reps = [bench_scan(scan, a.width, a.height, a.tol, a.input, m, spacing=a.spacing, yaw_step=a.yaw_step,
-                       camera_height=a.camera_height, pitch=a.pitch) for m in models]
+    model = Path(a.model).resolve() if a.model and Path(a.model).is_file() else None
+    comp = compare_candidates(scan, model, a.width, a.height, a.tol, spacing=a.spacing, yaw_step=a.yaw_step,
+                              camera_height=a.camera_height, pitch=a.pitch)
+    if a.choose:
+        for label, c in comp.items():
+            if label in SHIPPED:
+                print(f"{label}: {write_thresholds(label, c['chosen'])}")
+    reps = comp[DEFAULT_MODEL]["scenes"]  # the default model's figures, at its chosen thresholds
     geometry = [reps[0]]
     for g in a.geometry.split():
         h, p = (None, None) if g == "robot" else map(float, g.split(","))
@@ -337,9 +491,9 @@ def main(argv=None) -> list[dict]:
                                    camera_height=h, pitch=p, robot_camera=g == "robot"))
     gpu = json.loads(Path(a.gpu).read_text()) if a.gpu and Path(a.gpu).is_file() else None
     cpu = real_seconds(Path(a.real_root)) if a.real_root else {}
-    write_report(a.out, "bench_semantics_detector.json", {"machine": machine(), "scenes": reps, "geometry": geometry[1:],
-                                                         "gpu": gpu, "real_cpu_seconds": cpu}, omit=("scenes", "geometry"))
-    md = markdown(reps, machine(), geometry if len(geometry) > 1 else None, gpu, cpu)
+    write_report(a.out, "bench_semantics_detector.json", {"machine": machine(), "candidates": comp, "geometry": geometry[1:],
+                                                         "gpu": gpu, "real_cpu_seconds": cpu}, omit=("candidates", "geometry"))
+    md = markdown(reps, machine(), geometry if len(geometry) > 1 else None, gpu, cpu, comp)
     (Path(a.out) / "bench_semantics_detector.md").write_text(md)
     if a.docs:
         write_page("bench_semantics_detector.md", md)
@@ -361,6 +515,52 @@ def real_seconds(root: Path) -> dict:
             if info.get("segmenter") == "detector":
                 out[scene.name] = {**info.get("seconds", {}), "views": info.get("views"),
                                    "instances": info.get("by_category", {})}
+    return out
+
+
+
+PRECISION = 0.5
+"""A category's threshold is the lowest score whose boxes are right at least this often (per view,
+pooled over the labelled renders); a category whose boxes never are is left off the allow-list."""
+MIN_RIGHT = 4
+"""...with at least this many right boxes (fewer say nothing about precision)."""
+
+
+def choose_thresholds(reps: list[dict], precision: float = PRECISION, min_right: int = MIN_RIGHT) -> dict:
+    """Per-category score thresholds and the allow-list of one detector from its boxes on labelled
+    renders (reps of bench_scan, pooled): the lowest of THRESHOLDS at which the depth-mask boxes are
+    right at least `precision` of the time with at least `min_right` right; the counts they were
+    chosen from beside them."""
+    cats = sorted({c for r in reps for c in r["boxes"]})
+    counts, confidence = {}, {}
+    for cat in cats:
+        pooled = {th: [sum(r["boxes"][cat][str(th)]["right_depth_mask"] for r in reps if cat in r["boxes"]),
+                       sum(r["boxes"][cat][str(th)]["boxes"] for r in reps if cat in r["boxes"])] for th in THRESHOLDS}
+        counts[cat] = {str(th): f"{a} / {b}" for th, (a, b) in pooled.items()}
+        ok = [th for th, (a, b) in pooled.items() if a >= min_right and a >= precision * b]
+        if ok:
+            confidence[cat] = min(ok)
+    return {"confidence": confidence, "categories": sorted(confidence), "precision": precision, "min_right": min_right,
+            "counts_right_of_boxes": counts,
+            "chosen_on": [{"scene": r["scene"], "views": r["views"], "resolution": r["resolution"]} for r in reps]}
+
+
+def write_thresholds(model: str, chosen: dict) -> Path:
+    """The shipped model's thresholds file (navcore/models/<model>/thresholds.json), which the
+    detector's defaults read (stages.semantics.detector.shipped_thresholds)."""
+    import subprocess
+
+    from navcore.io.models import MODELS_ROOT, SHIPPED
+
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    out = MODELS_ROOT / SHIPPED[model].folder / "thresholds.json"
+    doc = {"about": f"Per-category score thresholds and allow-list of {SHIPPED[model].title}, chosen by "
+                    "`python -m benchmarks.goals.semantics_detector --choose` (do not edit by hand): per category the "
+                    f"lowest score at which at least {chosen['precision']:.0%} of its boxes (depth masks) were right, with "
+                    f"at least {chosen['min_right']} right, pooled over the renders named in chosen_on (the labelled "
+                    "ScanNet scan and the 3DGS trained on it; no held-out scene).",
+           "model": model, "sha256": SHIPPED[model].files[SHIPPED[model].network], "commit": commit, **chosen}
+    out.write_text(json.dumps(doc, indent=1) + "\n")
     return out
 
 

@@ -57,7 +57,12 @@ class CostmapConfig:
     motion FP against the mesh (2.98 / 3.24 % vs 2.21 / 2.31 %, bench-spatial's 10 scenes at
     0.05 m; 0.006 gives 2.34 / 2.56 %); FN 0 at all (stages/costmap/design.md)."""
     z_resolution: float = 0.05
-    """Voxel height in the body band, metres."""
+    """Voxel height in the body band, metres (evidence=voxel)."""
+    evidence: str = "voxel"
+    """How the body band's Gaussians make an obstacle column: voxel (a voxel of z_resolution whose
+    accumulated opacity reaches tau_occ) | column (the opacity the whole band accumulates along the
+    column, each Gaussian counted once at its largest density there: a table leg of a few
+    half-transparent splats stacked up blocks, where no single 5 cm voxel of it reached tau_occ)."""
     margin_xy: float = 0.5
     """Map border around the scene's Gaussians, metres."""
     extent_quantile: float = 0.1
@@ -114,6 +119,28 @@ class CostmapConfig:
     """Gaussians centred less than this above the floor layer's top keep the fixed outlier_radius,
     metres: a trained floor's blurred texture is made of long streak splats lying a few
     centimetres above it, which the size-aware radius would turn into obstacles."""
+    outlier_density: float = 0.0
+    """The isolated test's smallest radius grows with the scene's sparseness: at least this many
+    times the median distance from a candidate to its outlier_min_neighbours-th nearest candidate
+    (0 = the fixed outlier_radius). A pruned model of a room (81 k Gaussians where training gave
+    600 k) spaces its surface splats 6 cm apart at the median, and a fixed 0.1 m found too few
+    neighbours around a chair leg (docs/benchmarks/bench_density.md)."""
+    cell_evidence: bool = False
+    """Also gather the body band's opacity over the columns of cells of cell_evidence_size: a cell whose Gaussians together
+    reach tau_occ holds an obstacle even where no fine cell of it did alone (a 6 cm cube of six splats
+    of opacity 0.45: none reaches 0.5, together 0.97), placed at the fine cells those splats reach with
+    at least cell_evidence_floor."""
+    cell_evidence_size: float = 0.1
+    """Side of the cells whose columns gather that evidence, metres (whatever the map's resolution)."""
+    cell_evidence_share: float = 0.1
+    """A fine cell of such a cell holds the obstacle when its own evidence is at least this share of the
+    largest within cell_evidence_size of it."""
+    cell_evidence_floor: float = 0.05
+    """...and at least this opacity."""
+    footprint_max_sigma: float = 0.0
+    """Largest standard deviation a Gaussian's footprint on the obstacle grid is drawn with, metres
+    (0 = its own): a large blob's density reaches past the surface it stands for, and that reach
+    was counted as obstacle before the robot's radius was added on top (0 keeps the full extent)."""
     outlier_min_neighbours: int = 4
     """Non-floor Gaussians with fewer other centres within their radius are noise, not obstacles."""
     min_obstacle_alpha: float = 0.25
@@ -278,10 +305,12 @@ def obstacle_classes(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarr
     info["faint_dropped"] = int((faint & ~floor).sum())
     if cfg.outlier_radius > 0 and cand.sum() > cfg.outlier_min_neighbours:
         idx = np.nonzero(cand)[0]
-        radius = np.clip(cfg.outlier_sigmas * scene.scales[idx].max(1), cfg.outlier_radius,
-                         max(cfg.outlier_radius, cfg.outlier_radius_max))
+        base = max(cfg.outlier_radius, cfg.outlier_density * neighbour_spacing(scene.means[idx], cfg.outlier_min_neighbours)
+                   if cfg.outlier_density > 0 else 0.0)
+        info["outlier_radius_m"] = round(float(base), 4)
+        radius = np.clip(cfg.outlier_sigmas * scene.scales[idx].max(1), base, max(base, cfg.outlier_radius_max))
         # near the floor, long splats are the floor's own streaks (trained floors' blurred texture)
-        radius[scene.means[idx, 2] - top[idx] < cfg.outlier_floor_clearance] = cfg.outlier_radius
+        radius[scene.means[idx, 2] - top[idx] < cfg.outlier_floor_clearance] = base
         isolated[idx] = isolated_points(scene.means[idx], radius, cfg.outlier_min_neighbours)
         cand &= ~isolated
         info["isolated_dropped"] = int(isolated.sum())
@@ -331,6 +360,19 @@ def hidden_splats(scene: GaussianScene, noise: np.ndarray, layers: "CostmapLayer
     return idx[hit].astype(np.int64)
 
 
+def neighbour_spacing(points: np.ndarray, k: int, sample: int = 50_000) -> float:
+    """Median distance from a point to its k-th nearest other point (on an evenly strided sample of
+    at most `sample` points, against all of them): the scene's surface spacing."""
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points, np.float64)
+    if len(pts) <= k:
+        return 0.0
+    probe = pts[::max(1, len(pts) // sample)]
+    d, _ = cKDTree(pts).query(probe, k=k + 1)
+    return float(np.median(d[:, -1]))
+
+
 def isolated_points(points: np.ndarray, radius, min_neighbours: int) -> np.ndarray:
     """[N] bool: points with fewer than ``min_neighbours`` other points within ``radius`` (a scalar
     or one per point; exact: a k-d tree query of the min_neighbours + 1 nearest within the
@@ -365,11 +407,39 @@ def raw_obstacles_fine(scene: GaussianScene, origin, shape, s: int, emb: Embodim
                        vcfg: VoxelizeConfig) -> np.ndarray:
     """Fine [ny*s, nx*s] bool: body-band obstacle per fine cell (voxel z-layers start at h_min)."""
     res_f = cfg.resolution / s
-    nz = max(1, int(np.ceil((emb.h_max - emb.h_min) / cfg.z_resolution - 1e-9)))
-    grid = VoxelGrid((origin[0], origin[1], emb.h_min), (res_f, res_f, cfg.z_resolution),
-                     (shape[1] * s, shape[0] * s, nz))
+    if cfg.evidence == "column":  # one voxel spans the band: each Gaussian's largest density over it, once
+        dz, nz = emb.h_max - emb.h_min, 1
+    elif cfg.evidence == "voxel":
+        dz, nz = cfg.z_resolution, max(1, int(np.ceil((emb.h_max - emb.h_min) / cfg.z_resolution - 1e-9)))
+    else:
+        raise ValueError(f"costmap.evidence={cfg.evidence!r}; choose voxel | column")
+    grid = VoxelGrid((origin[0], origin[1], emb.h_min), (res_f, res_f, dz), (shape[1] * s, shape[0] * s, nz))
+    if cfg.footprint_max_sigma > 0:
+        scene = GaussianScene(scene.means, scene.quats, np.minimum(scene.log_scales, np.float32(np.log(cfg.footprint_max_sigma))),
+                              scene.opacity_logits, scene.sh[:, :1])
     a = column_max_opacity(scene, grid, vcfg)  # [nx_f, ny_f]
-    return (a >= vcfg.tau_occ).T
+    fine = a >= vcfg.tau_occ
+    if cfg.cell_evidence:
+        # the same evidence gathered over each map cell's whole column (each Gaussian once, at its largest
+        # density in the cell): a cell whose few half-transparent splats reach tau_occ together holds an
+        # obstacle, located at the fine cells where those splats' own density is (> cell_evidence_floor)
+        size = cfg.cell_evidence_size
+        nxf, nyf = a.shape
+        held = np.zeros_like(fine)
+        for shift in (0.0, 0.5 * size):  # two grids, the second offset by half a cell: an object on a cell
+            # boundary gathers its splats whole in one of them
+            nc = (int(np.ceil(nxf * res_f / size)) + 1, int(np.ceil(nyf * res_f / size)) + 1)
+            coarse = VoxelGrid((origin[0] - shift, origin[1] - shift, emb.h_min), (size, size, emb.h_max - emb.h_min),
+                               (nc[0], nc[1], 1))
+            cell = column_max_opacity(scene, coarse, vcfg) >= vcfg.tau_occ  # [ncx, ncy]
+            ix = np.minimum(((np.arange(nxf) + 0.5) * res_f + shift) / size, nc[0] - 1).astype(np.int64)
+            iy = np.minimum(((np.arange(nyf) + 0.5) * res_f + shift) / size, nc[1] - 1).astype(np.int64)
+            held |= cell[np.ix_(ix, iy)]
+        # placed where those splats are: the fine cells holding at least cell_evidence_share of the largest
+        # evidence within the cell's reach (their cores, not the fringe their densities taper off in)
+        peak = ndimage.maximum_filter(a, size=int(np.ceil(size / res_f)) | 1, mode="nearest")
+        fine |= held & (a >= cfg.cell_evidence_share * peak) & (a >= cfg.cell_evidence_floor)
+    return fine.T
 
 
 def support_mask(scene: GaussianScene, origin, shape, cfg: CostmapConfig, vcfg: VoxelizeConfig) -> tuple[np.ndarray, dict]:

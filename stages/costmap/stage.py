@@ -28,6 +28,13 @@ def embodiments(cfg) -> list:
     return [main] + extra
 
 
+ADDED_KEYS = (("costmap", "evidence", "voxel"), ("costmap", "cell_evidence", False), ("costmap", "cell_evidence_size", 0.1),
+              ("costmap", "cell_evidence_share", 0.1), ("costmap", "cell_evidence_floor", 0.05),
+              ("costmap", "outlier_density", 0.0), ("costmap", "footprint_max_sigma", 0.0))
+"""Keys added after data roots were made with this stage: at their defaults they leave its hash
+as it was (pipeline.graph.Stage.added)."""
+
+
 def hashed_inputs(cfg) -> list[dict]:
     """the embodiment files: the embodiments this stage builds maps for, as read from
     navcore/conf/embodiment (part of its config hash: editing an embodiment file recomputes the

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from navcore.io.models import load_net, model_spec
+from navcore.io.models import ModelSpec, load_net
 from stages.semantics.segmenters import Segmenter
 
 COCO_TO_GOAL = {
@@ -57,22 +57,20 @@ class DetectorConfig:
     did (docs/own-capture.md, "Other COCO detectors")."""
     class_map: dict[str, str] = field(default_factory=lambda: dict(COCO_TO_GOAL))
     """Detector class name -> goal category (COCO_TO_GOAL); classes not in it are ignored."""
-    categories: list[str] = field(default_factory=lambda: ["bed", "sofa", "table", "tv_monitor", "plant"])
-    """Goal categories the detector may produce, an allow-list chosen by measurement
-    (docs/benchmarks/bench_semantics_detector.md): chair is off, the chairs it lifted were wrong (both on the
-    real fungi room: display-table legs and a panel edge; on the ScanNet room's 3DGS one of two at
-    0.3 and none lifted at 0.4); toilet is off, its boxes on real renders land on bins, counters and
-    dark doors, and in about 1,000 views of the ScanNet room it never boxed the room's toilet. Table,
-    TV and plant stay on (on the real fungi room its tables and screen were right), though on the
-    ScanNet room it never boxed the coffee table, the desk's table or the TV. Add chair or toilet
-    back with semantics.detector.categories=[...] where a capture suits them."""
-    confidence: dict[str, float] = field(default_factory=lambda: {"bed": 0.5})
-    """Per-category score threshold (objectness x class score); a category not named here uses
-    default_confidence. Bed 0.5: on the ScanNet room (scan and trained 3DGS alike) 0.4 lifted a
-    second, false bed on the L-shaped sofa seen from above, 0.5 keeps only the real one."""
+    categories: list[str] | None = None
+    """Goal categories the detector may produce (an allow-list); null: the model's own, chosen by
+    measurement and written beside it (navcore/models/<model>/thresholds.json, by
+    `python -m benchmarks.goals.semantics_detector --choose`: the categories whose boxes were right at
+    least half the time on the labelled ScanNet room's renders), or FALLBACK_CATEGORIES for a model
+    with no such file. Add a category with semantics.detector.categories=[...] where a capture suits it."""
+    confidence: dict[str, float] = field(default_factory=dict)
+    """Per-category score thresholds (objectness x class score), over the model's own
+    (thresholds.json) where model_thresholds; a category in neither uses default_confidence."""
     default_confidence: float = 0.4
-    """Threshold of an allowed category missing from `confidence`: 0.4 lifts the ScanNet room's
-    sofa from 4 views on the scan and on its trained 3DGS, and nothing false; 0.3 adds a false chair."""
+    """Threshold of an allowed category with no threshold of its own."""
+    model_thresholds: bool = True
+    """Read the model's thresholds.json (its allow-list and thresholds) under what is given here
+    (false: categories and confidence alone, as a benchmark that sweeps thresholds needs)."""
     spacing: float = 0.75
     """Free-space pose spacing for this segmenter, metres (semantics.spacing is for the others): a
     COCO detector needs objects large and near in a view; at the stage's 1.5 m / 60 deg it boxed the
@@ -111,28 +109,100 @@ class DetectorConfig:
     captures without labels every one of the 9 lifted "beds" that were wrong (8 in the wangsha hall,
     1 in the fungi room: blurred floor and display-case bases seen from above) topped out at
     0.06-0.20 m, while every goal category rises above 0.3 m."""
+    confusable: list[list[str]] = field(default_factory=lambda: [["bed", "sofa"]])
+    """Groups of categories the detector takes for one another: overlapping instances of one group are
+    one object, named by a class vote across the views (lifting.class_vote). COCO detectors call a
+    sofa seen from above a bed (PicoDet-S on the ScanNet room: docs/benchmarks/bench_semantics_detector.md)."""
     min_views: int = 4
     """An instance needs detections from at least this many distinct views (lifting): on the ScanNet
     scan's renders 3 views kept a false bed beside the real one, 4 only the real one."""
 
 
-def detect(net, rgb: np.ndarray, size: int, family: str = "yolo") -> np.ndarray:
-    """Raw detections of one frame: [M, 4 + 1 + C] (cx, cy, w, h normalised, objectness, class scores),
-    whichever the model's family (navcore.io.models.model_spec)."""
+FALLBACK_CATEGORIES = ["bed", "sofa", "table", "tv_monitor", "plant"]
+"""The allow-list of a detector model that ships no thresholds.json."""
+
+
+def model_thresholds(model: str | None) -> dict | None:
+    """The thresholds.json beside a shipped model or a user's model file (None where there is none):
+    {"confidence": {category: score}, "categories": [...], ...} as the benchmark wrote it."""
+    import json
+    from pathlib import Path
+
+    from navcore.io.models import resolve
+
+    network, _, _ = resolve(model)
+    path = Path(network).parent / "thresholds.json"
+    if not path.is_file():
+        return None
+    doc = json.loads(path.read_text())
+    if not isinstance(doc.get("confidence"), dict) or not isinstance(doc.get("categories"), list):
+        raise ValueError(f"{path}: a detector thresholds file needs 'confidence' (category -> score) and 'categories'")
+    return doc
+
+
+def resolved(cfg: DetectorConfig) -> DetectorConfig:
+    """`cfg` with its allow-list and thresholds filled from the model's thresholds.json (module doc)."""
+    doc = model_thresholds(cfg.model) if cfg.model_thresholds else None
+    categories = cfg.categories if cfg.categories is not None else list(doc["categories"] if doc else FALLBACK_CATEGORIES)
+    confidence = {**(doc["confidence"] if doc else {}), **cfg.confidence}
+    return replace(cfg, categories=list(categories), confidence=confidence, model_thresholds=False)
+
+
+def preprocess(rgb: np.ndarray, spec: ModelSpec, size: int) -> tuple[np.ndarray, float, float]:
+    """The network's input blob [1, 3, size, size] of an RGB frame, and the factors (fx, fy) that take
+    the input's normalised coordinates to the frame's (1, 1 for a stretch; the letterbox's share)."""
     import cv2
 
-    blob = cv2.dnn.blobFromImage(rgb, 1 / 255.0, (size, size), swapRB=False, crop=False)  # rgb is RGB already
+    h, w = rgb.shape[:2]
+    img = rgb if spec.channels == "rgb" else rgb[..., ::-1]
+    interp = cv2.INTER_CUBIC if spec.interpolation == "cubic" else cv2.INTER_LINEAR
+    if spec.resize == "letterbox":
+        r = min(size / h, size / w)
+        nh, nw = int(h * r), int(w * r)
+        canvas = np.full((size, size, 3), spec.pad, np.float32)
+        canvas[:nh, :nw] = cv2.resize(np.ascontiguousarray(img), (nw, nh), interpolation=interp)
+        fx, fy = size / (w * r), size / (h * r)
+    else:
+        canvas = cv2.resize(np.ascontiguousarray(img), (size, size), interpolation=interp).astype(np.float32)
+        fx = fy = 1.0
+    x = (canvas * np.float32(spec.scale) - np.asarray(spec.mean, np.float32)) / np.asarray(spec.std, np.float32)
+    return np.ascontiguousarray(x.transpose(2, 0, 1)[None], dtype=np.float32), fx, fy
+
+
+def detect(net, rgb: np.ndarray, size: int, spec: ModelSpec | None = None) -> np.ndarray:
+    """Raw detections of one frame: [M, 4 + 1 + C] (cx, cy, w, h normalised to the frame, objectness,
+    class scores), whichever the model's family (navcore.io.models.ModelSpec)."""
+    spec = spec or ModelSpec()
+    blob, fx, fy = preprocess(rgb, spec, size)
     net.setInput(blob)
     names = net.getUnconnectedOutLayersNames()
     outs = net.forward(names)
-    if family == "nanodet":
-        return nanodet_raw(dict(zip(names, outs)), size)
-    return np.concatenate([o.reshape(-1, o.shape[-1]) for o in outs])
+    if spec.family == "gfl":
+        raw = gfl_raw(dict(zip(names, outs)), size, spec.strides)
+    elif spec.family == "yolox":
+        raw = yolox_raw(outs[0], size, spec.strides or (8, 16, 32))
+    else:
+        raw = np.concatenate([o.reshape(-1, o.shape[-1]) for o in outs])
+    if fx != 1.0 or fy != 1.0:
+        raw = raw.copy()
+        raw[:, [0, 2]] *= fx
+        raw[:, [1, 3]] *= fy
+    return raw
 
 
-def nanodet_raw(outs: dict[str, np.ndarray], size: int) -> np.ndarray:
-    """NanoDet's outputs (per stride: class scores [1, n, C] after the sigmoid, and box distributions
-    [1, n, 4 (reg_max + 1)]: generalized focal loss) as [n, 4 + 1 + C] rows like a YOLO's: each
+def level_stride(size: int, cells: int) -> int:
+    """The stride of an output level of `cells` cells on a square input of side `size`: the power of
+    two whose ceil(size / stride) squared is the count (416 / 64 leaves a 7 x 7 level)."""
+    side = int(round(np.sqrt(cells)))
+    stride = int(2 ** round(np.log2(size / side)))
+    if side * side != cells or -(-size // stride) != side:
+        raise ValueError(f"an output level of {cells} cells is no square grid of a {size}-pixel input")
+    return stride
+
+
+def gfl_raw(outs: dict[str, np.ndarray], size: int, strides: tuple[int, ...] | None = None) -> np.ndarray:
+    """Generalized-focal-loss heads (NanoDet, PP-PicoDet: per stride, class scores [1, n, C] after the
+    sigmoid and box distributions [1, n, 4 (reg_max + 1)]) as [n, 4 + 1 + C] rows like a YOLO's: each
     side's distance from its cell's centre is the expectation of its softmaxed distribution, in
     strides; objectness 1."""
     widths = sorted({o.shape[-1] for o in outs.values()})  # the box outputs' 4 (reg_max + 1) < COCO's 80 classes
@@ -140,11 +210,11 @@ def nanodet_raw(outs: dict[str, np.ndarray], size: int) -> np.ndarray:
     scores = sorted((o for o in flat if o.shape[-1] == widths[-1]), key=len, reverse=True)
     regs = sorted((o for o in flat if o.shape[-1] == widths[0]), key=len, reverse=True)
     if len(widths) != 2 or widths[0] % 4 or len(scores) != len(regs) or any(len(a) != len(b) for a, b in zip(scores, regs)):
-        raise ValueError(f"NanoDet outputs do not pair up by stride: {[o.shape for o in outs.values()]}")
+        raise ValueError(f"GFL detector outputs do not pair up by stride: {[o.shape for o in outs.values()]}")
     rows = []
-    for sc, rg in zip(scores, regs):
-        side = int(round(np.sqrt(len(sc))))
-        stride = size / side
+    for k, (sc, rg) in enumerate(zip(scores, regs)):
+        stride = strides[k] if strides else level_stride(size, len(sc))
+        side = -(-size // stride)
         d = rg.reshape(len(rg), 4, -1)
         d = np.exp(d - d.max(-1, keepdims=True))
         dist = (d / d.sum(-1, keepdims=True)) @ np.arange(d.shape[-1], dtype=np.float32) * stride  # l, t, r, b pixels
@@ -156,6 +226,24 @@ def nanodet_raw(outs: dict[str, np.ndarray], size: int) -> np.ndarray:
     return np.concatenate(rows).astype(np.float32)
 
 
+def yolox_raw(out: np.ndarray, size: int, strides: tuple[int, ...]) -> np.ndarray:
+    """YOLOX's undecoded output [1, n, 5 + C] (per cell of each stride's grid, row-major: dx, dy,
+    log w, log h in strides, then objectness and class scores after the sigmoid) as YOLO rows: centre
+    (dx + gx, dy + gy) * stride, size exp(log) * stride, normalised by the input side."""
+    o = out.reshape(-1, out.shape[-1])
+    grid, stride = [], []
+    for s in strides:
+        ys, xs = np.mgrid[:size // s, :size // s]
+        grid.append(np.stack([xs.ravel(), ys.ravel()], 1))
+        stride.append(np.full((xs.size, 1), s, np.float32))
+    grid, st = np.concatenate(grid), np.concatenate(stride)
+    if len(grid) != len(o):
+        raise ValueError(f"YOLOX output of {len(o)} rows; a {size}-pixel input at strides {strides} has {len(grid)}")
+    xy = (o[:, :2] + grid) * st / size
+    wh = np.exp(np.minimum(o[:, 2:4], 20.0)) * st / size
+    return np.concatenate([xy, wh, o[:, 4:]], 1).astype(np.float32)
+
+
 def boxes_of(raw: np.ndarray, names: list[str], cfg: DetectorConfig, width: int, height: int
              ) -> list[tuple[str, np.ndarray, float]]:
     """(goal category, box [x0, y0, x1, y1] pixels, score) of the allowed categories after
@@ -164,6 +252,8 @@ def boxes_of(raw: np.ndarray, names: list[str], cfg: DetectorConfig, width: int,
 
     if not len(raw):
         return []
+    if cfg.categories is None:
+        cfg = resolved(cfg)
     cls = raw[:, 5:].argmax(1)
     score = raw[:, 4] * raw[np.arange(len(raw)), 5 + cls]
     out = []
@@ -242,20 +332,19 @@ class DetectorSegmenter(Segmenter):
     def __init__(self, cfg: DetectorConfig, prompts_of: dict[str, str]):
         import cv2
 
+        cfg = resolved(cfg)
         self.cfg = cfg
         if cfg.threads:
             cv2.setNumThreads(int(cfg.threads))
-        # one entry per distinct model: (net, class names, family, input side, the categories it boxes)
+        # one entry per distinct model: (net, class names, spec, input side, the categories it boxes)
         own = {m: [c for c in cfg.categories if cfg.models.get(c) == m] for m in set(cfg.models.values())}
         rest = [c for c in cfg.categories if c not in cfg.models]
         self.runs = []
         for model, cats in [(cfg.model, rest), *sorted(own.items())]:
             if not cats:
                 continue
-            net, names = load_net(model)
-            spec = model_spec(model)
-            self.runs.append((net, names, spec["family"], spec["input_size"] or cfg.input_size,
-                              replace(cfg, categories=cats)))
+            net, names, spec = load_net(model)
+            self.runs.append((net, names, spec, spec.input_size or cfg.input_size, replace(cfg, categories=cats)))
         self.input_size = self.runs[0][3] if self.runs else cfg.input_size
         self.prompts_of = prompts_of  # goal category -> the stage's prompt string
         self.last_boxes: list = []  # the boxes of the last frame (category, box, score): benchmarks read them
@@ -270,8 +359,8 @@ class DetectorSegmenter(Segmenter):
         h, w = rgb.shape[:2]
         out: dict[str, list] = {p: [] for p in prompts}
         frame = np.ascontiguousarray(rgb)
-        self.last_boxes = [b for net, names, family, size, cfg in self.runs
-                           for b in boxes_of(detect(net, frame, size, family), names, cfg, w, h)]
+        self.last_boxes = [b for net, names, spec, size, cfg in self.runs
+                           for b in boxes_of(detect(net, frame, size, spec), names, cfg, w, h)]
         for cat, box, score in self.last_boxes:
             p = self.prompts_of.get(cat)
             if p not in out:

@@ -58,6 +58,13 @@ class LiftingConfig:
     """An instance needs votes from at least this many distinct views (its `views`): multi-view
     consistency against detections that do not recur in 3D (the detector segmenter asks for
     detector.min_views; with support=points every frame counts)."""
+    confusable: list[list[int]] | None = None
+    """Groups of labels a segmenter confuses with each other (the detector's bed and sofa): instances
+    of one group whose boxes overlap by `confusable_overlap` of the smaller are one object seen under
+    two names, merged into one instance of the label with the most view votes over its cells (a class
+    vote across views per instance; `class_vote` below). None: no merging."""
+    confusable_overlap: float = 0.3
+    """Share of the smaller box's volume the two boxes must share to be merged."""
 
 
 def back_project(depth: np.ndarray, K: np.ndarray, cam_to_world: np.ndarray, pixels: np.ndarray) -> np.ndarray:
@@ -208,10 +215,70 @@ def lift(frames, gaussian_means: np.ndarray, cfg: LiftingConfig) -> list[dict]:
             conf = float(g_conf[idx[sel]].mean()) if g_conf is not None else 1.0
             views, agreement = view_support(voxel_keys(p, cfg.delta_vote), voters) if cfg.voting else \
                 (len(np.unique(frames_of[idx[sel]])), 1.0)
-            if views < cfg.min_views or (cfg.min_top_m > 0 and float(p[:, 2].max()) < cfg.min_top_m):
-                continue
+            votes = sum(len(voters.get(tuple(k), ())) for k in np.unique(voxel_keys(p, cfg.delta_vote), axis=0))
             out.append({"label": int(lab), "center": p.mean(0), "min": p.min(0), "max": p.max(0),
-                        "support": int(sel.sum()), "confidence": conf, "views": views, "agreement": agreement})
+                        "support": int(sel.sum()), "confidence": conf, "views": views, "agreement": agreement,
+                        "votes": int(votes), "points": p})
+    if cfg.confusable and cfg.voting:
+        out = class_vote(out, cfg.confusable, cfg.confusable_overlap, voters, cfg.delta_vote)
+    kept = []
+    for o in out:
+        p = o.pop("points")
+        if o["views"] >= cfg.min_views and not (cfg.min_top_m > 0 and float(p[:, 2].max()) < cfg.min_top_m):
+            kept.append(o)
+    return kept
+
+
+def box_overlap(a: dict, b: dict) -> float:
+    """Volume shared by two instances' axis-aligned boxes, as a share of the smaller box's volume."""
+    lo, hi = np.maximum(a["min"], b["min"]), np.minimum(a["max"], b["max"])
+    inter = float(np.prod(np.clip(hi - lo, 0, None)))
+    vol = min(float(np.prod(np.maximum(x["max"] - x["min"], 1e-6))) for x in (a, b))
+    return inter / vol
+
+
+def class_vote(instances: list[dict], groups: list[list[int]], overlap: float, voters: dict[tuple, set[int]],
+               delta_vote: float) -> list[dict]:
+    """Instances of confusable labels (one group) whose boxes overlap by `overlap` of the smaller are
+    merged, transitively, into one instance labelled by the view votes summed per label over the merged
+    instances (the label most views gave its cells), its views counted over all its cells; the others
+    pass unchanged. Each merged instance records the votes per label it was chosen from (`label_votes`).
+    Runs before the min_views filter: two halves of one object, each seen from too few views under
+    its own name, can make one instance."""
+    group_of = {lab: g for g, labs in enumerate(groups) for lab in labs}
+    parent = list(range(len(instances)))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for i, a in enumerate(instances):
+        for j in range(i + 1, len(instances)):
+            b = instances[j]
+            if a["label"] != b["label"] and group_of.get(a["label"], -1) == group_of.get(b["label"], -2) \
+                    and box_overlap(a, b) >= overlap:
+                parent[root(j)] = root(i)
+    merged: dict[int, list[dict]] = {}
+    for i, inst in enumerate(instances):
+        merged.setdefault(root(i), []).append(inst)
+    out = []
+    for members in merged.values():
+        if len(members) == 1:
+            out.append(members[0])
+            continue
+        votes: dict[int, int] = {}
+        for m in members:
+            votes[m["label"]] = votes.get(m["label"], 0) + m["votes"]
+        label = max(sorted(votes), key=lambda lab: votes[lab])
+        p = np.concatenate([m["points"] for m in members])
+        n = sum(m["support"] for m in members)
+        views, agreement = view_support(voxel_keys(p, delta_vote), voters)
+        out.append({"label": int(label), "center": p.mean(0), "min": p.min(0), "max": p.max(0), "support": int(n),
+                    "confidence": float(sum(m["confidence"] * m["support"] for m in members) / n),
+                    "views": views, "agreement": agreement,
+                    "votes": int(sum(votes.values())), "points": p, "label_votes": votes})
     return out
 
 

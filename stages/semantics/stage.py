@@ -129,10 +129,13 @@ def category_masks(seg: dict, prompts: list[str]) -> dict[int, list[np.ndarray]]
 
 def lifting_config(scfg: SemanticsConfig):
     """The lifting of this segmenter: the detector's instances need detector.min_views views and
-    a top above detector.min_top_m."""
+    a top above detector.min_top_m, and its confusable categories are merged by a class vote."""
     if scfg.segmenter == "detector":
+        index = {c: k for k, c in enumerate(scfg.categories)}
+        groups = [[index[c] for c in g if c in index] for g in scfg.detector.confusable]
         return replace(scfg.lifting, min_views=max(scfg.lifting.min_views, scfg.detector.min_views),
-                       min_top_m=max(scfg.lifting.min_top_m, scfg.detector.min_top_m))
+                       min_top_m=max(scfg.lifting.min_top_m, scfg.detector.min_top_m),
+                       confusable=scfg.lifting.confusable or [g for g in groups if len(g) > 1] or None)
     return scfg.lifting
 
 
