@@ -132,10 +132,14 @@ def checks() -> list[Check]:
     ok, why = _try("cv2")
     out.append(Check("opencv (detector)", ok, _version("opencv-python-headless") or why, checkout, "pipeline"))
     try:
-        from navcore.io.models import load_net
+        from navcore.io.models import default_detector, load_net
 
-        load_net(None)
-        out.append(Check("detector weights", True, "shipped Yolo-Fastest-1.1-XL loads (sha256 checked)", part="pipeline"))
+        d = default_detector()
+        models = sorted({d["model"], *d["models"].values()}) if d else [None]
+        for m in models:
+            load_net(m)
+        out.append(Check("detector weights", True, f"the default detector's models load ({', '.join(map(str, models))}; sha256 checked)",
+                         part="pipeline"))
     except Exception as e:  # noqa: BLE001
         out.append(Check("detector weights", False, f"{type(e).__name__}: {e}", part="pipeline"))
     ok, why = _try("av")

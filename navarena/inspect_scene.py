@@ -72,17 +72,21 @@ def _units_hint(top: float, extent: dict) -> str:
 
 def picture(m: np.ndarray, path: str, out_png: str, info: dict | None = None) -> str:
     """Top-down density of the content's centres `m` (of the file `path`) seen along the found up
-    axis (or +z), with a 1 m scale bar."""
+    axis (or +z), in the frame the align stage will give (up turned onto +z: x right, y up, as the
+    costmap picture draws it), with a 1 m scale bar."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from navcore.gaussians.floor import floor_transform
+    from navcore.io.map_picture import FRAME_NOTE
+
     up = np.asarray((info or {}).get("up_vector") or [0, 0, 1], float)
-    a = np.cross(up, [1, 0, 0] if abs(up[0]) < 0.9 else [0, 1, 0])
-    a /= np.linalg.norm(a)
-    b = np.cross(up, a)
-    u, v = m @ a, m @ b
+    # the frame the align stage gives (up turned onto +z by the smallest rotation): the costmap
+    # picture's axes, so the two pictures of one scene are drawn the same way round
+    p = m @ floor_transform(up, 0.0)[:3, :3].T
+    u, v = p[:, 0], p[:, 1]
     (u0, u1), (v0, v1) = np.percentile(u, [0.5, 99.5]), np.percentile(v, [0.5, 99.5])
     res = max(u1 - u0, v1 - v0) / 400
     h, _, _ = np.histogram2d(v, u, bins=[max(int((v1 - v0) / res), 1), max(int((u1 - u0) / res), 1)],
@@ -91,9 +95,10 @@ def picture(m: np.ndarray, path: str, out_png: str, info: dict | None = None) ->
     ax.imshow(np.log1p(h), origin="lower", cmap="magma", extent=[u0, u1, v0, v1])
     ax.plot([u0 + 0.05 * (u1 - u0), u0 + 0.05 * (u1 - u0) + 1.0], [v0 + 0.05 * (v1 - v0)] * 2, color="cyan", lw=3)
     ax.text(u0 + 0.05 * (u1 - u0), v0 + 0.08 * (v1 - v0), "1 m", color="cyan")
-    ax.set_title(f"{Path(path).name}: content seen along up {(info or {}).get('up_axis') or '+z (assumed)'}", fontsize=9)
-    ax.set_xlabel("m")
-    ax.set_ylabel("m")
+    ax.set_title(f"{Path(path).name}: content seen along up {(info or {}).get('up_axis') or '+z (assumed)'}\n"
+                 f"{FRAME_NOTE}; before the floor is fitted, as the costmap picture after", fontsize=8)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
     fig.tight_layout()
     fig.savefig(out_png, dpi=100)
     plt.close(fig)

@@ -124,3 +124,36 @@ def test_doctor_passes_a_consumer_install_without_the_pipelines_packages(monkeyp
     monkeypatch.setattr(doctor, "pipeline_group", lambda: (["ompl"], ["ompl"]))
     assert doctor.main([]) == 1
     assert "FAIL" in capsys.readouterr().out
+
+
+def test_inspect_draws_the_aligned_frame_the_costmap_picture_draws(tmp_path, monkeypatch):
+    """One orientation (issue 86): a file with -y up whose content runs along its x axis is drawn with that
+    run left to right, as the costmap picture of its aligned frame draws it (x right, y up), not turned 90
+    degrees; both pictures say their frame."""
+    import matplotlib.pyplot as plt
+
+    from navarena import inspect_scene
+    from navcore.io.map_picture import FRAME_NOTE, topdown_picture
+
+    rng = np.random.default_rng(0)
+    m = np.column_stack([rng.uniform(0, 6, 4000), rng.uniform(-0.1, 0.1, 4000), rng.uniform(0, 1, 4000)])  # long in x
+    seen = {}
+    real_imshow = plt.Axes.imshow
+
+    def imshow(self, img, *a, extent=None, **k):
+        seen["extent"] = extent
+        return real_imshow(self, img, *a, extent=extent, **k)
+
+    monkeypatch.setattr(plt.Axes, "imshow", imshow)
+    titles = []
+    monkeypatch.setattr(plt.Axes, "set_title", lambda self, t, **k: titles.append(t))
+    inspect_scene.picture(m, "room.ply", str(tmp_path / "top.png"), {"up_vector": [0, -1, 0], "up_axis": "-y"})
+    u0, u1, v0, v1 = seen["extent"]
+    assert u1 - u0 > 5 and v1 - v0 < 2  # the 6 m run is horizontal on the page
+    assert FRAME_NOTE in titles[0]
+    import navcore.io.map_picture as mp
+
+    notes = []
+    monkeypatch.setattr(mp, "annotated", lambda img, res, legend, note=None, **k: notes.append(note) or img)
+    topdown_picture(np.zeros((4, 6), bool), np.ones((4, 6), bool), np.zeros((4, 6), bool), None, 0.05, "locobot")
+    assert FRAME_NOTE in notes[0]

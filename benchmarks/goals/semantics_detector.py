@@ -350,60 +350,110 @@ def markdown(reps: list[dict], machine_name: str, geometry: list[dict] | None = 
 
 
 SHARED_MODELS = Path(__file__).resolve().parents[3] / "shared" / "models"
-CANDIDATES = {"picodet_s_416_coco": "picodet_s_416_coco", "yolo_fastest_1.1_coco": "yolo_fastest_1.1_coco",
-              "picodet_s_320_coco": str(SHARED_MODELS / "picodet_s_320_coco" / "picodet_s_320_coco.onnx"),
-              "yolox_nano_416_coco": str(SHARED_MODELS / "yolox_nano_416_coco" / "yolox_nano.onnx")}
-"""The detectors compared (label -> semantics.detector.model): the two shipped ones and the other
-permissively licensed COCO models of ../shared/models (measured where that folder exists)."""
+CANDIDATES = {"picodet_s_320_coco": "picodet_s_320_coco", "yolox_nano_416_coco": "yolox_nano_416_coco",
+              "yolo_fastest_1.1_coco": "yolo_fastest_1.1_coco",
+              "picodet_s_416_coco": str(SHARED_MODELS / "picodet_s_416_coco" / "picodet_s_416_coco.onnx")}
+"""The detectors compared (label -> semantics.detector.model): the shipped ones and PicoDet-S 416 of
+../shared/models (measured where that folder exists; not shipped: on these renders it lifted less)."""
+
+
+PRECISIONS = (0.5, 0.6, 0.7, 0.8)
+"""The per-view precisions a candidate's thresholds are chosen for (choose_thresholds); its figures are
+those of the precision whose thresholds lift best on the labelled renders (`lift_key`)."""
+
+
+def lift_key(reps: list[dict]) -> tuple:
+    """Order of preference of one set of thresholds by what it lifts on the labelled renders: valid
+    centres >= 90 % on every render first, then the fewest goal instances found on any render, then the
+    least valid-centre rate."""
+    rates = [r["defaults"]["valid_center_rate"] for r in reps]
+    rates = [0.0 if x != x else x for x in rates]
+    return (all(x >= 0.9 for x in rates), min(r["defaults"]["found"] for r in reps), min(rates))
 
 
 def compare_candidates(scan: Path, model: Path | None, width: int, height: int, tol: float,
                        candidates: dict[str, str] | None = None, **views) -> dict:
     """Every candidate on the same renders of the scan (and of the 3DGS trained on it): boxes per
-    category and threshold, the thresholds `choose_thresholds` picks from both, and what those
-    thresholds lift with and without the class vote. {label: {"chosen": ..., "scenes": [rep, ...]}}.
-    `views`: bench_scan's pose options (spacing, yaw_step, camera_height, pitch)."""
+    category and threshold; for each precision of PRECISIONS the thresholds `choose_thresholds` picks
+    from both renders and what they lift (with the class vote, and without it); the precision whose
+    thresholds lift best (`lift_key`) gives the candidate's figures; and a per-category mix of the
+    candidates, each category from the candidate that keeps the most right boxes at its thresholds.
+    {label: {"model", "chosen", "sweep", "scenes": [rep, ...]}}. `views`: bench_scan's pose options
+    (spacing, yaw_step, camera_height, pitch)."""
+    import copy
+
+    import cv2
+
+    from navcore.io.models import SHIPPED
     from stages.semantics.detector import DetectorConfig
 
-    cands = {k: v for k, v in (candidates or CANDIDATES).items() if not v.endswith(".onnx") or Path(v).is_file()}
+    darknet = hasattr(cv2.dnn, "readNetFromDarknet")  # OpenCV 5 has none: Yolo-Fastest is left out there
+    cands = {k: v for k, v in (candidates or CANDIDATES).items()
+             if (not v.endswith(".onnx") or Path(v).is_file()) and (darknet or v not in SHIPPED or
+                                                                    not SHIPPED[v].network.endswith(".cfg"))}
     runs = [bench_scan(scan, width, height, tol, candidates=cands, **views)]
     if model is not None:
         runs.append(bench_scan(scan, width, height, tol, model=model, candidates=cands, **views))
-    out = {}
+
+    def lifted(views_of, chosen):
+        final = DetectorConfig(categories=chosen["categories"], confidence=chosen["confidence"], model_thresholds=False)
+        out = []
+        for k in range(len(runs)):
+            ctx = runs[k][next(iter(cands))]["_context"]
+            out.append(defaults_report(views_of(k), *ctx[1:], final))
+        return out
+
+    out, per_precision = {}, {}
     for label in cands:
         reps = [r[label] for r in runs]
-        chosen = choose_thresholds(reps)
-        final = DetectorConfig(categories=chosen["categories"], confidence=chosen["confidence"], model_thresholds=False)
-        for rep in reps:
-            rep["defaults"] = defaults_report(*rep["_context"], final)
-        out[label] = {"model": cands[label], "chosen": chosen, "scenes": reps}
-    # per category, the candidate whose chosen threshold keeps the most right boxes (pooled): one model a category
-    best: dict[str, tuple[int, str]] = {}
-    for label, c in out.items():
-        for cat, th in c["chosen"]["confidence"].items():
-            right = int(c["chosen"]["counts_right_of_boxes"][cat][str(th)].split(" / ")[0])
-            if right > best.get(cat, (-1, ""))[0]:
-                best[cat] = (right, label)
-    if best:
+        sweep = {}
+        for prec in PRECISIONS:
+            chosen = choose_thresholds(reps, precision=prec)
+            sweep[prec] = (chosen, lifted(lambda k, lab=label: runs[k][lab]["_context"][0], chosen))
+        per_precision[label] = sweep
+        prec = max(PRECISIONS, key=lambda q: (lift_key([{"defaults": d} for d in sweep[q][1]]), -q))
+        chosen, defaults = sweep[prec]
+        for rep, d in zip(reps, defaults):
+            rep["defaults"] = d
+        out[label] = {"model": cands[label], "chosen": chosen, "scenes": reps,
+                      "sweep": {str(q): [{k: d[k] for k in ("predicted", "valid", "found")} for d in sweep[q][1]]
+                                for q in PRECISIONS}}
+    # the per-category mix: at each precision, each category from the candidate that keeps the most right
+    # boxes at its threshold (pooled); its views combine those candidates' boxes of the same renders
+    best_mix = None
+    for prec in PRECISIONS:
+        best: dict[str, tuple[int, str]] = {}
+        for label in cands:
+            chosen = per_precision[label][prec][0]
+            for cat, th in chosen["confidence"].items():
+                right = int(chosen["counts_right_of_boxes"][cat][str(th)].split(" / ")[0])
+                if right > best.get(cat, (-1, ""))[0]:
+                    best[cat] = (right, label)
+        if not best:
+            continue
         mix = {cat: label for cat, (_, label) in sorted(best.items())}
-        conf = {cat: out[label]["chosen"]["confidence"][cat] for cat, label in mix.items()}
-        final = DetectorConfig(categories=sorted(mix), confidence=conf, model_thresholds=False)
-        reps = []
-        for k in range(len(runs)):
-            views0, scfg, gs, truth, all_cats, tol_ = runs[k][next(iter(cands))]["_context"]
-            views = [(d, kk, cw, [b for label in set(mix.values()) for b in out[label]["scenes"][k]["_context"][0][i][3]
-                                  if mix.get(b["category"]) == label])
-                     for i, (d, kk, cw, _) in enumerate(views0)]
-            rep = {"scene": runs[k][next(iter(cands))]["scene"], "views": len(views), "boxes": {},
-                   "seconds": {"detect_per_view": sum(out[label]["scenes"][k]["seconds"]["detect_per_view"]
-                                                      for label in set(mix.values()))},
-                   "defaults": defaults_report(views, scfg, gs, truth, all_cats, tol_, final)}
-            reps.append(rep)
-        out["per-category mix"] = {"model": mix, "chosen": {"confidence": conf, "categories": sorted(mix)}, "scenes": reps}
+        conf = {cat: per_precision[label][prec][0]["confidence"][cat] for cat, label in mix.items()}
+
+        def views_of(k, mix=mix):
+            base = runs[k][next(iter(cands))]["_context"][0]
+            return [(d, kk, cw, [b for label in sorted(set(mix.values())) for b in runs[k][label]["_context"][0][i][3]
+                                 if mix.get(b["category"]) == label]) for i, (d, kk, cw, _) in enumerate(base)]
+
+        defaults = lifted(views_of, {"categories": sorted(mix), "confidence": conf})
+        cand = (lift_key([{"defaults": d} for d in defaults]), -prec)
+        if best_mix is None or cand > best_mix[0]:
+            best_mix = (cand, prec, mix, conf, defaults)
+    if best_mix is not None:
+        _, prec, mix, conf, defaults = best_mix
+        reps = [{"scene": runs[k][next(iter(cands))]["scene"], "views": runs[k][next(iter(cands))]["views"], "boxes": {},
+                 "seconds": {"detect_per_view": sum(runs[k][label]["seconds"]["detect_per_view"] for label in set(mix.values()))},
+                 "defaults": d} for k, d in enumerate(defaults)]
+        out["per-category mix"] = {"model": mix, "chosen": {"confidence": conf, "categories": sorted(mix), "precision": prec},
+                                   "scenes": reps}
     for label in cands:
         for rep in out[label]["scenes"]:
             rep.pop("_context", None)
-    return out
+    return copy.deepcopy(out)
 
 
 def candidates_section(comp: dict) -> list[str]:
@@ -411,8 +461,10 @@ def candidates_section(comp: dict) -> list[str]:
          "Every candidate on the same renders: the labelled ScanNet scan (one Gaussian a scanned point) and the 3DGS "
          "trained on it, at the detector's free-space poses. Per category, boxes right (most of the depth mask on a "
          "labelled instance of the category) of all boxes at each score; the threshold chosen (`choose_thresholds`: "
-         f"the lowest score at which at least {PRECISION:.0%} of the boxes are right, with at least {MIN_RIGHT} right, "
-         "pooled over both renders; a category that never gets there is left off); what those thresholds lift "
+         f"the lowest score at which at least a precision p of the boxes are right, with at least {MIN_RIGHT} right, "
+         "pooled over both renders; a category that never gets there is left off; p of "
+         f"{', '.join(map(str, PRECISIONS))}, the one whose thresholds lift best: valid centres >= 90 % on both "
+         "renders first, then the most goal instances found); what those thresholds lift "
          f"(`min_views` {resolved_min_views()}, the bed / sofa class vote), and seconds per view on this machine.", "",
          "| model | scene | category | " + " | ".join(f">= {t}" for t in THRESHOLDS) + " | chosen |",
          "|---|---|---|" + "---|" * len(THRESHOLDS) + "---|"]
@@ -435,6 +487,18 @@ def candidates_section(comp: dict) -> list[str]:
             L.append(f"| {label} | {short(rep['scene'])} | {rep['seconds']['detect_per_view'] * 1000:.0f} | {d['predicted']} | "
                      f"{d['valid']} | {'-' if vcr != vcr else f'{vcr:.0%}'} | {d['found']} of {d['objects']} | {per or '-'} | "
                      f"{w['predicted']} / {w['valid']} / {w['found']} | {merged or '-'} |")
+    L += ["", "The precision sweep: what each candidate's thresholds lift on the scan / the trained 3DGS (instances, valid, "
+          "goal instances found) when chosen for each per-view precision:", "",
+          "| model | " + " | ".join(f"p {q}" for q in PRECISIONS) + " | chosen |", "|---|" + "---|" * len(PRECISIONS) + "---|"]
+    for label, c in comp.items():
+        if "sweep" in c:
+            cells = [" / ".join(f"{d['predicted']}, {d['valid']}, {d['found']}" for d in c["sweep"][str(q)]) for q in PRECISIONS]
+            L.append(f"| {label} | " + " | ".join(cells) + f" | p {c['chosen']['precision']}: "
+                     + ", ".join(f"{k} {v}" for k, v in c["chosen"]["confidence"].items()) + " |")
+    mix = comp.get("per-category mix")
+    if mix:
+        L += ["", f"Per-category mix (p {mix['chosen']['precision']}): " + ", ".join(
+            f"{cat} from {label} at {mix['chosen']['confidence'][cat]}" for cat, label in mix["model"].items()) + "."]
     return L + [""]
 
 
@@ -472,9 +536,17 @@ def main(argv=None) -> list[dict]:
                     help="a data root where the real captures ran with semantics.segmenter=detector (their CPU seconds)")
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--docs", action="store_true")
+    ap.add_argument("--write-thresholds", nargs="*", default=None, metavar="MODEL",
+                    help="only write these shipped models' thresholds.json from the report of an earlier run (--out)")
     a = ap.parse_args(argv)
     from navcore.io.models import DEFAULT_MODEL, SHIPPED
 
+    if a.write_thresholds is not None:
+        comp = json.loads((Path(a.out) / "bench_semantics_detector.json").read_text())["candidates"]
+        for label in a.write_thresholds or [k for k in comp if k in SHIPPED]:
+            print(f"{label}: {write_thresholds(label, comp[label]['chosen'])}")
+        print(f"default detector: {write_default_detector(comp)}")
+        return []
     scan = Path(a.scan).resolve()
     model = Path(a.model).resolve() if a.model and Path(a.model).is_file() else None
     comp = compare_candidates(scan, model, a.width, a.height, a.tol, spacing=a.spacing, yaw_step=a.yaw_step,
@@ -483,6 +555,7 @@ def main(argv=None) -> list[dict]:
         for label, c in comp.items():
             if label in SHIPPED:
                 print(f"{label}: {write_thresholds(label, c['chosen'])}")
+        print(f"default detector: {write_default_detector(comp)}")
     reps = comp[DEFAULT_MODEL]["scenes"]  # the default model's figures, at its chosen thresholds
     geometry = [reps[0]]
     for g in a.geometry.split():
@@ -562,6 +635,38 @@ def write_thresholds(model: str, chosen: dict) -> Path:
            "model": model, "sha256": SHIPPED[model].files[SHIPPED[model].network], "commit": commit, **chosen}
     out.write_text(json.dumps(doc, indent=1) + "\n")
     return out
+
+
+def write_default_detector(comp: dict) -> Path:
+    """navcore/models/detector.json, the default detector: of the candidates that ship and the per-category
+    mix of them, the one whose thresholds lift best on the labelled renders (`lift_key`; ties: the
+    fewer models, then the faster), with its models per category, thresholds and allow-list."""
+    import subprocess
+
+    from navcore.io.models import DEFAULT_DETECTOR, SHIPPED
+
+    options = []
+    for label, c in comp.items():
+        models = c["model"] if isinstance(c["model"], dict) else {cat: label for cat in c["chosen"]["categories"]}
+        if not models or not all(m in SHIPPED for m in models.values()):
+            continue
+        ms = sum(r["seconds"]["detect_per_view"] for r in c["scenes"]) / len(c["scenes"])
+        options.append(((lift_key(c["scenes"]), -len(set(models.values())), -ms), label, models, c["chosen"]))
+    if not options:
+        raise ValueError("no shipped candidate lifted anything: the default detector is left as it was")
+    _, label, models, chosen = max(options, key=lambda o: o[0])
+    main = max(sorted(set(models.values())), key=lambda m: sum(v == m for v in models.values()))
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    doc = {"about": "The `detector` segmenter's default (semantics.detector.model null, models empty), chosen by "
+                    "`python -m benchmarks.goals.semantics_detector --choose` (do not edit by hand): of the shipped "
+                    "models and their per-category mix, the one whose thresholds lift best on the labelled ScanNet "
+                    "scan and the 3DGS trained on it (valid centres >= 90 % on both, then the most goal instances "
+                    "found; docs/benchmarks/bench_semantics_detector.md). No held-out scene was used.",
+           "chosen_from": label, "model": main, "models": dict(sorted(models.items())),
+           "confidence": chosen["confidence"], "categories": chosen["categories"],
+           "precision": chosen.get("precision"), "commit": commit}
+    DEFAULT_DETECTOR.write_text(json.dumps(doc, indent=1) + "\n")
+    return DEFAULT_DETECTOR
 
 
 if __name__ == "__main__":

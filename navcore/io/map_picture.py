@@ -6,6 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 SCALE_STEPS = (0.25, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
+FRAME_NOTE = "aligned frame (the file's up turned onto +z): x to the right, y up the page"
+"""What every top-down picture of a scene says about its axes: the costmap and screening pictures and
+`navarena inspect`'s picture draw the same frame, with an x / y axis glyph in the lower-right corner."""
 """Scale-bar lengths, metres: the longest that spans at most a quarter of the map's width."""
 
 
@@ -32,6 +35,12 @@ def annotated(img: np.ndarray, resolution: float, legend: list[tuple[tuple[int, 
     d.rectangle([x0 - 4, y0 - 14, x0 + bar + 4, y0 + 8], fill=(255, 255, 255))
     d.rectangle([x0, y0, x0 + bar, y0 + 4], fill=(0, 0, 0))
     d.text((x0, y0 - 13), f"{metres:g} m", fill=(0, 0, 0))
+    ax, ay, arm = w - 40, h - 12, 24  # the axes: x to the right, y up the page
+    d.rectangle([ax - 6, ay - arm - 14, ax + arm + 12, ay + 6], fill=(255, 255, 255))
+    d.line([ax, ay, ax + arm, ay], fill=(200, 0, 0), width=2)
+    d.line([ax, ay, ax, ay - arm], fill=(0, 150, 0), width=2)
+    d.text((ax + arm + 2, ay - 6), "x", fill=(200, 0, 0))
+    d.text((ax + 3, ay - arm - 12), "y", fill=(0, 150, 0))
     y = h + pad
     for colour, label in legend:
         d.rectangle([10, y + 2, 22, y + 12], fill=tuple(colour), outline=(0, 0, 0))
@@ -66,4 +75,4 @@ def topdown_picture(raw, support, occ, components, resolution: float, embodiment
     """The costmap picture (03_costmaps/{scene_id}.png, the asset's costmap_topdown.png): topdown_image
     enlarged, with a scale bar and its legend."""
     return annotated(topdown_image(raw, support, occ, components), resolution, TOPDOWN_LEGEND,
-                     note=f"costmap of {embodiment} at {resolution:g} m a cell, north up")
+                     note=f"costmap of {embodiment} at {resolution:g} m a cell; {FRAME_NOTE}")

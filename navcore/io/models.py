@@ -91,19 +91,39 @@ SHIPPED = {
          "yolo-fastest-1.1-xl.cfg": "c458427acc4fbeabceff4528ef7b65b066c0308ce599460f8ba299eba63abad3",
          "coco.names": "634a1132eb33f8091d60f2c346ababe8b905ae08387037aed883953b7329af84"},
         "yolo-fastest-1.1-xl.cfg", "coco.names", ModelSpec(), "Yolo-Fastest-1.1-XL"),
-    "picodet_s_416_coco": Shipped(
-        "picodet_s_416_coco",
-        {"picodet_s_416_coco.onnx": "cdab77bdde16e4f76bec734c4e5791801d1739e4c7ec1995e0e110e04300d0c2",
+    "picodet_s_320_coco": Shipped(
+        "picodet_s_320_coco",
+        {"picodet_s_320_coco.onnx": "d7852a1508b36bfc2739770ad52ff28bf81e219dc5c15dd7868d5ebdf007b6c8",
          "classes.txt": "634a1132eb33f8091d60f2c346ababe8b905ae08387037aed883953b7329af84",
          "LICENSE": "c71d239df91726fc519c6eb72d318ec65820627232b2f796219e87dcf35d0ab4"},
-        "picodet_s_416_coco.onnx", "classes.txt", replace(PICODET, input_size=416), "PP-PicoDet-S 416"),
+        "picodet_s_320_coco.onnx", "classes.txt", replace(PICODET, input_size=320), "PP-PicoDet-S 320"),
+    "yolox_nano_416_coco": Shipped(
+        "yolox_nano_416_coco",
+        {"yolox_nano.onnx": "d39bee73564e338080378b0ad567fbb40e818b55bbfaf971de82a0267ed16b8a",
+         "classes.txt": "634a1132eb33f8091d60f2c346ababe8b905ae08387037aed883953b7329af84",
+         "LICENSE": "0ec3668d3274bcf29e8a29e9576d5a2cd96fc78d3c5bec4387355a796e5d9088"},
+        "yolox_nano.onnx", "classes.txt", replace(YOLOX, input_size=416), "YOLOX-Nano 416"),
 }
 """The detectors in navcore/models (each folder's README.md: provenance, licence, figures)."""
-DEFAULT_MODEL = "picodet_s_416_coco"
-"""The `detector` segmenter's default (semantics.detector.model: null), chosen by the figures of
-docs/benchmarks/bench_semantics_detector.md."""
-MODEL_DIR = MODELS_ROOT / SHIPPED[DEFAULT_MODEL].folder
-MODEL_FILES = SHIPPED[DEFAULT_MODEL].files
+DEFAULT_MODEL = "yolox_nano_416_coco"
+"""The default detector's main model (semantics.detector.model: null): the default detector is the
+per-category mix of shipped models that navcore/models/detector.json names (chosen by the figures of
+docs/benchmarks/bench_semantics_detector.md); a null model with no per-category models is this one."""
+DEFAULT_DETECTOR = MODELS_ROOT / "detector.json"
+"""The default detector (semantics.detector.model and models null / empty): its models per category,
+thresholds and allow-list, written by `python -m benchmarks.goals.semantics_detector --choose`."""
+
+def default_detector() -> dict | None:
+    """navcore/models/detector.json: the default detector's main model, its models per category, thresholds
+    and allow-list, as the benchmark chose them (None where the file is missing)."""
+    if not DEFAULT_DETECTOR.is_file():
+        return None
+    doc = json.loads(DEFAULT_DETECTOR.read_text())
+    if not isinstance(doc.get("models"), dict) or not isinstance(doc.get("confidence"), dict) or "model" not in doc:
+        raise ValueError(f"{DEFAULT_DETECTOR}: the default detector needs 'model', 'models' (category -> model), "
+                         "'confidence' and 'categories'")
+    return doc
+
 
 KNOWN_ONNX = {
     "cdab77bdde16e4f76bec734c4e5791801d1739e4c7ec1995e0e110e04300d0c2": replace(PICODET, input_size=416),

@@ -9,7 +9,7 @@ from omegaconf import OmegaConf
 
 from navcore.gaussians.cameras import camera_file, read_cameras
 from navcore.gaussians.content import camera_scene, content_of
-from navcore.io.map_picture import annotated
+from navcore.io.map_picture import FRAME_NOTE, annotated
 from stages.screen.quality import QualityConfig, scene_score, screen_layers
 
 # top-down picture colours: outside the supported map, obstacles, blobs, holes, view flags, unseen (free cells white)
@@ -50,7 +50,7 @@ SCREEN_LEGEND = [((255, 255, 255), "valid cell, nothing flagged"),
 def screen_picture(layers: dict, support, valid, view, origin, resolution: float, verdict_note: str) -> np.ndarray:
     """The screening picture: `picture` enlarged, a scale bar, its legend and what a verdict means."""
     return annotated(picture(layers, support, valid, view, origin, resolution), resolution, SCREEN_LEGEND,
-                     note=verdict_note)
+                     note=f"{verdict_note}\n{FRAME_NOTE}")
 
 
 def run(scene, cfg, catalog) -> dict:

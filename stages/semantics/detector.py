@@ -1,9 +1,12 @@
 """The `detector` segmenter: a box detector on the rendered views, boxes turned into masks by depth.
 
-A real, shippable model: Yolo-Fastest-1.1-XL (COCO, 80 classes, 3.7 MB, public domain; shipped in
-navcore/models/yolo_fastest_1.1_coco/ with its provenance, checked by sha256 on load: navcore/io/models.py), run on the CPU through
-OpenCV's DNN module (Darknet cfg + weights, or an ONNX file for other detectors). Its COCO classes map
-onto the goal vocabulary by a written table (COCO_TO_GOAL); the goal categories it cannot name
+Real, shippable COCO detectors (80 classes, a few MB each, sha256-checked on load:
+navcore/io/models.py, provenance and licence beside each in navcore/models/), run on the CPU through
+OpenCV's DNN module: PP-PicoDet-S 320 and YOLOX-Nano 416 (ONNX, Apache-2.0) and Yolo-Fastest-1.1-XL
+(Darknet, public domain), or a user's Darknet folder or ONNX file (YOLO, GFL or YOLOX heads). The
+default detector is a per-category mix of the shipped models chosen by measurement
+(navcore/models/detector.json): each model runs once a view and boxes its own categories. COCO classes
+map onto the goal vocabulary by a written table (COCO_TO_GOAL); the goal categories COCO cannot name
 (cabinet) are never produced.
 
 A box frames an object and whatever lies behind it (wall, floor). The mask the lifting needs is
@@ -14,10 +17,12 @@ depth mode holding at least `mode_share` of them is the object; the mask is the 
 the wall behind a chair and the floor under it get no vote.
 
 Per-view precision of a small COCO detector on renders is low; what makes a goal is multi-view
-consistency (lifting: a cell needs votes from `lifting.min_support` views, and a detector instance
-needs `min_views` distinct views whose masks agree in 3D). The per-category thresholds and the
-allow-list below were chosen on the real labelled ScanNet scan (benchmarks/goals/semantics_detector.py):
-see docs/benchmarks/bench_semantics_detector.md.
+consistency (lifting: a cell needs votes from `lifting.min_support` views, a detector instance
+needs `min_views` distinct views whose masks agree in 3D, and overlapping instances of categories the
+detector confuses, bed and sofa, are one object named by a class vote across the views). The
+per-category models, thresholds and allow-list were chosen on the real labelled ScanNet scan and the
+3DGS trained on it (benchmarks/goals/semantics_detector.py, which writes them): see
+docs/benchmarks/bench_semantics_detector.md.
 """
 from __future__ import annotations
 
@@ -25,7 +30,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from navcore.io.models import ModelSpec, load_net
+from navcore.io.models import ModelSpec, default_detector, load_net
 from stages.semantics.segmenters import Segmenter
 
 COCO_TO_GOAL = {
@@ -49,7 +54,9 @@ class DetectorConfig:
 
     model: str | None = None
     """Folder of a Darknet model (*.cfg, *.weights, *.names) or an ONNX file (*.onnx with a
-    *.names beside it); null = the shipped Yolo-Fastest-1.1-XL (COCO)."""
+    *.names or classes.txt beside it), or a shipped model's name (yolo_fastest_1.1_coco, picodet_s_320_coco,
+    yolox_nano_416_coco); null (with models empty) = the default detector, the per-category mix of shipped
+    models that navcore/models/detector.json names."""
     models: dict[str, str] = field(default_factory=dict)
     """Goal category -> the model that boxes it (a path, as `model`), for categories another
     detector sees better; the others are `model`'s. Each model runs once a view. E.g.
@@ -141,8 +148,16 @@ def model_thresholds(model: str | None) -> dict | None:
 
 
 def resolved(cfg: DetectorConfig) -> DetectorConfig:
-    """`cfg` with its allow-list and thresholds filled from the model's thresholds.json (module doc)."""
-    doc = model_thresholds(cfg.model) if cfg.model_thresholds else None
+    """`cfg` with its models, allow-list and thresholds filled in (module doc): with no model named
+    (model null, models empty) the default detector's (navcore/models/detector.json), else the named
+    model's thresholds.json; what `cfg` gives itself wins."""
+    doc = None
+    if cfg.model_thresholds and cfg.model is None and not cfg.models:
+        doc = default_detector()
+        if doc:
+            cfg = replace(cfg, model=doc["model"], models={k: v for k, v in doc["models"].items() if v != doc["model"]})
+    if doc is None and cfg.model_thresholds:
+        doc = model_thresholds(cfg.model)
     categories = cfg.categories if cfg.categories is not None else list(doc["categories"] if doc else FALLBACK_CATEGORIES)
     confidence = {**(doc["confidence"] if doc else {}), **cfg.confidence}
     return replace(cfg, categories=list(categories), confidence=confidence, model_thresholds=False)
