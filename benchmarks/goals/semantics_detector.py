@@ -62,7 +62,7 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
     from navcore.instances import shipped_instances, table_to_labels
     from navcore.io.models import DEFAULT_MODEL
     from navcore.render import Renderer
-    from stages.semantics.detector import COCO_TO_GOAL, DetectorConfig, DetectorSegmenter, box_mask
+    from stages.semantics.detector import COCO_TO_GOAL, DetectorConfig, DetectorSegmenter, box_mask, resolved
     from stages.semantics.segmenters import OracleSegmenter, real_truth
     from stages.semantics.stage import covering_cameras, render_views
 
@@ -114,9 +114,13 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
         select_s = time.perf_counter() - t_sel
         all_cats = sorted(set(COCO_TO_GOAL.values()))
         runs = candidates if candidates is not None else {None: detector}
+        # one detector alone (no candidates): the models the stage would run, the default detector's
+        # per-category mix where none is named
+        base = resolved(DetectorConfig(model=detector, models=dict(detector_models or {})))
         dcfg = {label: DetectorConfig(categories=all_cats, confidence={}, default_confidence=min(THRESHOLDS),
-                                      model_thresholds=False, input_size=input_size, model=m,
-                                      models=dict(detector_models or {}) if candidates is None else {})
+                                      model_thresholds=False, input_size=input_size,
+                                      model=m if candidates is not None else base.model,
+                                      models={} if candidates is not None else dict(base.models))
                 for label, m in runs.items()}
         dets = {label: DetectorSegmenter(c, {k: scfg.prompt(k) for k in all_cats}) for label, c in dcfg.items()}
         box_cfg = DetectorConfig(mask="box")
@@ -151,7 +155,8 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
                         "spacing_m": d.spacing, "yaw_step_deg": d.yaw_step_deg,
                         "gaussians": int(renderer.num_gaussians), "views": len(views[label]), "input": det.input_size,
                         "detector": (runs[label] or f"{DEFAULT_MODEL} (shipped default)") if candidates is not None
-                        else (detector or f"{DEFAULT_MODEL} (shipped default)"),
+                        else (detector or f"the default detector ({base.model}; " + ", ".join(
+                            f"{c}: {m}" for c, m in sorted(base.models.items())) + ")"),
                         "detector_models": dict(detector_models or {}) if candidates is None else {},
                         "view_selection": scfg.view_selection, "coverage": coverage,
                         "resolution": [width, height], "renderer": renderer.backend, "tolerance_m": tol,
@@ -539,7 +544,7 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--write-thresholds", nargs="*", default=None, metavar="MODEL",
                     help="only write these shipped models' thresholds.json from the report of an earlier run (--out)")
     a = ap.parse_args(argv)
-    from navcore.io.models import DEFAULT_MODEL, SHIPPED
+    from navcore.io.models import SHIPPED
 
     if a.write_thresholds is not None:
         comp = json.loads((Path(a.out) / "bench_semantics_detector.json").read_text())["candidates"]
@@ -556,7 +561,9 @@ def main(argv=None) -> list[dict]:
             if label in SHIPPED:
                 print(f"{label}: {write_thresholds(label, c['chosen'])}")
         print(f"default detector: {write_default_detector(comp)}")
-    reps = comp[DEFAULT_MODEL]["scenes"]  # the default model's figures, at its chosen thresholds
+    # the default detector (navcore/models/detector.json, as --choose just wrote it) on the scan and the model
+    reps = [bench_scan(scan, a.width, a.height, a.tol, a.input, m, spacing=a.spacing, yaw_step=a.yaw_step,
+                       camera_height=a.camera_height, pitch=a.pitch) for m in [None] + ([model] if model else [])]
     geometry = [reps[0]]
     for g in a.geometry.split():
         h, p = (None, None) if g == "robot" else map(float, g.split(","))
@@ -621,18 +628,15 @@ def choose_thresholds(reps: list[dict], precision: float = PRECISION, min_right:
 def write_thresholds(model: str, chosen: dict) -> Path:
     """The shipped model's thresholds file (navcore/models/<model>/thresholds.json), which the
     detector's defaults read (stages.semantics.detector.shipped_thresholds)."""
-    import subprocess
-
     from navcore.io.models import MODELS_ROOT, SHIPPED
 
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     out = MODELS_ROOT / SHIPPED[model].folder / "thresholds.json"
     doc = {"about": f"Per-category score thresholds and allow-list of {SHIPPED[model].title}, chosen by "
                     "`python -m benchmarks.goals.semantics_detector --choose` (do not edit by hand): per category the "
                     f"lowest score at which at least {chosen['precision']:.0%} of its boxes (depth masks) were right, with "
                     f"at least {chosen['min_right']} right, pooled over the renders named in chosen_on (the labelled "
                     "ScanNet scan and the 3DGS trained on it; no held-out scene).",
-           "model": model, "sha256": SHIPPED[model].files[SHIPPED[model].network], "commit": commit, **chosen}
+           "model": model, "sha256": SHIPPED[model].files[SHIPPED[model].network], **chosen}
     out.write_text(json.dumps(doc, indent=1) + "\n")
     return out
 
@@ -641,8 +645,6 @@ def write_default_detector(comp: dict) -> Path:
     """navcore/models/detector.json, the default detector: of the candidates that ship and the per-category
     mix of them, the one whose thresholds lift best on the labelled renders (`lift_key`; ties: the
     fewer models, then the faster), with its models per category, thresholds and allow-list."""
-    import subprocess
-
     from navcore.io.models import DEFAULT_DETECTOR, SHIPPED
 
     options = []
@@ -656,7 +658,6 @@ def write_default_detector(comp: dict) -> Path:
         raise ValueError("no shipped candidate lifted anything: the default detector is left as it was")
     _, label, models, chosen = max(options, key=lambda o: o[0])
     main = max(sorted(set(models.values())), key=lambda m: sum(v == m for v in models.values()))
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
     doc = {"about": "The `detector` segmenter's default (semantics.detector.model null, models empty), chosen by "
                     "`python -m benchmarks.goals.semantics_detector --choose` (do not edit by hand): of the shipped "
                     "models and their per-category mix, the one whose thresholds lift best on the labelled ScanNet "
@@ -664,7 +665,7 @@ def write_default_detector(comp: dict) -> Path:
                     "found; docs/benchmarks/bench_semantics_detector.md). No held-out scene was used.",
            "chosen_from": label, "model": main, "models": dict(sorted(models.items())),
            "confidence": chosen["confidence"], "categories": chosen["categories"],
-           "precision": chosen.get("precision"), "commit": commit}
+           "precision": chosen.get("precision")}
     DEFAULT_DETECTOR.write_text(json.dumps(doc, indent=1) + "\n")
     return DEFAULT_DETECTOR
 
