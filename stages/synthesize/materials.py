@@ -51,9 +51,11 @@ class LookConfig:
     """Fewest and most (bright) windows on a room's outer walls."""
     rug_share: float = 0.5
     """Probability that a room has a rug."""
-    colour_noise: float = 0.04
-    """Per-Gaussian colour noise (a trained 3DGS is never flat)."""
-    speckle: float = 0.1
+    colour_noise: float = 0.1
+    """Per-Gaussian colour noise (a trained 3DGS is never flat: its view-dependent colour noise). With
+    speckle, what brings the renders' gradient energy to the captures': 0.04 and 0.1 gave 0.30x, 0.1
+    and 0.3 give 0.75x (docs/benchmarks/bench_realism.md)."""
+    speckle: float = 0.3
     """Per-Gaussian brightness noise (log-normal sigma): the blotchy texture a trained 3DGS shows."""
 
 
