@@ -169,6 +169,13 @@ def stage_config(cfg, name: str) -> dict:
                 node = node.get(name_) if isinstance(node, dict) else None
             if isinstance(node, dict) and leaf in node and node[leaf] == default:
                 node.pop(leaf)
+    if s.name == "semantics" and isinstance(part.get("semantics"), dict):
+        # a segmenter's own settings decide nothing while another segmenter runs: a new detector default
+        # leaves the oracle's data roots as they are
+        sem = part["semantics"]
+        for seg in ("detector", "sam3", "open_vocab"):
+            if sem.get("segmenter") != seg and isinstance(sem.get(seg), dict):
+                sem.pop(seg)
     if s.inputs and (extra := s.inputs(cfg)) is not None:  # None: nothing read beyond the sections
         part["_inputs"] = extra
     return part

@@ -24,7 +24,8 @@ from stages.semantics.poses import coverage_poses, free_space_poses, surface_tar
 from stages.semantics.segmenters import SEGMENTERS, SegmenterUnavailable
 
 ADDED_KEYS = (("semantics", "view_selection", "grid"), ("semantics", "coverage", asdict(CoverageConfig())),
-              ("semantics", "detector.models", {}))
+              ("semantics", "detector.models", {}), ("semantics", "lifting.confusable", None),
+              ("semantics", "lifting.confusable_overlap", 0.3))
 """Keys added after data roots were made with this stage: at their defaults they leave its hash
 as it was (pipeline.graph.Stage.added)."""
 
