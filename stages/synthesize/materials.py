@@ -52,9 +52,13 @@ class LookConfig:
     rug_share: float = 0.5
     """Probability that a room has a rug."""
     colour_noise: float = 0.1
-    """Per-Gaussian colour noise (a trained 3DGS is never flat: its view-dependent colour noise). With
-    speckle, what brings the renders' gradient energy to the captures': 0.04 and 0.1 gave 0.30x, 0.1
-    and 0.3 give 0.75x (docs/benchmarks/bench_realism.md)."""
+    """Per-Gaussian colour noise, standard deviation (a trained 3DGS is never flat: its view-dependent
+    colour noise), mostly shared by the three channels (chroma_share). With speckle, what brings the
+    renders' gradient energy to the captures' (docs/benchmarks/bench_realism.md): 0.04 and speckle
+    0.1 gave 0.30x of it."""
+    chroma_share: float = 0.25
+    """Share of colour_noise drawn per channel (the rest is one draw for all three: brightness). Drawn
+    per channel alone, 0.1 of noise turned plain walls into multi-coloured confetti (looked at)."""
     speckle: float = 0.3
     """Per-Gaussian brightness noise (log-normal sigma): the blotchy texture a trained 3DGS shows."""
 
@@ -505,4 +509,6 @@ def dress(lay, points: np.ndarray, normals: np.ndarray, inst: np.ndarray, rng: n
     lit = rgb * (shade[:, None] * tint[None])
     lit = np.where(emissive[:, None], np.minimum(rgb * 1.05, 1.0), lit)
     lit = lit * np.exp(rng.normal(0, cfg.speckle, (len(lit), 1))) if cfg.speckle else lit
-    return np.clip(lit + rng.normal(0, cfg.colour_noise, lit.shape), 0.0, 1.0)
+    # mostly brightness (a capture's grain is grey, not confetti), a little per channel
+    grain = rng.normal(0, cfg.colour_noise, (len(lit), 1)) + rng.normal(0, cfg.colour_noise * cfg.chroma_share, lit.shape)
+    return np.clip(lit + grain, 0.0, 1.0)
