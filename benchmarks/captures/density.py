@@ -103,8 +103,13 @@ def agreement(a, b) -> dict:
             "free_kept": float((~occ_b[free]).mean()) if free.any() else float("nan")}
 
 
-def measure(model: Path, scan: Path, poses: int, resolutions=RESOLUTIONS, seed: int = 0) -> dict:
-    """Every version of the model at every resolution against the scan (module doc)."""
+CONFIGS = {"defaults": (), "cell evidence": ("costmap.cell_evidence=true",),
+           "cell evidence + density radius": ("costmap.cell_evidence=true", "costmap.outlier_density=2.8")}
+"""The costmap settings measured: the defaults and the sparse-evidence options (stages/costmap/build.py)."""
+
+
+def measure(model: Path, scan: Path, poses: int, resolutions=RESOLUTIONS, seed: int = 0, configs=None) -> dict:
+    """Every version of the model at every resolution and costmap setting against the scan (module doc)."""
     from benchmarks.captures.scan_truth import measure_model
     from navcore.gaussians.formats.ply import read_ply, write_inria_ply
 
@@ -114,21 +119,19 @@ def measure(model: Path, scan: Path, poses: int, resolutions=RESOLUTIONS, seed: 
         for name, scene in versions(gs, seed=seed).items():
             path = Path(tmp) / f"{name.replace(' ', '_').replace('%', 'pc').replace(',', '')}.ply"
             write_inria_ply(path, scene)
-            for res in resolutions:
+            for (label, extra), res in ((c, r) for c in (configs or CONFIGS).items() for r in resolutions):
                 t0 = time.perf_counter()
-                m = measure_model(path, scan, poses, seed, overrides=(f"costmap.resolution={res}",), keep_map=True)
+                m = measure_model(path, scan, poses, seed, overrides=(f"costmap.resolution={res}", *extra), keep_map=True)
                 cm = m.pop("map")
-                rows.append({"version": name, "resolution_m": res, **statistics(scene),
+                rows.append({"version": name, "config": label, "resolution_m": res, **statistics(scene),
                              "fn_rate": m["fn_rate"], "fp_rate": m["fp_rate"], "fn": m["fn"], "fp": m["fp"],
                              "scan_blocked": m["scan_blocked"], "scan_free": m["scan_free"],
                              "area_fn_rate": m["cells"]["fn_rate"], "area_fp_rate": m["cells"]["fp_rate"],
                              "fp_distance_m": m["cells"]["fp_distance_m"], "seconds": round(time.perf_counter() - t0, 1),
                              "_map": cm})
-    for res in resolutions:
-        full = next(r for r in rows if r["resolution_m"] == res)
-        for r in rows:
-            if r["resolution_m"] == res:
-                r["agreement"] = agreement(full["_map"], r["_map"])
+    for r in rows:  # against the full model's map at the same resolution and setting
+        full = next(f for f in rows if f["resolution_m"] == r["resolution_m"] and f["config"] == r["config"])
+        r["agreement"] = agreement(full["_map"], r["_map"])
     for r in rows:
         del r["_map"]
     return {"model": str(model), "scan": str(scan), "poses": poses, "rows": rows}
@@ -139,13 +142,16 @@ def markdown(rep: dict, machine_name: str) -> str:
          __doc__.split("\n\n")[1].replace("\n", " "), "",
          f"Model: `{rep['model']}`; truth: `{rep['scan']}` ({rep['poses']} poses, LoCoBot: the body band from the "
          "scanned floor).", "",
-         "| version | map (m) | Gaussians | median / p99 scale (m) | median opacity | FN | FP | area FN | area FP | "
-         "blocked kept | free kept | s |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+         "| version | costmap | map (m) | Gaussians | median / p99 scale (m) | median opacity | FN | FP | area FN | area FP | "
+         "FP cells' distance to the scan p10 / p50 / p90 (m) | blocked kept | free kept | s |",
+         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rep["rows"]:
         a = r["agreement"]
-        L.append(f"| {r['version']} | {r['resolution_m']} | {r['gaussians']:,} | {r['median_largest_scale_m']} / "
+        fpd = (r["fp_distance_m"] or {}).get("p10_p50_p90") or ["-"] * 3
+        L.append(f"| {r['version']} | {r['config']} | {r['resolution_m']} | {r['gaussians']:,} | {r['median_largest_scale_m']} / "
                  f"{r['p99_largest_scale_m']} | {r['median_opacity']} | {r['fn_rate']:.2%} | {r['fp_rate']:.1%} | "
-                 f"{r['area_fn_rate']:.2%} | {r['area_fp_rate']:.1%} | {a['blocked_kept']:.1%} | {a['free_kept']:.1%} | "
+                 f"{r['area_fn_rate']:.2%} | {r['area_fp_rate']:.1%} | {' / '.join(map(str, fpd))} | "
+                 f"{a['blocked_kept']:.1%} | {a['free_kept']:.1%} | "
                  f"{r['seconds']} |")
     return "\n".join(L) + "\n"
 
@@ -161,6 +167,7 @@ def main(argv=None) -> dict:
     a = ap.parse_args(argv)
     rep = measure(Path(a.model).resolve(), Path(a.scan).resolve(), a.poses,
                   tuple(float(x) for x in a.resolutions.split(",")))
+    rep["robot_radius_m"] = 0.18
     rep["machine"] = machine()
     write_report(a.out, "bench_density.json", rep)
     md = markdown(rep, rep["machine"])
