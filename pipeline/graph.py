@@ -88,7 +88,7 @@ STAGES: tuple[Stage, ...] = (
           version="10", inputs=episodes.hashed_inputs),  # 10: a point goal that cannot fill the bin whose turn it is gives way
     Stage("goal_images", goal_images.run, ("episodes",), ("goal_images",), gpu=True, memory_gb=2.0),
     Stage("semantics", semantics.run, ("costmap",), ("semantics", "embodiment"), version="3", gpu=True,
-          memory_gb=3.0, added=semantics.ADDED_KEYS),
+          memory_gb=3.0, added=semantics.ADDED_KEYS, inputs=semantics.hashed_inputs),
     Stage("asset", asset.run, ("costmap", "semantics"), ("asset",), version="4"),
     Stage("objectnav_episodes", episodes.run_objects, ("costmap", "semantics", "screen"),
           ("episodes", "planner", "embodiment", "screen"), version="9", inputs=episodes.hashed_object_inputs,

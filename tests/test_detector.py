@@ -430,3 +430,24 @@ def test_class_vote_merges_one_object_seen_under_two_names():
     np.testing.assert_allclose(merged["min"], np.minimum(half_a.min(0), half_b.min(0)))
     # no groups: nothing merges
     assert len(class_vote([inst(BED, half_a, 30), inst(SOFA, half_b, 50)], [], 0.3, voters, 0.1)) == 2
+
+
+def test_a_rechosen_default_detector_changes_the_semantics_hash(tmp_path, monkeypatch, make_cfg):
+    """The default detector lives in files (detector.json, thresholds.json) the benchmark rewrites: the
+    semantics stage hashes what they resolve to, so a re-chosen default recomputes the detector's scenes
+    (it was cached before) and leaves the oracle's alone."""
+    import json
+
+    import navcore.io.models as M
+    from pipeline.graph import config_hashes
+
+    det = make_cfg(tmp_path, "semantics.segmenter=detector")
+    oracle = make_cfg(tmp_path, "semantics.segmenter=oracle")
+    before, before_oracle = config_hashes(det)["semantics"], config_hashes(oracle)["semantics"]
+    doc = json.loads(M.DEFAULT_DETECTOR.read_text())
+    doc["confidence"]["bed"] = 0.95
+    moved = tmp_path / "detector.json"
+    moved.write_text(json.dumps(doc))
+    monkeypatch.setattr(M, "DEFAULT_DETECTOR", moved)
+    assert config_hashes(det)["semantics"] != before
+    assert config_hashes(oracle)["semantics"] == before_oracle

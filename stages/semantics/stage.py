@@ -29,6 +29,26 @@ ADDED_KEYS = (("semantics", "view_selection", "grid"), ("semantics", "coverage",
 """Keys added after data roots were made with this stage: at their defaults they leave its hash
 as it was (pipeline.graph.Stage.added)."""
 
+def hashed_inputs(cfg) -> dict | None:
+    """What the semantics stage reads beyond its config: with the detector segmenter, the models,
+    thresholds and allow-list it resolves to (navcore/models/detector.json and the models'
+    thresholds.json, re-chosen by a benchmark), and each model's sha256, so that a re-chosen default
+    recomputes the scenes it labelled; None for the other segmenters."""
+    from omegaconf import OmegaConf
+
+    if OmegaConf.select(cfg, "semantics.segmenter") != "detector":
+        return None
+    from dataclasses import asdict as _asdict
+
+    from navcore.io.models import SHIPPED
+    from stages.semantics.detector import resolved
+
+    d = resolved(OmegaConf.to_object(cfg.semantics.detector))
+    models = sorted({str(d.model), *map(str, d.models.values())})
+    return {"detector": {k: v for k, v in _asdict(d).items() if k in ("model", "models", "confidence", "categories")},
+            "sha256": {m: SHIPPED[m].files[SHIPPED[m].network] for m in models if m in SHIPPED}}
+
+
 def spread(n: int, k: int) -> np.ndarray:
     """Indices of k of n items spread evenly (all when k is 0 or >= n)."""
     if k <= 0 or k >= n:
