@@ -89,10 +89,10 @@ fi
 if [ -n "${GSPLAT_BUILD:-}" ]; then
   tar xzf "$GSPLAT_BUILD" -C "$VENV" && find "$VENV/torch_extensions" -exec touch {} +
 fi
-# the detector segmenter's Darknet reader: an image's OpenCV 5 (seen through the system's packages) has none
+# the optional Yolo-Fastest detector's Darknet reader: OpenCV 5 has none (the default detector's ONNX models need none)
 "$BIN/python" -c "import cv2, sys; sys.exit(0 if hasattr(cv2.dnn, 'readNetFromDarknet') else 1)" 2>/dev/null || \
-  echo "make setup-gpu: the OpenCV here has no Darknet reader (OpenCV 5); semantics.segmenter=detector needs" \
-    "opencv-python-headless<5: pip install 'opencv-python-headless>=4.8,<5' (offline: add its wheel to WHEELS)" >&2
+  echo "make setup-gpu: the OpenCV here has no Darknet reader (OpenCV 5): the default detector runs, the optional" \
+    "semantics.detector.model=yolo_fastest_1.1_coco needs 'opencv-python-headless>=4.8,<5'" >&2
 mkdir -p data/08_reports
 "$BIN/python" -m navcore.render.ready --json data/08_reports/gpu_ready.json
 touch "$VENV/.installed-gpu"

@@ -120,7 +120,9 @@ def test_wheel_holds_only_the_library_with_its_data(wheel, project_root):
     tops = {n.split("/")[0] for n in names if not n.split("/")[0].endswith((".dist-info", ".data"))}
     assert tops == WHEEL_TOPS
     for data in ("navcore/conf/embodiment/locobot.yaml", "navcore/io/layout.yaml",
-                 "navcore/models/yolo_fastest_1.1_coco/yolo-fastest-1.1-xl.weights"):
+                 "navcore/models/yolo_fastest_1.1_coco/yolo-fastest-1.1-xl.weights", "navcore/models/detector.json",
+                 "navcore/models/picodet_s_320_coco/picodet_s_320_coco.onnx",
+                 "navcore/models/yolox_nano_416_coco/thresholds.json"):
         assert data in names, data
     # the wheel's dependencies are the library's: no orchestration, planner or mesh library
     assert not {"hydra", "dask", "distributed", "ompl", "open3d", "trimesh", "jsonschema"} & allowed
