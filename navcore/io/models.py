@@ -125,6 +125,19 @@ def default_detector() -> dict | None:
     return doc
 
 
+def model_thresholds(model: str | None) -> dict | None:
+    """The thresholds.json beside a shipped model or a user's model file (None where there is none):
+    {"confidence": {category: score}, "categories": [...], ...} as the benchmark wrote it."""
+    network, _, _ = resolve(model)
+    path = Path(network).parent / "thresholds.json"
+    if not path.is_file():
+        return None
+    doc = json.loads(path.read_text())
+    if not isinstance(doc.get("confidence"), dict) or not isinstance(doc.get("categories"), list):
+        raise ValueError(f"{path}: a detector thresholds file needs 'confidence' (category -> score) and 'categories'")
+    return doc
+
+
 KNOWN_ONNX = {
     "cdab77bdde16e4f76bec734c4e5791801d1739e4c7ec1995e0e110e04300d0c2": replace(PICODET, input_size=416),
     "d7852a1508b36bfc2739770ad52ff28bf81e219dc5c15dd7868d5ebdf007b6c8": replace(PICODET, input_size=320),

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from navcore.io.models import ModelSpec, default_detector, load_net
+from navcore.io.models import ModelSpec, default_detector, load_net, model_thresholds
 from stages.semantics.segmenters import Segmenter
 
 COCO_TO_GOAL = {
@@ -127,24 +127,6 @@ class DetectorConfig:
 
 FALLBACK_CATEGORIES = ["bed", "sofa", "table", "tv_monitor", "plant"]
 """The allow-list of a detector model that ships no thresholds.json."""
-
-
-def model_thresholds(model: str | None) -> dict | None:
-    """The thresholds.json beside a shipped model or a user's model file (None where there is none):
-    {"confidence": {category: score}, "categories": [...], ...} as the benchmark wrote it."""
-    import json
-    from pathlib import Path
-
-    from navcore.io.models import resolve
-
-    network, _, _ = resolve(model)
-    path = Path(network).parent / "thresholds.json"
-    if not path.is_file():
-        return None
-    doc = json.loads(path.read_text())
-    if not isinstance(doc.get("confidence"), dict) or not isinstance(doc.get("categories"), list):
-        raise ValueError(f"{path}: a detector thresholds file needs 'confidence' (category -> score) and 'categories'")
-    return doc
 
 
 def resolved(cfg: DetectorConfig) -> DetectorConfig:
