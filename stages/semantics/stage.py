@@ -43,7 +43,10 @@ def hashed_inputs(cfg) -> dict | None:
     from navcore.io.models import SHIPPED
     from stages.semantics.detector import resolved
 
-    d = resolved(OmegaConf.to_object(cfg.semantics.detector))
+    try:
+        d = resolved(OmegaConf.to_object(cfg.semantics.detector))
+    except (OSError, ValueError) as e:  # a missing or bad model: the stage's own task fails with it, not the run
+        return {"detector_unresolved": f"{type(e).__name__}: {e}"}
     models = sorted({str(d.model), *map(str, d.models.values())})
     return {"detector": {k: v for k, v in _asdict(d).items() if k in ("model", "models", "confidence", "categories")},
             "sha256": {m: SHIPPED[m].files[SHIPPED[m].network] for m in models if m in SHIPPED}}
