@@ -18,6 +18,8 @@ import math
 import sys
 from pathlib import Path
 
+from navarena import quick
+from navarena.quick import shorten
 from navcore.eval.dataset import TASKS, NavDataset
 
 
@@ -51,6 +53,13 @@ def chosen_episodes(ds: NavDataset, args) -> dict[str, list]:
                 eps = ds.episodes(sid, task, None, args.difficulty, args.episodes_per_scene, ids=ids)
             else:
                 eps = ds.episodes(sid, task, args.split, args.difficulty, args.episodes_per_scene)
+            if getattr(args, "decoy_goal", False) and eps:  # each shown another goal of its scene (navcore.eval.decoy)
+                from navcore.eval.decoy import with_decoys
+
+                eps, none = with_decoys(eps, ds.episodes(sid, task))
+                if none:
+                    print(f"navarena eval: --decoy-goal: {len(none)} {task} episodes of scene {sid} left out: the scene "
+                          f"has no other {task} goal", file=sys.stderr)
             out.setdefault(sid, []).extend(eps)
     return {s: e for s, e in out.items() if e}
 
@@ -196,10 +205,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--batch-slots", type=int, default=1, metavar="N", help="episodes stepped together (one render call per step)")
     ap.add_argument("--embodiment", default=None, metavar="NAME", help="the costmap of this embodiment (data roots with several)")
     ap.add_argument("--seed", type=int, default=0, help="seed of stochastic agents")
+    ap.add_argument("--decoy-goal", action="store_true",
+                    help="show the agent another goal of the scene (ImageNav: another goal image; ObjectNav: another "
+                         "category; PointNav: another point) and score it on the true one: a policy's goal gain is its "
+                         "SR without this minus its SR with it")
     ap.add_argument("--timeout", type=float, default=30.0, help="agent servers: seconds to wait for each action")
     ap.add_argument("--out", default=None, help="output folder (default: navarena_eval/{agent}_{protocol})")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
+    shorten(args, quick.EVAL, "navarena eval")
     import re
 
     bad = check_agent(args.agent)
@@ -207,7 +221,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"navarena eval: {bad}", file=sys.stderr)
         return 2
 
-    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", f"{args.agent}_{args.protocol}").strip("_")
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", f"{args.agent}_{args.protocol}{'_decoy' if args.decoy_goal else ''}").strip("_")
     out = Path(args.out or Path("navarena_eval") / name)
     try:
         rows, interrupted, stopped = evaluate(args)
@@ -217,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
     meta = {"root": str(Path(args.root).resolve()), "agent": args.agent, "agent_args": dict(args.agent_arg),
             "protocol": args.protocol,
             "split": args.split, "difficulty": args.difficulty, "episodes_per_scene": args.episodes_per_scene,
-            "seed": args.seed, "render": None if args.no_render else
+            "seed": args.seed, "decoy_goal": args.decoy_goal, "render": None if args.no_render else
             {"width": args.width, "height": args.height, "renderer": args.renderer},
             "interrupted": interrupted, "stopped": stopped or None}
     if not rows:

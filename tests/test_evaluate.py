@@ -608,3 +608,69 @@ def test_progress_time_left_counts_the_step_budgets_still_to_run():
         assert left == pytest.approx(3000 / rate, rel=0.2)
     with ToolProgress("eval", 4, quiet=True) as q:
         assert q.budget_left_s() is None
+
+
+@pytest.mark.parametrize("task", ["pointnav", "imagenav", "objectnav"])
+def test_a_decoy_goal_is_another_goal_of_the_scene_and_the_agent_sees_it(episode_run, task):
+    """--decoy-goal: each episode shown another goal of its scene and task (another category, another
+    goal pose), the environment's goal observation and the agent's task are the decoy's, and the
+    episode is still scored on its own goal."""
+    import dataclasses
+
+    from navcore.eval.dataset import NavDataset
+    from navcore.eval.decoy import goal_key, with_decoys
+    from navcore.eval.loop import task_info
+
+    ds = NavDataset(episode_run[0])
+    (sid,) = ds.scene_ids(task)
+    pool = ds.episodes(sid, task)
+    eps, none = with_decoys(pool[:4], pool)
+    assert len(eps) == 4 and none == []
+    ctx = ds.scene_context(sid, render=task == "imagenav", renderer="cpu")
+    env = NavEnv(ctx, ds.env_config(width=64, height=48, render=task == "imagenav"))
+    for ep in eps:
+        d = ep.shown
+        assert goal_key(d) != goal_key(ep) and d.scene_id == ep.scene_id and d in pool  # a goal this scene offers
+        assert ctx.costmap.is_state_valid(*d.goal_xy) if task != "objectnav" else d.category in {e.category for e in pool}
+        obs = env.reset(ep)
+        true = NavEnv(ctx, env.cfg).reset(dataclasses.replace(ep, shown=None))
+        if task == "objectnav":
+            assert obs["goal_category"] == task_info(ep)["goal_category"] == d.category != ep.category
+        elif task == "imagenav":
+            seen = ctx.render(d.goal_pose[None], 64, 48)[0][0]
+            assert np.array_equal(obs["goal_image"], seen) and not np.array_equal(obs["goal_image"], true["goal_image"])
+        else:
+            assert not np.allclose(obs["pointgoal"], true["pointgoal"])
+        assert env.state.ep is ep and np.array_equal(env.state.ep.goal_xy, ep.goal_xy)  # scored on its own goal
+
+
+def test_a_network_that_ignores_its_goal_has_no_goal_gain(episode_run, tmp_path):
+    """A constructed ObjectNav network whose goal embedding is zero reads no goal: navarena eval with
+    and without --decoy-goal gives it the same episodes, actions and SR (goal gain 0); the decoy run
+    records which episode's goal each one was shown."""
+    import json
+
+    import pandas as pd
+    import torch
+
+    from navarena.evaluate import main
+    from navcore.baselines.checkpoint import save_checkpoint
+    from navcore.baselines.model import NavNet, NavSpec
+
+    torch.manual_seed(0)
+    net = NavNet(NavSpec(hidden=16, embed=16, task="objectnav"))
+    with torch.no_grad():
+        net.goal.weight.zero_()
+    f = tmp_path / "blind.pt"
+    save_checkpoint(f, "objectnav", net.spec.to_dict(), net.state_dict(), {})
+    common = [str(episode_run[0]), "--agent", "learned", "--agent-arg", f"checkpoint={f}", "--tasks", "objectnav",
+              "--episodes-per-scene", "4", "--renderer", "cpu", "--width", "64", "--height", "48", "--quiet"]
+    assert main([*common, "--out", str(tmp_path / "true")]) == 0
+    assert main([*common, "--decoy-goal", "--out", str(tmp_path / "decoy")]) == 0
+    a, b = (pd.read_parquet(tmp_path / k / "results.parquet") for k in ("true", "decoy"))
+    assert list(a["episode_id"]) == list(b["episode_id"]) and len(a) == 4
+    assert (a["steps"].tolist(), a["sr"].tolist()) == (b["steps"].tolist(), b["sr"].tolist())
+    assert (b["shown_goal_of"] != b["episode_id"]).all() and "shown_goal_of" not in a
+    sa, sb = (json.loads((tmp_path / k / "summary.json").read_text()) for k in ("true", "decoy"))
+    assert sb["decoy_goal"] is True and sa["decoy_goal"] is False
+    assert sa["tasks"]["objectnav"]["overall"]["sr"] - sb["tasks"]["objectnav"]["overall"]["sr"] == 0

@@ -3,8 +3,9 @@ paired across them:
 
 - `goal`: the policy as shipped (its card's decoding), the episode's own goal;
 - `decoy`: the same, shown another goal of the scene and split in place of its own, the one whose
-  goal pose is farthest from this episode's: ImageNav's goal image rendered there, ObjectNav's goal
-  category (a policy that ignores its goal scores as with `goal`);
+  goal pose is farthest from this episode's (navcore.eval.decoy, as `navarena eval --decoy-goal`):
+  ImageNav's goal image rendered there, ObjectNav's goal category (a policy that ignores its goal
+  scores as with `goal`);
 - `greedy` (ImageNav, whose registry name samples): the own goal image, moves by argmax (the
   decoding's share of the figure).
 
@@ -27,34 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from navcore.baselines.agent import LearnedNavAgent
+from navcore.eval.decoy import goal_key, with_decoys
 
 VARIANTS = {"imagenav": ("goal", "decoy", "greedy"), "objectnav": ("goal", "decoy")}
-GOAL_KEY = {"imagenav": "goal_image", "objectnav": "goal_category"}
-"""The observation that carries each track's goal."""
 PROTOCOL = {"imagenav": "distance", "objectnav": "explicit_stop"}
-
-
-class DecoyGoalAgent(LearnedNavAgent):
-    """A learned agent that sees `decoys[episode_id]` in place of the episode's goal (the observation
-    `key`: ImageNav's goal image, ObjectNav's goal category)."""
-
-    def __init__(self, decoys: dict, key: str = "goal_image", **kwargs):
-        super().__init__(**kwargs)
-        self.decoys, self.decoy, self.key = decoys, None, key
-
-    def reset(self, task: dict) -> None:
-        super().reset(task)
-        self.decoy = self.decoys[str(task.get("episode_id", ""))]
-
-    @classmethod
-    def act_batch(cls, agents: list, observations: list[dict]) -> list[int]:
-        shown = [{**o, a.key: a.decoy} for a, o in zip(agents, observations)]
-        return LearnedNavAgent.act_batch.__func__(cls, agents, shown)
-
-
-def goal_of(ep) -> object:
-    """What identifies an episode's goal: ObjectNav's category, else its goal pose."""
-    return ep.category if getattr(ep, "category", None) else tuple(np.round(ep.goal_pose, 3))
 
 
 def one_per_goal(episodes: list, n: int) -> list:
@@ -63,34 +40,11 @@ def one_per_goal(episodes: list, n: int) -> list:
     another goal."""
     seen, out = set(), []
     for ep in sorted(episodes, key=lambda e: e.episode_id):
-        key = goal_of(ep)
+        key = goal_key(ep)
         if key not in seen and len(out) < n:
             seen.add(key)
             out.append(ep)
     return out
-
-
-def decoy_episodes(episodes: list, pool: list) -> dict:
-    """Each episode's decoy: the episode of `pool` with another goal (goal_of) whose goal pose is
-    farthest from this episode's."""
-    out = {}
-    for ep in episodes:
-        others = [o for o in pool if goal_of(o) != goal_of(ep)]
-        far = np.linalg.norm(np.array([o.goal_pose[:2] for o in others], float) - ep.goal_pose[:2], axis=1)
-        out[ep.episode_id] = others[int(np.argmax(far))]
-    return out
-
-
-def decoy_poses(episodes: list, pool: list) -> dict[str, np.ndarray]:
-    """Each episode's decoy pose: its decoy episode's goal pose."""
-    return {k: np.asarray(o.goal_pose, float) for k, o in decoy_episodes(episodes, pool).items()}
-
-
-def decoy_images(ctx, episodes: list, pool: list, width: int, height: int) -> dict[str, np.ndarray]:
-    """The decoy goal image of each episode (decoy_poses), rendered as the environment renders goal images."""
-    poses = decoy_poses(episodes, pool)
-    rgb = ctx.render(np.stack([poses[ep.episode_id] for ep in episodes]), width, height)[0]
-    return {ep.episode_id: rgb[i] for i, ep in enumerate(episodes)}
 
 
 def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: str | None = None,
@@ -113,14 +67,13 @@ def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: st
         if len(eps) < 2:
             continue
         ctx = ds.scene_context(sid, renderer="cpu")
-        decoys = decoy_images(ctx, eps, pool, width, height) if task == "imagenav" else \
-            {k: o.category for k, o in decoy_episodes(eps, pool).items()}
+        decoyed, _ = with_decoys(eps, pool)  # each shown the farthest other goal of the scene (navcore.eval.decoy)
         makers = {"goal": lambda: LearnedNavAgent(**net, device="cpu"),
-                  "decoy": lambda: DecoyGoalAgent(decoys, GOAL_KEY[task], **net, device="cpu"),
+                  "decoy": lambda: LearnedNavAgent(**net, device="cpu"),
                   "greedy": lambda: LearnedNavAgent(**net, device="cpu", sample=False)}
         for v in variants:
             t = time.perf_counter()
-            for r in run_episodes_batched(ctx, eps, InProcessBatch(makers[v]), slots, cfg):
+            for r in run_episodes_batched(ctx, decoyed if v == "decoy" else eps, InProcessBatch(makers[v]), slots, cfg):
                 rows[v].append({"scene_id": sid, "episode_id": r["episode_id"], "sr": float(r["sr"]),
                                 "spl": float(r["spl"]), "steps": int(r["steps"]), "path_length": float(r["path_length"])})
             seconds[v] += time.perf_counter() - t

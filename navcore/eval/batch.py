@@ -53,7 +53,7 @@ class BatchNavEnv:
         want = [i for i in slots if self.envs[i].state.ep.task == "imagenav"]
         if not want:
             return
-        poses = np.stack([self.envs[i].state.ep.goal_pose for i in want])
+        poses = np.stack([self.envs[i].state.ep.shown_goal.goal_pose for i in want])
         rgb, _ = self.ctx.render(poses, self.w, self.h)
         for k, i in enumerate(want):
             self.envs[i]._goal_image = rgb[k]

@@ -246,7 +246,7 @@ class NavEnv:
         self.state = EpisodeState(ep)
         self._goal_image = None
         if ep.task == "imagenav" and self.cfg.render and self.ctx.renderer is not None:
-            self._goal_image = self.ctx.render(ep.goal_pose[None], self.w, self.h)[0][0]
+            self._goal_image = self.ctx.render(ep.shown_goal.goal_pose[None], self.w, self.h)[0][0]
         return self._observe()
 
     def step(self, action) -> tuple[dict, dict]:
@@ -320,7 +320,7 @@ class NavEnv:
 
     def goal_observation(self) -> dict:
         s = self.state
-        ep = s.ep
+        ep = s.ep.shown_goal  # the goal the agent is shown (another episode's in the decoy check)
         if ep.task == "objectnav":
             return {"goal_category": ep.category}
         if ep.task == "imagenav":

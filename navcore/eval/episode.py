@@ -32,6 +32,10 @@ class Episode:
     scene_id: str = ""
     extra: dict = field(default_factory=dict)
     regions: np.ndarray | None = None  # [k, 4] success regions (in_region); None: the centres as points
+    shown: "Episode | None" = field(default=None, repr=False, compare=False)
+    """The episode whose goal the agent is shown in place of this one's (the decoy check,
+    navcore.eval.decoy): its goal image, category or point; success, SPL and every metric stay this
+    episode's. None: its own goal."""
 
     def __post_init__(self):
         self.centres = np.ascontiguousarray(self.centres, np.float64).reshape(-1, 2)
@@ -64,6 +68,11 @@ class Episode:
             category=row.get("goal_object_category") if task == "objectnav" else None, goal_sources=sources,
             goal_camera=json.loads(row["goal_camera_json"]) if row.get("goal_camera_json") else None,
             reference_path=reference_path, scene_id=str(row.get("scene_id", "")))
+
+    @property
+    def shown_goal(self) -> "Episode":
+        """The episode whose goal the agent sees: `shown`, else this one."""
+        return self.shown if self.shown is not None else self
 
     @property
     def goal_pose(self) -> np.ndarray:

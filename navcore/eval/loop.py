@@ -15,7 +15,7 @@ def task_info(ep) -> dict:
     info = {"episode_id": ep.episode_id, "task_type": ep.task, "max_steps": ep.max_steps,
             "success_radius": ep.success_radius}
     if ep.task == "objectnav":
-        info["goal_category"] = ep.category
+        info["goal_category"] = ep.shown_goal.category  # another episode's in the decoy check
     return info
 
 
@@ -54,6 +54,7 @@ def result_row(env: NavEnv, ep, d0: float, error: str, seconds: float) -> dict:
             "invalid_actions": s.invalid_actions, "action_error": s.action_error,
             **episode_metrics(s, d0, env.geodesic_to_goal(), env.cfg.protocol),
             "geodesic": ep.geodesic, "path_length": s.path_length, "seconds": seconds,
+            **({"shown_goal_of": ep.shown.episode_id} if ep.shown is not None else {}),
             "trajectory": np.asarray(s.positions, np.float32)}
 
 
