@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from navarena import quick
+from navarena.quick import shorten
 from navcore.baselines.model import TRACKS, NavSpec
 from navcore.baselines.train import TrainConfig, Trainer, init_checkpoint
 
@@ -27,19 +29,22 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
     ap = ap or argparse.ArgumentParser(prog="navarena train", usage="navarena train ROOT --out OUT [options]",
                                        description="Train a baseline policy (behaviour cloning, then DAgger) into --out.")
     ap.formatter_class = lambda prog: argparse.HelpFormatter(prog, max_help_position=30)  # one line an option
-    ap.add_argument("root", help="a data root (make dataset) or a release folder")
+    ap.add_argument("root", nargs="+", help="a data root (make dataset) or a release folder; several are trained on "
+                    "together (generated scenes and your captures: see --capture-share)")
     ap.add_argument("--out", required=True, help="the run folder (model.pt, model_card.json, rounds/)")
     ap.add_argument("--resume", action="store_true", help="go on after the last finished round in --out")
     d = TrainConfig()
     helps = {"task": None, "rounds": "0: behaviour cloning, then DAgger", "episodes_per_round": None, "grad_steps": None,
              "batch_episodes": None, "slots": "episodes stepped together", "width": "render size", "height": None,
-             "val_episodes": "held-out check", "keep": "best|last round into model.pt", "scenes": "first N train scenes", "seed": None,
+             "val_episodes": "held-out check", "keep": "best|last round into model.pt", "scenes": "first N train scenes",
+             "capture_share": "episodes from non-generated scenes", "seed": None,
              "init": "fine-tune: a model.pt or shipped name", "first_round": "bc|dagger: round 0 (dagger: --init drives)",
              "max_learner_steps": None, "expert": "auto|geodesic|search: the labelling expert",
              "view_overlap": "ImageNav: goal view share that is found",
              "workers": "collection processes", "beta": "DAgger mixing",
              "stop_veto": "DAgger: label false STOPs, run on",
-             "lr": None, "weight_decay": None, "aux_weight": "ImageNav's goal-position loss", "train_split": None, "val_split": None,
+             "lr": None, "weight_decay": None, "depth_noise": "augmentation: depth noise and holes",
+             "rgb_noise": "augmentation: RGB jitter", "aux_weight": "ImageNav's goal-position loss", "train_split": None, "val_split": None,
              "renderer": "auto|cpu|gsplat", "device": "auto|cpu|cuda"}
     for name, text in helps.items():
         default = "auto" if name == "expert" else getattr(d, name)  # d's auto is resolved for its task
@@ -47,7 +52,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
             ap.add_argument("--task", default=default, choices=list(TRACKS), metavar="T",
                             help=f"{'|'.join(TRACKS)} ({default})")
             continue
-        kind = {int: int, float: float, bool: _flag}.get(type(default), int if name == "scenes" else str)
+        kind = {int: int, float: float, bool: _flag}.get(type(default), {"scenes": int, "capture_share": float}.get(name, str))
         ap.add_argument("--" + name.replace("_", "-"), type=kind, default=default,
                         metavar={int: "N", float: "X", _flag: "B"}.get(kind, "S"),
                         help=f"{text + ' ' if text else ''}({default})")
@@ -59,6 +64,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
+    shorten(a, quick.TRAIN, "navarena train")
     fields_ = {k: getattr(a, k) for k in TrainConfig.__dataclass_fields__ if k != "spec"}
     if a.aux_goal:
         if a.task == "pointnav":

@@ -765,3 +765,62 @@ def test_navarena_card_ships_a_run_and_keeps_its_markdown(trained, tmp_path, cap
     capsys.readouterr()
     assert main(["--models", str(models), "ship", str(tmp_path), "x"]) == 2
     assert str(tmp_path) in capsys.readouterr().err
+
+
+def test_training_noise_is_seeded_and_shaped_as_documented():
+    import torch
+
+    from navcore.baselines.model import NavSpec
+    from navcore.baselines.train import TrainConfig, augment
+
+    x = torch.rand(3, 2, 4, 48, 64)  # ObjectNav's frames: depth, then RGB
+    clean = TrainConfig(task="objectnav", spec=NavSpec(task="objectnav"))
+    assert torch.equal(augment(x, clean, torch.Generator().manual_seed(0)), x)
+    noisy = TrainConfig(task="objectnav", spec=NavSpec(task="objectnav"), depth_noise=0.1, rgb_noise=0.2)
+    a = augment(x, noisy, torch.Generator().manual_seed(1))
+    b = augment(x, noisy, torch.Generator().manual_seed(1))
+    assert torch.equal(a, b) and a.shape == x.shape
+    assert 0.0 <= float(a.min()) and float(a.max()) <= 1.0
+    holes = (a[:, :, 0] == 1.0) & (x[:, :, 0] < 1.0)
+    assert 0.07 < float(holes.float().mean()) < 0.13  # the holes' share is depth_noise
+    kept = ~holes
+    rel = (a[:, :, 0][kept] / x[:, :, 0][kept] - 1)
+    assert 0.05 < float(rel.std()) < 0.15  # and the rest scaled by 1 + 0.1 N(0, 1) (clamped)
+    assert not torch.equal(a[:, :, 1:], x[:, :, 1:])
+
+
+def test_combined_datasets_read_as_one_and_refuse_a_scene_twice(episode_run, tmp_path, copy_data_root):
+    import pytest
+
+    from navcore.eval.dataset import CombinedDataset, NavDataset, open_dataset
+
+    root = episode_run[0]
+    other = tmp_path / "other"
+    copy_data_root(root, other)
+    (sid,) = NavDataset(root).scene_ids("pointnav")
+    for folder in ("05_episodes", "06_trajectories"):  # the same episodes under another scene id
+        for d in (other / folder).glob(f"task=*/scene_id={sid}"):
+            d.rename(d.parent / f"scene_id={sid}x")
+    both = open_dataset([root, other])
+    assert isinstance(both, CombinedDataset) and both.scene_ids("pointnav") == [sid, sid + "x"]
+    a, b = both.episodes(sid, "pointnav", "train"), both.episodes(sid + "x", "pointnav", "train")
+    assert [e.episode_id for e in a] == [e.episode_id for e in b] and len(a) > 0
+    assert both.info()["kind"] == "combined" and len(both.info()["parts"]) == 2
+    with pytest.raises(ValueError, match=f"scene '{sid}' is in both"):
+        CombinedDataset([root, root])
+    assert isinstance(open_dataset([root]), NavDataset) and isinstance(open_dataset(root), NavDataset)
+
+
+def test_capture_share_splits_a_rounds_episodes_between_captures_and_generated_scenes():
+    import numpy as np
+
+    from navcore.baselines.train import episodes_per_scene
+
+    groups = ["synthetic"] * 8 + ["real_indoor", "real_indoor"]
+    scenes = [f"s{i}" for i in range(10)]
+    n = episodes_per_scene(scenes, groups, 1000, 0.5, np.random.default_rng(0))
+    assert n.sum() == 1000 and n[8:].sum() == 500 and n[:8].sum() == 500 and (n > 0).all()
+    uniform = episodes_per_scene(scenes, groups, 1000, None, np.random.default_rng(0))
+    assert uniform.sum() == 1000 and 120 < uniform[8:].sum() < 290  # about 2 in 10
+    only_real = episodes_per_scene(scenes[8:], groups[8:], 100, 0.5, np.random.default_rng(0))
+    assert only_real.sum() == 100

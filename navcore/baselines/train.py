@@ -48,7 +48,7 @@ from torch import nn
 from navcore.baselines.agent import default_device
 from navcore.baselines.checkpoint import load_checkpoint, save_checkpoint
 from navcore.baselines.model import NO_ACTION, NavNet, NavSpec, goal_input, observation_input, parameter_count
-from navcore.eval.dataset import NavDataset
+from navcore.eval.dataset import open_dataset
 from navcore.io import jsonio
 from navcore.io.atomic import atomic_path, write_text_atomic
 from navcore.nav.actions import STOP
@@ -109,6 +109,13 @@ class TrainConfig:
     """Episodes (whole sequences) per gradient step."""
     lr: float = 5e-4
     weight_decay: float = 1e-5
+    depth_noise: float = 0.0
+    """Training augmentation of the depth input (0: off): each pixel's depth times (1 + depth_noise x a
+    standard normal draw), and that share of pixels read as 'nothing hit' (holes), as a real sensor or
+    a sparse capture's render gives. Drawn anew at every gradient step (the stored frames stay clean)."""
+    rgb_noise: float = 0.0
+    """Training augmentation of the RGB input and the goal image (0: off): per frame a brightness and
+    a contrast factor 1 + rgb_noise x a standard normal draw, plus per-pixel noise of rgb_noise / 2."""
     aux_weight: float = 1.0
     """Weight of the aux_goal head's loss (mean squared error of the goal's encoded position) beside
     the actions' cross-entropy; a network without the head ignores it."""
@@ -128,6 +135,11 @@ class TrainConfig:
     worse than the one before."""
     scenes: int | None = None
     """Use the first N training scenes (the scene-scaling runs); None: all."""
+    capture_share: float | None = None
+    """The share of each round's episodes drawn from the training scenes outside the generated group
+    (`synthetic`: real captures trained on beside generated scenes), spread evenly over them; None:
+    every training scene alike (a few captures among a hundred generated scenes would get a few
+    per cent)."""
     init: str | None = None
     """Start from these weights instead of random ones (fine-tuning): a checkpoint file of the same
     track, or a shipped baseline's name (navcore/models, sha256-checked). The network takes the
@@ -195,7 +207,8 @@ class Steps:
 class Trainer:
     def __init__(self, root, out, cfg: TrainConfig, quiet: bool = False, init: dict | None = None):
         """init: cfg.init's checkpoint when the caller has loaded it already (init_checkpoint)."""
-        self.ds, self.out, self.cfg, self.quiet = NavDataset(root), Path(out), cfg, quiet
+        self.ds, self.out, self.cfg, self.quiet = open_dataset(root), Path(out), cfg, quiet
+        self.roots = [str(p) for p in getattr(self.ds, "paths", [self.ds.path])]
         self.device = default_device(cfg.device)
         torch.manual_seed(cfg.seed)
         self.net = NavNet(cfg.spec).to(self.device)
@@ -252,8 +265,8 @@ class Trainer:
         only, so the result is the same with any number of workers)."""
         cfg = self.cfg
         rng = np.random.default_rng(stream_seed(cfg.seed, "train-collect", str(rnd)) % 2**32)
-        per_scene = np.bincount(rng.integers(0, len(self.train_scenes), cfg.episodes_per_round),
-                                minlength=len(self.train_scenes))
+        per_scene = episodes_per_scene(self.train_scenes, [self.groups.get(s) for s in self.train_scenes],
+                                       cfg.episodes_per_round, cfg.capture_share, rng)
         learner = str(model) if round_beta(cfg, rnd) < 1.0 else None  # a behaviour-cloning round has none
         jobs = [(sid, int(k), rnd, learner, sha) for sid, k in zip(self.train_scenes, per_scene) if k]
         parts, t0, n_eps, steps = [], time.perf_counter(), 0, 0
@@ -274,6 +287,7 @@ class Trainer:
         aux_goal loss's the same way, or None without the head)."""
         cfg, dev = self.cfg, self.device
         rng = np.random.default_rng(stream_seed(cfg.seed, "train-fit", str(rnd)) % 2**32)
+        gen = torch.Generator(device=dev).manual_seed(stream_seed(cfg.seed, "train-augment", str(rnd)) % 2**63)
         self.net.train()
         losses, aux_losses, t0 = [], [], time.perf_counter()
         for step in range(cfg.grad_steps):
@@ -283,9 +297,11 @@ class Trainer:
             tidx = np.arange(tmax)[:, None]
             mask = tidx < lens[None]
             rows = np.where(mask, data.starts[pick][None] + np.minimum(tidx, lens[None] - 1), 0)
-            frames = torch.from_numpy(data.obs[rows]).to(dev).float().div_(255)
+            frames = augment(torch.from_numpy(data.obs[rows]).to(dev).float().div_(255), cfg, gen)
             if data.seq_goal.shape[1]:  # the episode's goal image as more channels of every frame
                 g = torch.from_numpy(data.seq_goal[pick]).to(dev).float().div_(255)
+                if cfg.rgb_noise > 0:
+                    g = augment_rgb(g, cfg.rgb_noise, gen)
                 frames = torch.cat([frames, g[None].expand(tmax, *g.shape)], 2)
             goal = torch.from_numpy(data.goal[rows]).to(dev)
             prev = torch.from_numpy(data.prev[rows].astype(np.int64)).to(dev)
@@ -357,7 +373,7 @@ class Trainer:
 
             gpus = torch.cuda.device_count() if self.device.startswith("cuda") else 0
             self.pool = tmp.get_context("spawn").Pool(cfg.workers, initializer=_init_worker,
-                                                      initargs=(str(self.ds.path), cfg, self.device, gpus))
+                                                      initargs=(self.roots, cfg, self.device, gpus))
         try:
             return self._rounds(first, parts, sha)
         finally:
@@ -417,7 +433,8 @@ class Trainer:
         """What model.pt records: the data, the full config, the seed and the curve (no timings and no
         worker count, so one config and seed on one device give the same bytes with any workers)."""
         info = self.ds.info()
-        return {"task": self.cfg.task, "data": {"root": str(self.ds.path), "kind": info["kind"],
+        roots = {"roots": [str(p) for p in self.ds.paths]} if info["kind"] == "combined" else {}
+        return {"task": self.cfg.task, "data": {"root": str(self.ds.path), "kind": info["kind"], **roots,
                                                 "release": info.get("version"), "train_scenes": self.train_scenes,
                                                 "groups": dict(sorted(Counter(self.groups[sid] for sid in self.train_scenes).items())),
                                                 "split": self.cfg.train_split},
@@ -456,7 +473,7 @@ class Collector:
     module docstring); one per process (the trainer's, or each collection worker's)."""
 
     def __init__(self, root, cfg: TrainConfig, device: str):
-        self.ds, self.cfg, self.device = NavDataset(root), cfg, device
+        self.ds, self.cfg, self.device = open_dataset(root), cfg, device
         self.net = NavNet(cfg.spec).to(device).eval()
         self._ctx: dict = {}
         self._eps: dict = {}
@@ -579,6 +596,47 @@ NO_AUX = (math.nan, math.nan)
 """A step's aux target where the network has no aux_goal head (NaN: the loss skips it)."""
 
 
+def episodes_per_scene(scenes: list[str], groups: list, n: int, capture_share: float | None, rng) -> np.ndarray:
+    """How many of a round's n episodes each training scene gets: drawn uniformly over the scenes, or
+    with capture_share, that share over the scenes outside the `synthetic` group and the rest over
+    the generated ones (all over whichever kind is present when the other is not)."""
+    real = np.array([g != "synthetic" for g in groups], bool)
+    if capture_share is None or real.all() or not real.any():
+        return np.bincount(rng.integers(0, len(scenes), n), minlength=len(scenes))
+    k = int(round(capture_share * n))
+    out = np.zeros(len(scenes), np.int64)
+    for mask, m in ((real, k), (~real, n - k)):
+        idx = np.flatnonzero(mask)
+        out[idx] += np.bincount(rng.integers(0, len(idx), m), minlength=len(idx))
+    return out
+
+
+def augment(frames: torch.Tensor, cfg: TrainConfig, gen: torch.Generator) -> torch.Tensor:
+    """[T, B, C, h, w] frames in [0, 1] (depth first when the spec has it, then RGB) with the config's
+    training noise (TrainConfig.depth_noise, rgb_noise)."""
+    spec = cfg.spec
+    if cfg.depth_noise > 0 and spec.depth:
+        d = frames[:, :, :1]
+        n = torch.randn(d.shape, generator=gen, device=d.device)
+        holes = torch.rand(d.shape, generator=gen, device=d.device) < cfg.depth_noise
+        d = torch.where(holes, torch.ones_like(d), (d * (1 + cfg.depth_noise * n)).clamp(0, 1))
+        frames = torch.cat([d, frames[:, :, 1:]], 2)
+    if cfg.rgb_noise > 0 and spec.rgb:
+        c = int(spec.depth)
+        frames = torch.cat([frames[:, :, :c], augment_rgb(frames[:, :, c:c + 3], cfg.rgb_noise, gen)], 2)
+    return frames
+
+
+def augment_rgb(x: torch.Tensor, sigma: float, gen: torch.Generator) -> torch.Tensor:
+    """[..., 3, h, w] in [0, 1]: a brightness and a contrast factor per image, per-pixel noise."""
+    shape = (*x.shape[:-3], 1, 1, 1)
+    bright = 1 + sigma * torch.randn(shape, generator=gen, device=x.device)
+    contrast = 1 + sigma * torch.randn(shape, generator=gen, device=x.device)
+    mean = x.mean((-3, -2, -1), keepdim=True)
+    x = (x - mean) * contrast + mean * bright
+    return (x + 0.5 * sigma * torch.randn(x.shape, generator=gen, device=x.device)).clamp(0, 1)
+
+
 def init_checkpoint(init: str, task: str) -> dict:
     """The checkpoint --init names (a file, else a shipped baseline's name), with its "sha256"."""
     from navcore.baselines.agent import shipped
@@ -626,7 +684,7 @@ def round_beta(cfg: TrainConfig, rnd: int) -> float:
     return cfg.beta ** k if k else 1.0
 
 
-def _init_worker(root: str, cfg: TrainConfig, device: str, gpus: int) -> None:
+def _init_worker(root, cfg: TrainConfig, device: str, gpus: int) -> None:
     import multiprocessing
 
     torch.set_num_threads(1)

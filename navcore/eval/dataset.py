@@ -231,3 +231,62 @@ class NavDataset:
             out["version"] = json.loads((self.path / "release.json").read_text()).get("version")
         return out
 
+
+
+class CombinedDataset:
+    """Several data roots or releases read as one: their scenes side by side, each read from its own
+    folder (training on generated scenes and real captures together: `navarena train ROOT ROOT ...`).
+    They must share the embodiment and the step sizes, and a scene id may appear in one of them only.
+    The same methods as NavDataset, each answered by the part that holds the scene."""
+
+    def __init__(self, paths, embodiment: str | None = None):
+        self.parts = [NavDataset(p, embodiment) for p in paths]
+        if not self.parts:
+            raise ValueError("CombinedDataset: no folder given")
+        first = self.parts[0]
+        for ds in self.parts[1:]:
+            if (ds.embodiment.name, ds.actions) != (first.embodiment.name, first.actions):
+                raise ValueError(f"{ds.path}: embodiment {ds.embodiment.name} with {ds.actions}, where {first.path} has "
+                                 f"{first.embodiment.name} with {first.actions}: datasets trained on together must match")
+        self._owner: dict[str, NavDataset] = {}
+        for ds in self.parts:
+            for sid in ds.scene_ids():
+                if sid in self._owner:
+                    raise ValueError(f"scene {sid!r} is in both {self._owner[sid].path} and {ds.path}")
+                self._owner[sid] = ds
+        self.path, self.paths = first.path, [ds.path for ds in self.parts]
+        self.embodiment, self.actions, self.is_release = first.embodiment, first.actions, False
+
+    def __repr__(self) -> str:
+        return f"CombinedDataset({[str(p) for p in self.paths]!r})"
+
+    def _of(self, scene_id: str) -> NavDataset:
+        if scene_id not in self._owner:
+            raise KeyError(f"scene {scene_id!r} is in none of {[str(p) for p in self.paths]}")
+        return self._owner[scene_id]
+
+    def scene_ids(self, task: str | None = None, split: str | None = None) -> list[str]:
+        return sorted(s for ds in self.parts for s in ds.scene_ids(task, split))
+
+    def episode_table(self, scene_id: str, task: str):
+        return self._of(scene_id).episode_table(scene_id, task)
+
+    def episodes(self, scene_id: str, task: str, split: str | None = None, difficulty: str | None = None,
+                 limit: int | None = None, ids=None) -> list[Episode]:
+        return self._of(scene_id).episodes(scene_id, task, split, difficulty, limit, ids)
+
+    def scene_context(self, scene_id: str, render: bool = True, renderer: str = "auto") -> SceneContext:
+        return self._of(scene_id).scene_context(scene_id, render, renderer)
+
+    def env_config(self, **settings) -> EnvConfig:
+        return self.parts[0].env_config(**settings)
+
+    def info(self) -> dict:
+        return {**self.parts[0].info(), "kind": "combined", "parts": [ds.info() for ds in self.parts]}
+
+
+def open_dataset(roots, embodiment: str | None = None):
+    """One folder (a path) -> NavDataset; several (a list or tuple of paths) -> CombinedDataset."""
+    if isinstance(roots, (list, tuple)):
+        return NavDataset(roots[0], embodiment) if len(roots) == 1 else CombinedDataset(roots, embodiment)
+    return NavDataset(roots, embodiment)

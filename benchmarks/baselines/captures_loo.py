@@ -1,0 +1,215 @@
+"""PointNav from the generated world to real captures (issue 82): a policy trained on the generated
+scenes alone, evaluated zero-shot on each capture, and leave-one-capture-out fine-tunes (trained on
+the generated scenes and two captures, evaluated on the third). Phases, each skipping what is done,
+so that a run cut by a machine's time limit goes on where it stopped:
+
+    python -m benchmarks.baselines.captures_loo gen                     # the generated training world
+    python -m benchmarks.baselines.captures_loo cap NAME=PATH [...]     # a capture's data root (200 PointNav episodes, half test)
+    python -m benchmarks.baselines.captures_loo train [--rounds 4 --episodes 2048]
+    python -m benchmarks.baselines.captures_loo zeroshot                # the world's policy, pointnav_bc, depth_reactive on every capture
+    python -m benchmarks.baselines.captures_loo loo                     # per capture: fine-tune on the others, evaluate on it
+    python -m benchmarks.baselines.captures_loo report --out DIR        # the table: DIR/captures_loo.{json,md}
+
+gen: the baselines' reference scenes (benchmarks.baselines.reference: the first SCENES=128 generated
+scenes' held-out ones and their first TRAIN_SCENES=48 training scenes), PointNav only, in ROOT
+(data/pn_world). cap: one data root per capture (data/caps/NAME; the scene's id is NAME, its group
+`captures`), whole scene in train and test halves. Evaluations at 640 x 480, gsplat (--renderer),
+the distance protocol, the first N (100) test episodes of a capture, one navarena eval process per
+(capture, agent), several side by side per GPU. Train under the environment's one collision rule
+(navcore.eval.env: a blocked move ends at the last collision-free pose, counted).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+PY = sys.executable
+ROOT = Path(os.environ.get("ROOT", "data/pn_world"))
+CAPS = Path(os.environ.get("CAPS", "data/caps"))
+RUNS = Path(os.environ.get("RUNS", "data/runs_loo"))
+EVAL = Path(os.environ.get("EVAL", "data/eval_loo"))
+WORKERS = int(os.environ.get("WORKERS", str(max(1, (os.cpu_count() or 2) - 2))))
+WORLD = "pn_world"
+AGENTS = ("world", "pointnav_bc", "depth_reactive")
+"""Zero-shot on each capture: the generated world's policy (RUNS/pn_world), the shipped policy, the
+hand-written controller."""
+
+
+def log(msg: str) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
+
+
+def run(cmd: list[str], out: Path | None = None, env: dict | None = None) -> int:
+    log(" ".join(map(str, cmd)))
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with open(out, "w") as f:
+            rc = subprocess.run([str(c) for c in cmd], stdout=f, stderr=subprocess.STDOUT, env=env).returncode
+    else:
+        rc = subprocess.run([str(c) for c in cmd], env=env).returncode
+    log(f"exit {rc}")
+    return rc
+
+
+def threads(n: int) -> dict:
+    return {**os.environ, **{k: str(n) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}}
+
+
+def gen(scenes: int, train: int) -> int:
+    os.environ.update({"SCENES": str(scenes), "TRAIN_SCENES": str(train), "TASKS": "pointnav", "ROOT": str(ROOT)})
+    from benchmarks.baselines.reference import held_out_and_first_train
+
+    ids = held_out_and_first_train(scenes, train)
+    return run([PY, "-m", "pipeline", f"data_root={ROOT}", f"scenes.count={scenes}", f"scenes.ids=[{','.join(ids)}]",
+                "task=[pointnav]", "semantics.enabled=false", "episodes.scene_splits.test=0.1", "executor.dashboard=false",
+                "stages=[episodes]", f"executor.n_workers={WORKERS}"])
+
+
+def cap(specs: list[str], episodes: int) -> int:
+    rc = 0
+    for spec in specs:
+        name, path = spec.split("=", 1)
+        root = CAPS / name
+        root.mkdir(parents=True, exist_ok=True)
+        catalog = CAPS / f"{name}.yaml"
+        catalog.write_text(f"scenes:\n  - {{name: {name}, group: captures, path: {Path(path).resolve()}}}\n")
+        rc |= run([PY, "-m", "pipeline", f"data_root={root}", f"scenes.catalog={catalog}", "task=[pointnav]",
+                   f"task.pointnav.episodes_per_scene={episodes}", "episodes.splits.train=0.5", "+episodes.splits.test=0.5",
+                   "episodes.scene_splits.val_unseen=0", "episodes.scene_splits.test=0", "semantics.enabled=false", "executor.dashboard=false",
+                   "stages=[episodes]", f"executor.n_workers={min(WORKERS, 4)}"])
+    return rc
+
+
+def captures() -> list[str]:
+    """The captures whose data roots have finished episodes."""
+    return sorted(p.name for p in CAPS.iterdir() if p.is_dir() and any((p / "05_episodes").glob("task=pointnav/*")))
+
+
+def train(rounds: int, episodes: int, grad_steps: int, extra: list[str]) -> int:
+    out = RUNS / WORLD
+    if (out / "model_card.json").is_file():
+        log(f"{out}: done")
+        return 0
+    resume = ["--resume"] if (out / "checkpoint.pt").is_file() else []
+    return run([PY, "-m", "navarena", "train", ROOT, "--out", out, "--rounds", rounds, "--episodes-per-round", episodes,
+                "--grad-steps", grad_steps, "--workers", WORKERS, *resume, *extra], RUNS / f"{WORLD}.log")
+
+
+def agent_args(agent: str) -> list[str]:
+    if agent in ("world",) or agent.startswith("loo_"):
+        return ["--agent", "learned", "--agent-arg", f"checkpoint={RUNS / (WORLD if agent == 'world' else agent) / 'model.pt'}"]
+    return ["--agent", agent]
+
+
+def evaluate(jobs: list[tuple[str, Path, str, str]], n: int, per_gpu: int, renderer: str, size: tuple[int, int]) -> int:
+    """jobs: (label, root, split, agent) -> EVAL/label/summary.json, per_gpu processes side by side."""
+    todo = [j for j in jobs if not (EVAL / j[0] / "summary.json").is_file()]
+    log(f"evaluate: {len(todo)} of {len(jobs)} to run")
+    cores = max(1, WORKERS // max(1, per_gpu))
+
+    def one(job) -> int:
+        label, root, split, agent = job
+        return run([PY, "-m", "navarena", "eval", root, *agent_args(agent), "--tasks", "pointnav", "--split", split,
+                    "--episodes-per-scene", n, "--renderer", renderer, "--width", size[0], "--height", size[1],
+                    "--batch-slots", 50, "--quiet", "--out", EVAL / label], EVAL / f"{label}.log", threads(cores))
+
+    with ThreadPoolExecutor(per_gpu) as pool:
+        return max([0, *pool.map(one, todo)])
+
+
+def zeroshot(n: int, per_gpu: int, renderer: str, size, gen_n: int) -> int:
+    jobs = [(f"zs_{c}_{a}", CAPS / c, "test", a) for c in captures() for a in AGENTS]
+    jobs += [(f"gen_{a}", ROOT, "test", a) for a in ("world", "pointnav_bc")]
+    return max(evaluate(jobs[:-2], n, per_gpu, renderer, size), evaluate(jobs[-2:], gen_n, per_gpu, renderer, size))
+
+
+def loo(rounds: int, episodes: int, grad_steps: int, share: float, n: int, per_gpu: int, renderer: str, size) -> int:
+    caps = captures()
+    if len(caps) < 2:
+        log(f"loo: needs at least 2 captures, has {caps}")
+        return 1
+    procs = []
+    for held in caps:
+        out = RUNS / f"loo_{held}"
+        if (out / "model_card.json").is_file():
+            continue
+        others = [CAPS / c for c in caps if c != held]
+        cmd = [PY, "-m", "navarena", "train", ROOT, *others, "--out", out, "--init", RUNS / WORLD / "model.pt",
+               "--first-round", "dagger", "--rounds", rounds, "--episodes-per-round", episodes, "--grad-steps", grad_steps,
+               "--capture-share", share, "--workers", max(1, WORKERS // len(caps))]
+        log(" ".join(map(str, cmd)))
+        (RUNS / f"loo_{held}.log").parent.mkdir(parents=True, exist_ok=True)
+        procs.append(subprocess.Popen([str(c) for c in cmd], stdout=open(RUNS / f"loo_{held}.log", "w"),
+                                      stderr=subprocess.STDOUT, env=threads(max(1, WORKERS // len(caps)))))
+    rc = max([0, *(p.wait() for p in procs)])
+    jobs = [(f"loo_{c}", CAPS / c, "test", f"loo_{c}") for c in caps if (RUNS / f"loo_{c}" / "model.pt").is_file()]
+    return max(rc, evaluate(jobs, n, per_gpu, renderer, size))
+
+
+def report(out: Path) -> dict:
+    rows = []
+    for s in sorted(EVAL.glob("*/summary.json")):
+        d = json.loads(s.read_text())
+        m = d["tasks"]["pointnav"]["overall"]
+        rows.append({"label": s.parent.name, "root": Path(d["root"]).name, "agent": d["agent"],
+                     "agent_args": d.get("agent_args"), "render": d.get("render"), "episodes": m.get("episodes"),
+                     **{k: m.get(k) for k in ("sr", "spl", "cr", "ne")}})
+    cards = {p.parent.name: json.loads(p.read_text()) for p in RUNS.glob("*/model_card.json")}
+    res = {"rows": rows, "runs": {k: {"curve": c["curve"], "data": c["data"], "train_seconds": c.get("train_seconds"),
+                                      "trained_on": c.get("trained_on"), "sha256": c["sha256"]} for k, c in cards.items()}}
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "captures_loo.json").write_text(json.dumps(res, indent=1, default=str) + "\n")
+    lines = ["| run | data | agent | episodes | SR | SPL | CR |", "|---|---|---|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['label']} | {r['root']} | {r['agent']} | {r['episodes']} | {r['sr']:.3f} | {r['spl']:.3f} | "
+                     f"{r['cr']:.3f} |")
+    (out / "captures_loo.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return res
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="captures_loo", description=__doc__.split("\n\n")[0])
+    ap.add_argument("phase", choices=("gen", "cap", "train", "zeroshot", "loo", "report"))
+    ap.add_argument("caps", nargs="*", help="cap: NAME=PATH of each capture")
+    ap.add_argument("--scenes", type=int, default=128)
+    ap.add_argument("--train-scenes", type=int, default=48)
+    ap.add_argument("--cap-episodes", type=int, default=200)
+    ap.add_argument("--rounds", type=int, default=4)
+    ap.add_argument("--episodes", type=int, default=2048)
+    ap.add_argument("--grad-steps", type=int, default=2000)
+    ap.add_argument("--train-arg", action="append", default=[], help="more navarena train arguments (e.g. --depth-noise=0.05)")
+    ap.add_argument("--loo-rounds", type=int, default=1)
+    ap.add_argument("--loo-episodes", type=int, default=768)
+    ap.add_argument("--loo-grad-steps", type=int, default=1000)
+    ap.add_argument("--capture-share", type=float, default=0.5)
+    ap.add_argument("-n", "--episodes-per-capture", type=int, default=100)
+    ap.add_argument("--gen-episodes", type=int, default=30, help="zeroshot: per held-out generated scene")
+    ap.add_argument("--per-gpu", type=int, default=6)
+    ap.add_argument("--renderer", default="gsplat")
+    ap.add_argument("--size", type=int, nargs=2, default=(640, 480))
+    ap.add_argument("--out", type=Path, default=Path("data/08_reports"))
+    a = ap.parse_args(argv)
+    if a.phase == "gen":
+        return gen(a.scenes, a.train_scenes)
+    if a.phase == "cap":
+        return cap(a.caps, a.cap_episodes)
+    if a.phase == "train":
+        return train(a.rounds, a.episodes, a.grad_steps, a.train_arg)
+    if a.phase == "zeroshot":
+        return zeroshot(a.episodes_per_capture, a.per_gpu, a.renderer, a.size, a.gen_episodes)
+    if a.phase == "loo":
+        return loo(a.loo_rounds, a.loo_episodes, a.loo_grad_steps, a.capture_share, a.episodes_per_capture, a.per_gpu,
+                   a.renderer, a.size)
+    report(a.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
