@@ -36,6 +36,8 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from navarena import quick
+from navarena.quick import shorten
 from navcore.io import jsonio
 from navcore.io.atomic import atomic_path
 from navcore.io.catalog import Catalog
@@ -312,6 +314,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--renderer", default="auto", choices=["auto", "cpu", "gsplat"])
     ap.add_argument("--quiet", action="store_true", help="no progress display")
     args = ap.parse_args(argv)
+    shorten(args, quick.EXPORT, "navarena export-lerobot")
     w, h = (int(v) for v in args.size.lower().split("x"))
     res = export_lerobot(args.root, args.out, args.split or None, args.tasks.split(","), args.fps, w, h,
                          not args.no_depth, args.episodes_per_scene, renderer=args.renderer, quiet=args.quiet,

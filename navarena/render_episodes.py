@@ -26,6 +26,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from navarena import quick
+from navarena.quick import shorten
 from navcore.io.catalog import Catalog
 from navcore.io.tool_progress import ToolProgress
 from navcore.nav.embodiment import Embodiment
@@ -391,6 +393,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--no-report", action="store_true")
     ap.add_argument("--quiet", action="store_true", help="no progress display")
     args = ap.parse_args(argv)
+    shorten(args, quick.VIDEOS, "navarena render-episodes")
     w, h = (int(v) for v in args.size.lower().split("x"))
     res = render_episodes(args.root, args.out, args.scene, args.task or TASK_TYPES,
                           args.episodes.split(",") if args.episodes else None, args.count, args.run, w, h, args.fps,

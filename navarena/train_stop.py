@@ -10,6 +10,8 @@ import argparse
 import sys
 from dataclasses import asdict
 
+from navarena import quick
+from navarena.quick import shorten
 from navcore.baselines.train_stop import StopConfig, StopTrainer
 from navcore.baselines.verifier import StopSpec
 
@@ -34,6 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
+    shorten(a, quick.TRAIN_STOP, "navarena train-stop")
     fields_ = {k: getattr(a, k) for k in StopConfig.__dataclass_fields__ if k != "spec"}
     cfg = StopConfig(**fields_, spec=StopSpec(depth_w=a.input[0], depth_h=a.input[1]))
     try:
