@@ -81,7 +81,8 @@ def cap(specs: list[str], episodes: int) -> int:
         catalog.write_text(f"scenes:\n  - {{name: {name}, group: captures, path: {Path(path).resolve()}}}\n")
         rc |= run([PY, "-m", "pipeline", f"data_root={root}", f"scenes.catalog={catalog}", "task=[pointnav]",
                    f"task.pointnav.episodes_per_scene={episodes}", "episodes.splits.train=0.5", "+episodes.splits.test=0.5",
-                   "episodes.scene_splits.val_unseen=0", "episodes.scene_splits.test=0", "semantics.enabled=false", "executor.dashboard=false",
+                   "episodes.scene_splits.val_unseen=0", "episodes.scene_splits.test=0", "semantics.enabled=false",
+                   "executor.dashboard=false",
                    "stages=[episodes]", f"executor.n_workers={min(WORKERS, 4)}"])
     return rc
 
@@ -123,10 +124,10 @@ def evaluate(jobs: list[tuple[str, Path, str, str]], n: int, per_gpu: int, rende
         return max([0, *pool.map(one, todo)])
 
 
-def zeroshot(n: int, per_gpu: int, renderer: str, size, gen_n: int) -> int:
-    jobs = [(f"zs_{c}_{a}", CAPS / c, "test", a) for c in captures() for a in AGENTS]
-    jobs += [(f"gen_{a}", ROOT, "test", a) for a in ("world", "pointnav_bc")]
-    return max(evaluate(jobs[:-2], n, per_gpu, renderer, size), evaluate(jobs[-2:], gen_n, per_gpu, renderer, size))
+def zeroshot(n: int, per_gpu: int, renderer: str, size, gen_n: int, agents=AGENTS) -> int:
+    jobs = [(f"zs_{c}_{a}", CAPS / c, "test", a) for c in captures() for a in agents]
+    gen = [(f"gen_{a}", ROOT, "test", a) for a in ("world", "pointnav_bc")] if gen_n else []
+    return max(evaluate(jobs, n, per_gpu, renderer, size), evaluate(gen, gen_n, per_gpu, renderer, size))
 
 
 def loo(rounds: int, episodes: int, grad_steps: int, share: float, n: int, per_gpu: int, renderer: str, size) -> int:
@@ -159,7 +160,7 @@ def report(out: Path) -> dict:
         m = d["tasks"]["pointnav"]["overall"]
         rows.append({"label": s.parent.name, "root": Path(d["root"]).name, "agent": d["agent"],
                      "agent_args": d.get("agent_args"), "render": d.get("render"), "episodes": m.get("episodes"),
-                     **{k: m.get(k) for k in ("sr", "spl", "cr", "ne")}})
+                     **{k: m.get(k) for k in ("sr", "spl", "ne")}, "cr": m.get("collision_rate")})
     cards = {p.parent.name: json.loads(p.read_text()) for p in RUNS.glob("*/model_card.json")}
     res = {"rows": rows, "runs": {k: {"curve": c["curve"], "data": c["data"], "train_seconds": c.get("train_seconds"),
                                       "trained_on": c.get("trained_on"), "sha256": c["sha256"]} for k, c in cards.items()}}
@@ -190,8 +191,9 @@ def main(argv=None) -> int:
     ap.add_argument("--loo-grad-steps", type=int, default=1000)
     ap.add_argument("--capture-share", type=float, default=0.5)
     ap.add_argument("-n", "--episodes-per-capture", type=int, default=100)
-    ap.add_argument("--gen-episodes", type=int, default=30, help="zeroshot: per held-out generated scene")
+    ap.add_argument("--gen-episodes", type=int, default=30, help="zeroshot: per held-out generated scene (0: none)")
     ap.add_argument("--per-gpu", type=int, default=6)
+    ap.add_argument("--agents", default=",".join(AGENTS), help="zeroshot: which of " + ",".join(AGENTS))
     ap.add_argument("--renderer", default="gsplat")
     ap.add_argument("--size", type=int, nargs=2, default=(640, 480))
     ap.add_argument("--out", type=Path, default=Path("data/08_reports"))
@@ -203,7 +205,7 @@ def main(argv=None) -> int:
     if a.phase == "train":
         return train(a.rounds, a.episodes, a.grad_steps, a.train_arg)
     if a.phase == "zeroshot":
-        return zeroshot(a.episodes_per_capture, a.per_gpu, a.renderer, a.size, a.gen_episodes)
+        return zeroshot(a.episodes_per_capture, a.per_gpu, a.renderer, a.size, a.gen_episodes, a.agents.split(","))
     if a.phase == "loo":
         return loo(a.loo_rounds, a.loo_episodes, a.loo_grad_steps, a.capture_share, a.episodes_per_capture, a.per_gpu,
                    a.renderer, a.size)
