@@ -12,7 +12,7 @@ import sys
 
 from navarena import quick
 from navarena.quick import shorten
-from navcore.baselines.model import TRACKS, NavSpec
+from navcore.baselines.model import ENCODERS, TRACKS, NavSpec
 from navcore.baselines.train import TrainConfig, Trainer, init_checkpoint
 
 
@@ -58,6 +58,10 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
                         help=f"{text + ' ' if text else ''}({default})")
     ap.add_argument("--aux-goal", action="store_true",
                     help="also a goal-position head (not PointNav; off)")
+    ap.add_argument("--encoder", default="cnn", choices=ENCODERS, help="the visual encoder (cnn)")
+    ap.add_argument("--film", action="store_true", help="the goal conditions every encoder stage (not PointNav; off)")
+    ap.add_argument("--input", type=int, nargs=2, default=None, metavar=("W", "H"),
+                    help="the network's input size (64 48; 128 96 with --encoder resnet)")
     ap.add_argument("--quiet", action="store_true")
     return ap
 
@@ -66,10 +70,12 @@ def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     shorten(a, quick.TRAIN, "navarena train")
     fields_ = {k: getattr(a, k) for k in TrainConfig.__dataclass_fields__ if k != "spec"}
-    if a.aux_goal:
-        if a.task == "pointnav":
-            build_parser().error("--aux-goal applies to --task imagenav and objectnav")
-        fields_["spec"] = NavSpec(task=a.task, rgbd=a.task == "imagenav", aux_goal=True)
+    if a.aux_goal or a.film or a.encoder != "cnn" or a.input:
+        if a.task == "pointnav" and (a.aux_goal or a.film):
+            build_parser().error("--aux-goal and --film apply to --task imagenav and objectnav")
+        w, h = a.input or ((128, 96) if a.encoder == "resnet" else (64, 48))
+        fields_["spec"] = NavSpec(task=a.task, rgbd=a.task == "imagenav", aux_goal=a.aux_goal, encoder=a.encoder,
+                                  film=a.film, depth_w=w, depth_h=h)
     init = init_checkpoint(a.init, a.task) if a.init else None  # read once: its network is this run's
     if init is not None:  # its network, plus the goal-position head when asked for (trained from scratch)
         fields_["spec"] = NavSpec(**{**init["spec"], **({"aux_goal": True} if a.aux_goal else {})})

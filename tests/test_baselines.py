@@ -251,15 +251,17 @@ def test_collection_workers_give_the_same_run_and_check(episode_run, tmp_path):
 
 @pytest.mark.parametrize("task", ["imagenav", "objectnav"])
 def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
-    """ImageNav (RGB-D + the goal image, one encoder) and ObjectNav (RGB-D + the goal category): the
-    loss falls, the checkpoint is of the track and its agent acts on the track's observations; both
+    """ImageNav (RGB-D + the goal image; here FiLM-conditioned ResNet-9) and ObjectNav (RGB-D + the goal
+    category, FiLM-conditioned): the loss falls, the checkpoint is of the track and its agent acts on the track's observations; both
     are labelled by the searching expert, and the card names it (auto resolved)."""
     from navarena.train import main
     from navcore.eval.dataset import NavDataset
     from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
     root = episode_run[0]
-    extra = ["--aux-goal"]  # the goal-position head, an option of both tracks
+    extra = ["--aux-goal", "--film"]  # the goal-position head and the goal's FiLM, options of both tracks
+    if task == "imagenav":  # and the ResNet-9 at a small input
+        extra += ["--encoder", "resnet", "--input", "32", "24"]
     assert main([str(root), "--out", str(tmp_path), "--task", task, *TINY, *extra]) == 0
     card = json.loads((tmp_path / "model_card.json").read_text())
     assert card["task"] == task and card["curve"][0]["loss"] < card["curve"][0]["loss_first"]
@@ -274,6 +276,7 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     # the goal-position head's targets: goal_input's encoding, on every step
     assert np.isfinite(aux).all() and np.allclose(aux[:, 1] ** 2 + aux[:, 2] ** 2, 1, atol=1e-5)
     assert ck["spec"]["aux_goal"] and {"aux_loss_first", "aux_loss"} <= set(card["curve"][0])
+    assert ck["spec"]["film"] and ck["spec"].get("encoder", "cnn") == ("resnet" if task == "imagenav" else "cnn")
     if task == "objectnav":  # the nearest success region: the expert stops within the success radius of one
         from navcore.eval.dataset import NavDataset
 
@@ -824,3 +827,62 @@ def test_capture_share_splits_a_rounds_episodes_between_captures_and_generated_s
     assert uniform.sum() == 1000 and 120 < uniform[8:].sum() < 290  # about 2 in 10
     only_real = episodes_per_scene(scenes[8:], groups[8:], 100, 0.5, np.random.default_rng(0))
     assert only_real.sum() == 100
+
+
+def test_film_and_resnet_specs_round_trip_and_old_specs_keep_their_network():
+    from navcore.baselines.model import NavNet, NavSpec
+
+    new = [NavSpec(task="objectnav", film=True), NavSpec(task="imagenav", rgbd=True, encoder="resnet", depth_w=128, depth_h=96),
+           NavSpec(task="imagenav", rgbd=True, encoder="resnet", film=True, depth_w=128, depth_h=96)]
+    for spec in new:
+        assert NavSpec(**spec.to_dict()) == spec
+    for old in (NavSpec(), NavSpec(task="objectnav"), NavSpec(task="imagenav", rgbd=True)):
+        d = old.to_dict()
+        assert "encoder" not in d and "film" not in d  # a checkpoint written before the options reads as before
+        assert [k for k in NavNet(old).state_dict() if k.startswith("cnn.")] == \
+            ["cnn.0.weight", "cnn.0.bias", "cnn.2.weight", "cnn.2.bias", "cnn.4.weight", "cnn.4.bias", "cnn.6.weight", "cnn.6.bias"]
+    with pytest.raises(ValueError, match="film applies"):
+        NavSpec(film=True)
+    with pytest.raises(ValueError, match="encoder="):
+        NavSpec(encoder="vit")
+
+
+@pytest.mark.parametrize("task", ["objectnav", "imagenav"])
+def test_a_film_network_conditions_its_visual_features_on_the_goal_and_learns_a_goal_dependent_action(task):
+    """The same frames, two goals (two categories; two goal images): the FiLM network's encoder output
+    differs by goal once trained, and it learns an action that depends on the goal alone (a known
+    answer a network that ignored its goal could fit no better than chance)."""
+    import torch
+
+    from navcore.baselines.model import NavNet, NavSpec
+
+    torch.manual_seed(0)
+    spec = NavSpec(task=task, film=True, hidden=16, embed=16, depth_w=32, depth_h=24, rgbd=task == "imagenav",
+                   encoder="resnet" if task == "imagenav" else "cnn")
+    net = NavNet(spec)
+    c = spec.obs_channels
+    frames = torch.rand(1, c, 24, 32).expand(8, c, 24, 32)  # one view for every sample
+    if task == "objectnav":
+        goal = torch.tensor([[1.0], [2.0]] * 4)  # bed, sofa
+        inputs = frames
+    else:
+        images = torch.rand(2, 3, 24, 32)
+        goal = torch.zeros(8, 0)
+        inputs = torch.cat([frames, images.repeat(4, 1, 1, 1)], 1)
+    label = torch.tensor([1, 2] * 4)  # forward for the first goal, left for the second
+    prev = torch.full((8,), 4, dtype=torch.long)
+    opt = torch.optim.Adam(net.parameters(), lr=3e-3)
+    for _ in range(150):
+        logits, _ = net.step(inputs, goal, prev, None)
+        loss = torch.nn.functional.cross_entropy(logits, label)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    assert loss.item() < 0.05 and (net.step(inputs, goal, prev, None)[0].argmax(1) == label).all()
+    with torch.no_grad():
+        if task == "objectnav":
+            cond = net.goal(goal[:2, 0].long())
+        else:
+            cond = torch.relu(net.goal_proj(net.goal_cnn(images)))
+        feats = net.cnn(frames[:2], cond)
+    assert not torch.allclose(feats[0], feats[1])  # the goal reached the encoder, not only the recurrent core

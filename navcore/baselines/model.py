@@ -27,6 +27,8 @@ NUM_ACTIONS = 4
 NO_ACTION = NUM_ACTIONS
 """The previous-action input at an episode's first step."""
 
+ENCODERS = ("cnn", "resnet")
+
 TRACKS = {"pointnav": (True, False, "point"), "imagenav": (False, True, "image"), "objectnav": (True, True, "category")}
 """task -> (depth, RGB, goal kind) of its baseline."""
 
@@ -58,6 +60,16 @@ class NavSpec:
     the goal image, or to find its goal category (ObjectNav's target: the nearest point of the nearest
     instance's success region, where stopping succeeds); acting never reads it. PointNav: False (its
     goal is an input)."""
+    encoder: str = "cnn"
+    """cnn: the first baselines' 4 strided convolutions (64 x 48 in); resnet: a ResNet-9 (a stem and four
+    residual stages of two 3 x 3 convolutions, GroupNorm, global average pooling), the encoder of the
+    early-fusion ImageNav study, for larger inputs (128 x 96: depth_w=128, depth_h=96), where two views
+    of a room can be matched."""
+    film: bool = False
+    """The goal conditions the visual features from the first layers: after each encoder stage, a per-channel
+    scale and shift computed from the goal (FiLM). ObjectNav: from the category's embedding, so that what
+    the encoder looks for, and the STOP it leads to, depend on the category; ImageNav: from the goal
+    image's own encoding by a second encoder (FGPrompt's conditioning). PointNav: False."""
 
     def __post_init__(self):
         if self.task not in TRACKS:
@@ -66,6 +78,10 @@ class NavSpec:
             raise ValueError(f"rgbd applies to the imagenav network, not {self.task!r} (its inputs are fixed: TRACKS)")
         if self.aux_goal and self.task == "pointnav":
             raise ValueError("aux_goal applies to the imagenav and objectnav networks, not 'pointnav' (its goal is an input)")
+        if self.encoder not in ENCODERS:
+            raise ValueError(f"encoder={self.encoder!r}: one of {ENCODERS}")
+        if self.film and self.task == "pointnav":
+            raise ValueError("film applies to the imagenav and objectnav networks, not 'pointnav'")
         object.__setattr__(self, "categories", tuple(self.categories))
 
     @property
@@ -94,12 +110,16 @@ class NavSpec:
     def to_dict(self) -> dict:
         d = asdict(self)
         if self.task == "pointnav":  # the fields of a PointNav spec written before the other tracks
-            d.pop("task"), d.pop("categories")
+            d.pop("task"), d.pop("categories"), d.pop("film")
+            if d["encoder"] == "cnn":
+                d.pop("encoder")
         else:
             d["categories"] = list(self.categories)
-            for name in ("rgbd", "aux_goal"):  # the fields of a spec written before them (the same network)
+            for name in ("rgbd", "aux_goal", "film"):  # the fields of a spec written before them (the same network)
                 if not d[name]:
                     d.pop(name)
+            if d["encoder"] == "cnn":
+                d.pop("encoder")
         return d
 
 
@@ -176,15 +196,24 @@ class NavNet(nn.Module):
     def __init__(self, spec: NavSpec = NavSpec()):
         super().__init__()
         self.spec = spec
-        channels = spec.obs_channels + (3 if spec.goal == "image" else 0)
-        self.cnn = nn.Sequential(
-            nn.Conv2d(channels, 32, 5, stride=2, padding=2), nn.ReLU(),
-            nn.Conv2d(32, 64, 3, stride=2, padding=1), nn.ReLU(),
-            nn.Conv2d(64, 64, 3, stride=2, padding=1), nn.ReLU(),
-            nn.Conv2d(64, 64, 3, stride=2, padding=1), nn.ReLU(),
-            nn.Flatten())
+        # the goal image joins as channels (early fusion), or, with film, conditions the encoder instead
+        channels = spec.obs_channels + (3 if spec.goal == "image" and not spec.film else 0)
+        if spec.encoder == "cnn" and not spec.film:  # the first baselines' encoder (their parameter names)
+            self.cnn = nn.Sequential(
+                nn.Conv2d(channels, 32, 5, stride=2, padding=2), nn.ReLU(),
+                nn.Conv2d(32, 64, 3, stride=2, padding=1), nn.ReLU(),
+                nn.Conv2d(64, 64, 3, stride=2, padding=1), nn.ReLU(),
+                nn.Conv2d(64, 64, 3, stride=2, padding=1), nn.ReLU(),
+                nn.Flatten())
+        else:
+            self.cnn = Encoder(channels, spec.encoder, film=spec.film)
+            if spec.film and spec.goal == "image":  # the goal image's encoding (its own encoder) gives the FiLM input
+                self.goal_cnn = Encoder(3, spec.encoder)
+                self.goal_proj = nn.Linear(self.goal_cnn.width, FILM_INPUT)
         with torch.no_grad():
-            n = self.cnn(torch.zeros(1, channels, spec.depth_h, spec.depth_w)).shape[1]
+            probe = torch.zeros(1, channels, spec.depth_h, spec.depth_w)
+            n = (self.cnn(probe, torch.zeros(1, FILM_INPUT)) if isinstance(self.cnn, Encoder) and spec.film
+                 else self.cnn(probe)).shape[1]
         self.fc = nn.Sequential(nn.Linear(n, spec.embed), nn.ReLU())
         goal_width = 0
         if spec.goal == "point":
@@ -199,10 +228,19 @@ class NavNet(nn.Module):
 
     def features(self, frames: torch.Tensor, goal: torch.Tensor, prev: torch.Tensor) -> torch.Tensor:
         """[N, C, h, w], [N, goal_size], [N] long -> [N, F] (the GRU's input)."""
-        parts = [self.fc(self.cnn(frames))]
-        if self.spec.goal == "point":
+        spec = self.spec
+        if spec.film:
+            if spec.goal == "category":
+                cond = self.goal(goal[:, 0].long())
+            else:  # the goal image: the frames' last 3 channels (observation_input and the trainer stack it there)
+                frames, image = frames[:, :-3], frames[:, -3:]
+                cond = torch.relu(self.goal_proj(self.goal_cnn(image)))
+            parts = [self.fc(self.cnn(frames, cond))]
+        else:
+            parts = [self.fc(self.cnn(frames))]
+        if spec.goal == "point":
             parts.append(self.goal(goal))
-        elif self.spec.goal == "category":
+        elif spec.goal == "category":
             parts.append(self.goal(goal[:, 0].long()))
         parts.append(self.prev(prev))
         return torch.cat(parts, 1)
@@ -225,6 +263,59 @@ class NavNet(nn.Module):
 
     def initial_state(self, batch: int, device=None) -> torch.Tensor:
         return torch.zeros(1, batch, self.spec.hidden, device=device)
+
+
+FILM_INPUT = 32
+"""Width of the goal's code that FiLM reads (ObjectNav's category embedding is this wide)."""
+
+
+class Encoder(nn.Module):
+    """A visual encoder of stages, each optionally followed by FiLM (x * (1 + gamma) + beta, per channel,
+    from the goal's code): cnn, the first baselines' four strided convolutions; resnet, a ResNet-9 (a
+    3 x 3 stem, four residual stages of two 3 x 3 convolutions with GroupNorm, each halving the size),
+    average-pooled to a vector."""
+
+    def __init__(self, channels: int, kind: str = "cnn", film: bool = False):
+        super().__init__()
+        self.kind, self.film = kind, film
+        if kind == "cnn":
+            widths = [32, 64, 64, 64]
+            self.stages = nn.ModuleList(
+                nn.Sequential(nn.Conv2d(c_in, c_out, 5 if i == 0 else 3, stride=2, padding=2 if i == 0 else 1), nn.ReLU())
+                for i, (c_in, c_out) in enumerate(zip([channels, *widths[:-1]], widths)))
+        else:
+            widths = [32, 64, 128, 256]
+            self.stem = nn.Sequential(nn.Conv2d(channels, 32, 3, padding=1, bias=False), nn.GroupNorm(8, 32), nn.ReLU())
+            self.stages = nn.ModuleList(ResBlock(c_in, c_out) for c_in, c_out in zip([32, *widths[:-1]], widths))
+        self.width = widths[-1]
+        if film:
+            self.films = nn.ModuleList(nn.Linear(FILM_INPUT, 2 * w) for w in widths)
+            for f in self.films:  # the identity at the start: conditioning is learned, not imposed
+                nn.init.zeros_(f.weight), nn.init.zeros_(f.bias)
+
+    def forward(self, x: torch.Tensor, cond: torch.Tensor | None = None) -> torch.Tensor:
+        if self.kind != "cnn":
+            x = self.stem(x)
+        for i, stage in enumerate(self.stages):
+            x = stage(x)
+            if self.film:
+                gamma, beta = self.films[i](cond).chunk(2, 1)
+                x = x * (1 + gamma[:, :, None, None]) + beta[:, :, None, None]
+        return x.flatten(1) if self.kind == "cnn" else x.mean((2, 3))
+
+
+class ResBlock(nn.Module):
+    """Two 3 x 3 convolutions with GroupNorm, the first of stride 2, and a strided 1 x 1 shortcut."""
+
+    def __init__(self, c_in: int, c_out: int):
+        super().__init__()
+        self.body = nn.Sequential(
+            nn.Conv2d(c_in, c_out, 3, stride=2, padding=1, bias=False), nn.GroupNorm(8, c_out), nn.ReLU(),
+            nn.Conv2d(c_out, c_out, 3, padding=1, bias=False), nn.GroupNorm(8, c_out))
+        self.skip = nn.Sequential(nn.Conv2d(c_in, c_out, 1, stride=2, bias=False), nn.GroupNorm(8, c_out))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.relu(self.body(x) + self.skip(x))
 
 
 def parameter_count(net: nn.Module) -> int:
