@@ -2,6 +2,7 @@
 depth, and the lifting's multi-view support."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -266,12 +267,18 @@ def test_nanodet_decoding_known_box():
 def test_model_spec_reads_the_json_beside_an_onnx_or_knows_the_release(tmp_path):
     import json
 
-    from navcore.io.models import PICODET, YOLOX, ModelSpec, model_spec
+    from navcore.io.models import PICODET, YOLOX, ModelSpec, resolve
+
+    def model_spec(model):
+        return resolve(model)[2]
 
     assert model_spec(None) == SHIPPED[DEFAULT_MODEL].spec
     assert model_spec("yolo_fastest_1.1_coco") == ModelSpec()
     m = tmp_path / "det.onnx"
-    assert model_spec(str(m)).family == "yolo"  # an ONNX with no JSON: a YOLO export
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        model_spec(str(m))
+    m.write_bytes(b"an unknown model")
+    assert model_spec(str(m)).family == "yolo"  # an ONNX with no JSON, not a known release: a YOLO export
     m.with_suffix(".json").write_text(json.dumps({"family": "nanodet", "input_size": 416}))
     assert model_spec(str(m)) == ModelSpec(family="gfl", input_size=416)
     m.with_suffix(".json").write_text(json.dumps({"family": "picodet", "input_size": 320}))
@@ -287,6 +294,7 @@ def test_model_spec_reads_the_json_beside_an_onnx_or_knows_the_release(tmp_path)
     m.with_suffix(".json").unlink()
     # a copy of a published release is known by its sha256, no JSON needed
     m.write_bytes((MODELS_ROOT / DEFAULT_MODEL / SHIPPED[DEFAULT_MODEL].network).read_bytes())
+    os.utime(m, ns=(1, 1))  # a rewritten file is hashed again (its size or modification time changed)
     assert model_spec(str(m)) == SHIPPED[DEFAULT_MODEL].spec
     assert model_spec(str(tmp_path)) == SHIPPED[DEFAULT_MODEL].spec  # a folder holding one ONNX file
 

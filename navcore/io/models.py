@@ -147,13 +147,27 @@ KNOWN_ONNX = {
 user's copy of one needs no JSON beside it."""
 
 
+_DIGESTS: dict[tuple, str] = {}
+"""(path, size, mtime) -> sha256: a model file is hashed once a process (the pipeline resolves the
+detector for every config hash)."""
+
+
+def file_digest(path: Path) -> str:
+    """sha256_file, remembered while the file's size and modification time stay."""
+    st = path.stat()
+    key = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if key not in _DIGESTS:
+        _DIGESTS[key] = sha256_file(path)
+    return _DIGESTS[key]
+
+
 def _shipped_files(entry: Shipped) -> Path:
     folder = MODELS_ROOT / entry.folder
     for name, digest in entry.files.items():
         p = folder / name
         if not p.is_file():
             raise FileNotFoundError(f"the shipped detector file {p} is missing (reinstall the project)")
-        if sha256_file(p) != digest:
+        if file_digest(p) != digest:
             raise ValueError(f"{p}: sha256 differs from the shipped model's; the file is damaged")
     return folder
 
@@ -201,21 +215,10 @@ def onnx_spec(path: Path) -> ModelSpec:
         raw = {k: tuple(v) if isinstance(v, list) else v for k, v in raw.items()}
         return replace(FAMILY_PRESETS[family], **raw).check(str(side))
     if path.is_file():
-        digest = sha256_file(path)
+        digest = file_digest(path)
         if digest in KNOWN_ONNX:
             return KNOWN_ONNX[digest]
     return ModelSpec()
-
-
-def model_spec(model: str | None) -> ModelSpec:
-    """How to run a detector model (module doc)."""
-    name = DEFAULT_MODEL if model is None else str(model)
-    if name in SHIPPED:
-        return SHIPPED[name].spec
-    path = Path(name)
-    if path.is_dir() and sorted(path.glob("*.onnx")) and not sorted(path.glob("*.cfg")):
-        path = sorted(path.glob("*.onnx"))[0]
-    return onnx_spec(path) if path.suffix == ".onnx" else ModelSpec()
 
 
 def load_net(model: str | None):
