@@ -60,7 +60,7 @@ def chosen_episodes(ds: NavDataset, args) -> dict[str, list]:
                 if none:
                     print(f"navarena eval: --decoy-goal: {len(none)} {task} episodes of scene {sid} left out: the scene "
                           f"has no other {task} goal", file=sys.stderr)
-            out.setdefault(sid, []).extend(eps)
+            out.setdefault(sid, []).extend(quick.short_episodes(eps))
     return {s: e for s, e in out.items() if e}
 
 
@@ -214,6 +214,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
     shorten(args, quick.EVAL, "navarena eval")
+    if quick.quick():
+        print(f"navarena eval: NAVARENA_QUICK is set: at most {quick.EVAL_STEPS} steps an episode", file=sys.stderr)
     import re
 
     bad = check_agent(args.agent)
