@@ -235,7 +235,12 @@ def _protocol(cfg: dict) -> list[str]:
         f"{n} < {u:g} m: {s}" if u < 1e8 else f"{n}: {s}" for n, u, s in zip(diff["names"], diff["upper"], diff["max_steps"]))
           + ". An episode ends when the agent stops (protocol `explicit_stop`) or reaches the goal region (`distance`), or "
           "when its step budget runs out; metrics (SR, SPL, DTW, collisions) are defined in the evaluation docs and "
-          f"computed by `make eval` (dynamics: blocked moves `{cfg['evaluate']['dynamics']['blocked']}`).", ""]
+          f"computed by `make eval` (dynamics: blocked moves `{cfg['evaluate']['dynamics']['blocked']}`).", "",
+          "**Does a policy use its goal?** `navarena eval RELEASE --agent YOURS --decoy-goal` runs the same episodes with "
+          "the agent shown another goal of the scene (ImageNav: another goal image; ObjectNav: another category present "
+          "in the scene; PointNav: another goal point) and scores it on the true goal. The policy's goal gain is its SR "
+          "with the true goal minus its SR with the decoy: a policy that ignores its goal has a gain of 0, and one that "
+          "searches the scene can score well under the distance protocol with none. Report both.", ""]
     return L
 
 
