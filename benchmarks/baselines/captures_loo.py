@@ -17,6 +17,12 @@ scenes' held-out ones and their first TRAIN_SCENES=48 training scenes), PointNav
 the distance protocol, the first N (100) test episodes of a capture, one navarena eval process per
 (capture, agent), several side by side per GPU. Train under the environment's one collision rule
 (navcore.eval.env: a blocked move ends at the last collision-free pose, counted).
+
+On the device machine (2026-12-06): the carry limit (64 MiB with the 27 MB checkout) takes one
+capture a call, and a later call removed the folders an earlier one carried and the wheels
+installed outside data/. Copy each carried capture into data/src/ and install the wheels into
+data/site/ (`pip install --target data/site`), then make the captures' roots from data/src/ paths:
+data/ stays between the calls of one machine.
 """
 from __future__ import annotations
 
