@@ -206,9 +206,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--embodiment", default=None, metavar="NAME", help="the costmap of this embodiment (data roots with several)")
     ap.add_argument("--seed", type=int, default=0, help="seed of stochastic agents")
     ap.add_argument("--decoy-goal", action="store_true",
-                    help="show the agent another goal of the scene (ImageNav: another goal image; ObjectNav: another "
-                         "category; PointNav: another point) and score it on the true one: a policy's goal gain is its "
-                         "SR without this minus its SR with it")
+                    help="the agent sees another goal of the scene (goal gain check)")
     ap.add_argument("--timeout", type=float, default=30.0, help="agent servers: seconds to wait for each action")
     ap.add_argument("--out", default=None, help="output folder (default: navarena_eval/{agent}_{protocol})")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
