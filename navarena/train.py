@@ -25,12 +25,16 @@ def _flag(text: str) -> bool:
     raise argparse.ArgumentTypeError(f"{text!r}: true or false")
 
 
-def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
+ADVANCED = ("batch_episodes", "slots", "max_learner_steps", "view_overlap", "beta", "stop_veto", "lr", "weight_decay",
+            "aux_weight", "train_split", "val_split", "keep", "first_round", "expert")
+"""Options `--help` leaves to `--help-all` (so that the help fits a screen): the recipe's finer knobs."""
+
+
+def build_parser(ap: argparse.ArgumentParser | None = None, show_all: bool = False) -> argparse.ArgumentParser:
     ap = ap or argparse.ArgumentParser(prog="navarena train", usage="navarena train ROOT --out OUT [options]",
                                        description="Train a baseline policy (behaviour cloning, then DAgger) into --out.")
     ap.formatter_class = lambda prog: argparse.HelpFormatter(prog, max_help_position=30)  # one line an option
-    ap.add_argument("root", nargs="+", help="a data root (make dataset) or a release folder; several are trained on "
-                    "together (generated scenes and your captures: see --capture-share)")
+    ap.add_argument("root", nargs="+", help="data roots or releases (several: trained on together)")
     ap.add_argument("--out", required=True, help="the run folder (model.pt, model_card.json, rounds/)")
     ap.add_argument("--resume", action="store_true", help="go on after the last finished round in --out")
     d = TrainConfig()
@@ -55,7 +59,8 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
         kind = {int: int, float: float, bool: _flag}.get(type(default), {"scenes": int, "capture_share": float}.get(name, str))
         ap.add_argument("--" + name.replace("_", "-"), type=kind, default=default,
                         metavar={int: "N", float: "X", _flag: "B"}.get(kind, "S"),
-                        help=f"{text + ' ' if text else ''}({default})")
+                        help=f"{text + ' ' if text else ''}({default})" if show_all or name not in ADVANCED
+                        else argparse.SUPPRESS)
     ap.add_argument("--aux-goal", action="store_true",
                     help="also a goal-position head (not PointNav; off)")
     ap.add_argument("--encoder", default="cnn", choices=ENCODERS, help="the visual encoder (cnn)")
@@ -63,10 +68,14 @@ def build_parser(ap: argparse.ArgumentParser | None = None) -> argparse.Argument
     ap.add_argument("--input", type=int, nargs=2, default=None, metavar=("W", "H"),
                     help="the network's input size (64 48; 128 96 with --encoder resnet)")
     ap.add_argument("--quiet", action="store_true")
+    ap.add_argument("--help-all", action="store_true", help="every option, the recipe's finer knobs too")
     return ap
 
 
 def main(argv: list[str] | None = None) -> int:
+    if "--help-all" in (sys.argv[1:] if argv is None else argv):
+        build_parser(show_all=True).print_help()
+        return 0
     a = build_parser().parse_args(argv)
     shorten(a, quick.TRAIN, "navarena train")
     fields_ = {k: getattr(a, k) for k in TrainConfig.__dataclass_fields__ if k != "spec"}
