@@ -85,10 +85,10 @@ class PythonSession:
     in the work folder with the runner's environment; its own process, so that the libraries a block
     loads (OpenMP through torch) never share a process with the runner's forks."""
 
-    def __init__(self, work: Path, env: dict):
+    def __init__(self, work: Path, env: dict, python: str = sys.executable):
         import threading
 
-        self.proc = subprocess.Popen([sys.executable, "-u", "-c", SERVER], cwd=work, env={**env, "PYTHONPATH": str(work)},
+        self.proc = subprocess.Popen([python, "-u", "-c", SERVER], cwd=work, env={**env, "PYTHONPATH": str(work)},
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         self.lines: list[str] = []
         self.lock = threading.Lock()

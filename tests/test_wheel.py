@@ -266,6 +266,22 @@ def test_release_and_data_root_read_the_same_episodes(release_root, small_releas
             assert np.allclose(x.centres, y.centres) and np.allclose(x.reference_path, y.reference_path)
 
 
+def consumer_venv(whl: Path, tmp_path: Path) -> tuple[Path, float]:
+    """A fresh venv with the consumer's CPU install as docs/library.md gives it (PyTorch's CPU build,
+    then the wheel with its dependencies from the package index); (venv, seconds of the installs)."""
+    import time
+
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
+    py = str(venv / "bin" / "python")
+    t0 = time.perf_counter()
+    for args in (["torch==2.13.0"], [str(whl)]):  # the CPU build (this machine's local file; elsewhere
+        # --index-url https://download.pytorch.org/whl/cpu), then the wheel
+        p = subprocess.run([py, "-m", "pip", "install", "-q", *args], capture_output=True, text=True, timeout=1800)
+        assert p.returncode == 0, p.stderr[-3000:]
+    return venv, time.perf_counter() - t0
+
+
 @pytest.mark.slow
 def test_a_cpu_consumer_install_pulls_no_cuda_package(wheel, tmp_path):
     """The consumer's CPU install as docs/library.md gives it, in a fresh venv: PyTorch's CPU build
@@ -273,17 +289,8 @@ def test_a_cpu_consumer_install_pulls_no_cuda_package(wheel, tmp_path):
     No NVIDIA package comes with it, torch stays the CPU build, navarena doctor passes, and the
     venv's size and the install's seconds are printed (issue 86's target: under 1.5 GB and 3 minutes
     on 2 cores). `make test-all` runs it."""
-    import time
-
-    venv = tmp_path / "venv"
-    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=300)
+    venv, seconds = consumer_venv(wheel[0], tmp_path)
     py = str(venv / "bin" / "python")
-    t0 = time.perf_counter()
-    for args in (["torch==2.13.0"], [str(wheel[0])]):  # the CPU build (this machine's local file; elsewhere
-        # --index-url https://download.pytorch.org/whl/cpu), then the wheel
-        p = subprocess.run([py, "-m", "pip", "install", "-q", *args], capture_output=True, text=True, timeout=1800)
-        assert p.returncode == 0, p.stderr[-3000:]
-    seconds = time.perf_counter() - t0
     listed = subprocess.run([py, "-m", "pip", "list", "--format=freeze"], capture_output=True, text=True).stdout.lower()
     assert not [line for line in listed.splitlines() if line.startswith(("nvidia", "triton", "cuda"))], listed
     assert "+cpu" in subprocess.run([py, "-c", "import torch; print(torch.__version__)"], capture_output=True,
@@ -292,3 +299,39 @@ def test_a_cpu_consumer_install_pulls_no_cuda_package(wheel, tmp_path):
     assert doctor.returncode == 0, doctor.stdout[-3000:]
     size = sum(f.stat().st_size for f in venv.rglob("*") if f.is_file() and not f.is_symlink())
     print(f"consumer venv: {size / 2**30:.2f} GiB, installed in {seconds:.0f} s")
+
+
+@pytest.mark.slow
+def test_the_library_page_runs_verbatim_from_a_fresh_consumer_venv(wheel, project_root, tmp_path):
+    """The new user's check of issue 86: docs/library.md's blocks, in order and as written, run by a
+    fresh consumer venv (CPU torch, then the wheel) in a folder outside the checkout, on the default
+    dataset and its release (made by this checkout's pipeline, as a download would bring them)."""
+    import os
+
+    from docs_runner import PythonSession, blocks, run_block, runnable
+
+    venv, _ = consumer_venv(wheel[0], tmp_path)
+    work = tmp_path / "work"
+    work.mkdir()
+    for cmd in ([sys.executable, "-m", "navarena", "run", f"data_root={work / 'data'}"],
+                [sys.executable, "-m", "navarena", "release", "--root", str(work / "data"), "--out", str(work / "navarena-v1.0.0")]):
+        p = subprocess.run(cmd, cwd=project_root, capture_output=True, text=True, timeout=900)
+        assert p.returncode == 0, (cmd, p.stdout[-2000:], p.stderr[-3000:])
+    (work / "my_release").symlink_to(work / "navarena-v1.0.0")
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
+    env.update({"NAVARENA_QUICK": "1", "PYTHONUNBUFFERED": "1", "VIRTUAL_ENV": str(venv)})
+    bin_ = str(venv / "bin") + "/"
+    session = PythonSession(work, env, python=bin_ + "python")
+    failed = []
+    try:
+        for b in blocks(project_root, ("docs/library.md",)):
+            if runnable(b) or b.kind == "file":
+                r = run_block(b, work, env, session, bin_)
+                if not r.ok:
+                    failed.append(f"{b.where}\n{b.code}\n{r.output}")
+    finally:
+        session.close()
+    assert not failed, "\n\n".join(failed)
+    found = subprocess.run([bin_ + "python", "-c", "import navcore; print(navcore.__file__)"], cwd=work, env=env,
+                           capture_output=True, text=True).stdout
+    assert str(venv) in found and str(project_root) not in found  # the venv's library, not the checkout's
