@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -51,20 +50,23 @@ def log(msg: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {msg}", flush=True)
 
 
-def run(cmd: list[str], out: Path | None = None, env: dict | None = None) -> int:
-    log(" ".join(map(str, cmd)))
+def run(cmd: list, out: Path | None = None, env: dict | None = None) -> int:
+    """The reference run's runner (its own process group, output to `out`), no deadline; logged here."""
+    from benchmarks.baselines.reference import Deadline
+    from benchmarks.baselines.reference import run as run_cmd
+
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
-        with open(out, "w") as f:
-            rc = subprocess.run([str(c) for c in cmd], stdout=f, stderr=subprocess.STDOUT, env=env).returncode
-    else:
-        rc = subprocess.run([str(c) for c in cmd], env=env).returncode
+    rc = run_cmd([str(c) for c in cmd], Deadline(None), out, env)
     log(f"exit {rc}")
     return rc
 
 
-def threads(n: int) -> dict:
-    return {**os.environ, **{k: str(n) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS")}}
+def threads(processes: int) -> dict:
+    """Each of `processes` side by side gets its share of the cores (benchmarks.baselines.reference.threads)."""
+    from benchmarks.baselines.reference import threads as share
+
+    return share(processes)
 
 
 def gen(scenes: int, train: int) -> int:
@@ -118,13 +120,12 @@ def evaluate(jobs: list[tuple[str, Path, str, str]], n: int, per_gpu: int, rende
     """jobs: (label, root, split, agent) -> EVAL/label/summary.json, per_gpu processes side by side."""
     todo = [j for j in jobs if not (EVAL / j[0] / "summary.json").is_file()]
     log(f"evaluate: {len(todo)} of {len(jobs)} to run")
-    cores = max(1, WORKERS // max(1, per_gpu))
 
     def one(job) -> int:
         label, root, split, agent = job
         return run([PY, "-m", "navarena", "eval", root, *agent_args(agent), "--tasks", "pointnav", "--split", split,
                     "--episodes-per-scene", n, "--renderer", renderer, "--width", size[0], "--height", size[1],
-                    "--batch-slots", 50, "--quiet", "--out", EVAL / label], EVAL / f"{label}.log", threads(cores))
+                    "--batch-slots", 50, "--quiet", "--out", EVAL / label], EVAL / f"{label}.log", threads(per_gpu))
 
     with ThreadPoolExecutor(per_gpu) as pool:
         return max([0, *pool.map(one, todo)])
@@ -141,7 +142,7 @@ def loo(rounds: int, episodes: int, grad_steps: int, share: float, n: int, per_g
     if len(caps) < 2:
         log(f"loo: needs at least 2 captures, has {caps}")
         return 1
-    procs = []
+    runs = []
     for held in caps:
         out = RUNS / f"loo_{held}"
         if (out / "model_card.json").is_file():
@@ -150,11 +151,9 @@ def loo(rounds: int, episodes: int, grad_steps: int, share: float, n: int, per_g
         cmd = [PY, "-m", "navarena", "train", ROOT, *others, "--out", out, "--init", RUNS / WORLD / "model.pt",
                "--first-round", "dagger", "--rounds", rounds, "--episodes-per-round", episodes, "--grad-steps", grad_steps,
                "--capture-share", share, "--workers", max(1, WORKERS // len(caps))]
-        log(" ".join(map(str, cmd)))
-        (RUNS / f"loo_{held}.log").parent.mkdir(parents=True, exist_ok=True)
-        procs.append(subprocess.Popen([str(c) for c in cmd], stdout=open(RUNS / f"loo_{held}.log", "w"),
-                                      stderr=subprocess.STDOUT, env=threads(max(1, WORKERS // len(caps)))))
-    rc = max([0, *(p.wait() for p in procs)])
+        runs.append((cmd, RUNS / f"loo_{held}.log"))
+    with ThreadPoolExecutor(max(1, len(runs))) as pool:  # the held-out captures' fine-tunes side by side
+        rc = max([0, *pool.map(lambda r: run(*r, threads(len(caps))), runs)])
     jobs = [(f"loo_{c}", CAPS / c, "test", f"loo_{c}") for c in caps if (RUNS / f"loo_{c}" / "model.pt").is_file()]
     return max(rc, evaluate(jobs, n, per_gpu, renderer, size))
 
