@@ -433,7 +433,7 @@ class Trainer:
         """What model.pt records: the data, the full config, the seed and the curve (no timings and no
         worker count, so one config and seed on one device give the same bytes with any workers)."""
         info = self.ds.info()
-        roots = {"roots": [str(p) for p in self.ds.paths]} if info["kind"] == "combined" else {}
+        roots = {"roots": self.roots} if info["kind"] == "combined" else {}
         return {"task": self.cfg.task, "data": {"root": str(self.ds.path), "kind": info["kind"], **roots,
                                                 "release": info.get("version"), "train_scenes": self.train_scenes,
                                                 "groups": dict(sorted(Counter(self.groups[sid] for sid in self.train_scenes).items())),
