@@ -57,6 +57,9 @@ class Page:
     """Files or folders whose code the figures depend on beside stage outputs (the benchmark's own first)."""
     stages: tuple[str, ...] = ()
     """Pipeline stages whose outputs the figures measure (a stage's hash covers its upstream)."""
+    captured: bool = False
+    """The figures measure scenes read from files only: keyed by the captured scenes' chain
+    (pipeline.graph.StageHashes.captured), which a generator setting does not change."""
 
     @property
     def inputs(self) -> tuple[str, ...]:
@@ -71,23 +74,23 @@ PAGES: dict[str, Page] = {
     "bench_eval.md": Page("make bench-eval", ("benchmarks/closed_loop/eval.py", "navcore/eval", *_RENDER),
                           ("episodes", "objectnav_episodes")),
     "bench_real.md": Page("make bench-real", ("benchmarks/captures/real.py", "benchmarks/captures/scan_truth.py",
-                                              "catalogs/real_indoor.yaml"), ("costmap", "screen", "episodes")),
+                                              "catalogs/real_indoor.yaml"), ("costmap", "screen", "episodes"), captured=True),
     # frames of the aligned scenes at poses the costmap allows (the episodes stage only names the embodiment)
     "bench_realism.md": Page("make bench-realism", ("benchmarks/captures/realism.py", *_RENDER), ("synthesize", "costmap")),
     "bench_density.md": Page("make bench-density", ("benchmarks/captures/density.py", "benchmarks/captures/scan_truth.py"),
-                             ("costmap",)),
+                             ("costmap",), captured=True),
     "bench_screening.md": Page("make bench-screening", ("benchmarks/captures/screening.py", *_RENDER), ("screen",)),
     "bench_reflections.md": Page("python -m benchmarks.map.reflections --docs",
                                  ("benchmarks/map/reflections.py", "benchmarks/map/spatial.py"), ("align",)),
     "bench_semantics.md": Page("make bench-semantics", ("benchmarks/goals/semantics.py",), ("semantics",)),
-    "bench_semantics_real.md": Page("make bench-semantics", ("benchmarks/goals/semantics_real.py",), ("semantics",)),
+    "bench_semantics_real.md": Page("make bench-semantics", ("benchmarks/goals/semantics_real.py",), ("semantics",), captured=True),
     "bench_semantics_detector.md": Page("make bench-semantics", ("benchmarks/goals/semantics_detector.py",
                                                                  "benchmarks/goals/semantics_real.py", "navcore/models"),
-                                        ("semantics",)),
+                                        ("semantics",), captured=True),
     "bench_semantics_views.md": Page("python -m benchmarks.goals.semantics_views --data DATA --docs",
                                      ("benchmarks/goals/semantics_views.py",), ("semantics",)),
     "bench_blind_views.md": Page("python -m benchmarks.dataset.blind_views --docs docs/bench_blind_views.md",
-                                 ("benchmarks/dataset/blind_views.py", *_RENDER), ("episodes",)),
+                                 ("benchmarks/dataset/blind_views.py", *_RENDER), ("episodes",), captured=True),
     "bench_faults.md": Page("make test-faults", ("tests/faults/suite.py", "tests/faults/faults.py",
                                                  "tests/faults/fuzz_frames.py",
                                                  "tests/faults/fuzz_readers.py", "tests/test_faults.py", "pipeline",
@@ -142,7 +145,8 @@ def code_digest(paths: tuple[str, ...], root: Path = ROOT) -> str:
 
 
 def default_stage_hashes() -> dict[str, str]:
-    """Every stage's hash on the default config, as the pipeline keys its markers."""
+    """Every stage's hash on the default config, as the pipeline keys its markers (a
+    pipeline.graph.StageHashes: `.captured` holds the captured scenes' chain)."""
     from hydra import compose, initialize_config_dir
 
     from pipeline.config import CONF_DIR, register_configs
@@ -157,6 +161,8 @@ def page_inputs(name: str, root: Path = ROOT, stage_hashes: dict[str, str] | Non
     """{"code": digest, "stages": {stage: hash}} of page `name` now."""
     page = PAGES[name]
     hashes = stage_hashes if stage_hashes is not None else (default_stage_hashes() if page.stages else {})
+    if page.captured:
+        hashes = getattr(hashes, "captured", hashes)
     return {"code": code_digest(page.code, root), "stages": {s: hashes[s] for s in page.stages}}
 
 

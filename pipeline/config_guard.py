@@ -12,7 +12,7 @@ stage computes and is never refused.
 """
 from __future__ import annotations
 
-from pipeline.graph import BY_NAME, STAGES, scene_hash, stage_config, stage_storage
+from pipeline.graph import BY_NAME, STAGES, stage_config, stage_storage
 from pipeline.markers import read_marker
 
 
@@ -46,7 +46,7 @@ def config_changes(cfg, catalog, scenes, stages, hashes) -> dict[str, dict]:
             if BY_NAME[st.name].only_synthetic and not scene.synthetic:
                 continue
             m = read_marker(catalog.path("markers", scene, stage=st.name))
-            if m is None or m.get("config_hash") == scene_hash(hashes[st.name], st.name, scene):
+            if m is None or m.get("config_hash") == hashes.of(st.name, scene):
                 continue
             row = out.setdefault(st.name, {"scenes": [], "keys": [], "cause": "", "storage_only": True})
             row["scenes"].append(scene.scene_id)

@@ -22,7 +22,7 @@ from pipeline.backends import run_on_dask
 from pipeline.config import unknown_keys, unknown_keys_message
 from pipeline.config_guard import config_changes, describe, refusal
 from pipeline.episode_progress import EpisodeWatcher, rate_column
-from pipeline.graph import closure, config_hashes, scene_hash, selection
+from pipeline.graph import closure, config_hashes, selection
 from pipeline.summary import build_summary, print_summary, write_summary
 from pipeline.tasks import finalize_due, new_run, run_finalize, run_task
 
@@ -122,7 +122,7 @@ def run_graph(cfg, catalog, scenes, stages, hashes: dict, selected: set, results
         for scene in scenes:
             prev = {}
             for st in stages:
-                prev[st.name] = submit(st, scene, scene_hash(hashes[st.name], st.name, scene), cfg.force and st.name in selected,
+                prev[st.name] = submit(st, scene, hashes.of(st.name, scene), cfg.force and st.name in selected,
                                        [prev[n] for n in st.needs if n in prev])
                 handles.append((st.name, scene, prev[st.name]))
         return handles

@@ -187,20 +187,42 @@ def stage_storage(cfg, name: str) -> dict:
             for sec, key, default in BY_NAME[name].storage}
 
 
-def config_hashes(cfg) -> dict[str, str]:
+class StageHashes(dict):
+    """Stage -> hash for generated scenes (the dict itself), and `captured`: the hashes for scenes
+    read from files, whose chain leaves out the stages that apply to generated scenes only (a
+    changed generator setting or default recomputes no real capture). `of(stage, scene)` is the
+    hash a (stage, scene) task is keyed with."""
+
+    def __init__(self, synthetic: dict[str, str], captured: dict[str, str]):
+        super().__init__(synthetic)
+        self.captured = captured
+
+    def of(self, stage: str, scene) -> str:
+        captured = not getattr(scene, "synthetic", True) and stage in self.captured  # a generated-only stage: n/a there
+        return scene_hash((self.captured if captured else self)[stage], stage, scene)
+
+
+def config_hashes(cfg) -> StageHashes:
     """Hash per stage of its config sections, its version and its upstream hashes: a changed
-    config recomputes that stage and everything downstream of it.
+    config recomputes that stage and everything downstream of it. Two chains: the dict itself for
+    generated scenes, `.captured` for scenes read from files (without the generated-only stages).
 
     A stage's storage keys (`Stage.storage`) are left out of every section before hashing, so
     that changing one recomputes no later stage (what they read is the same); the stage itself
     is recomputed, its hash mixing in the key's value, but only when the value is not the default:
     a data root written before the key existed stays valid."""
+    return StageHashes(_chain(cfg, synthetic=True), _chain(cfg, synthetic=False))
+
+
+def _chain(cfg, synthetic: bool) -> dict[str, str]:
     chain: dict[str, str] = {}
     out: dict[str, str] = {}
     for s in STAGES:
+        if s.only_synthetic and not synthetic:
+            continue
         part = stage_config(cfg, s.name)
         blob = json.dumps({"stage": s.name, "version": s.version, "config": part,
-                           "needs": [chain[n] for n in s.needs]}, sort_keys=True, default=str)
+                           "needs": [chain[n] for n in s.needs if n in chain]}, sort_keys=True, default=str)
         chain[s.name] = out[s.name] = hashlib.sha256(blob.encode()).hexdigest()[:16]
         kept = {f"{sec}.{key}": v for sec, key, default in s.storage
                 if (v := OmegaConf.select(cfg, f"{sec}.{key}", default=default)) != default}

@@ -22,6 +22,8 @@ def build_summary(results: list[dict], started: dt.datetime, cat_file, shard: li
                "finished_at": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
                "catalog": str(cat_file), "shard": shard,
                "stages": [s.name for s in stages], "config_hashes": {s.name: hashes[s.name] for s in stages},
+               # the chain of scenes read from files (no generated-only stages): what their markers hold
+               "captured_config_hashes": {s.name: h for s in stages if (h := getattr(hashes, "captured", {}).get(s.name))},
                "counts": {}, "failures": [r for r in results if r["status"] in FAILED],
                "shortfalls": [r for r in results if r.get("shortfall")],
                "warnings": [r for r in results if r.get("warnings")],

@@ -1085,3 +1085,34 @@ def test_the_screening_hint_names_the_runs_own_data_root(tmp_path):
         print_summary(summary, Console(file=f, width=400))
     text = out.read_text()
     assert "data/real_indoor/03_costmaps/screen/<scene_id>.png" in text and "data/real_indoor/_runs/latest.json" in text
+
+
+def test_a_generator_setting_recomputes_no_captured_scene(tmp_path, make_cfg):
+    """Scenes read from files are keyed by a chain without the generated-only stages: a changed
+    synthetic.* setting (or a new generator default) changes every stage's hash of a generated
+    scene and none of a captured one, whose finished stages stay cached."""
+    from navcore.gaussians import GaussianScene
+    from navcore.gaussians.formats import write_inria_ply
+    from pipeline.graph import config_hashes
+
+    rng = np.random.default_rng(0)
+    n = 2000
+    q = rng.normal(size=(n, 4))
+    write_inria_ply(tmp_path / "cap.ply", GaussianScene(
+        means=rng.uniform(-2, 2, (n, 3)).astype(np.float32), quats=(q / np.linalg.norm(q, axis=1, keepdims=True)).astype(np.float32),
+        log_scales=np.full((n, 3), -3, np.float32), opacity_logits=np.zeros(n, np.float32),
+        sh=rng.uniform(-1, 1, (n, 1, 3)).astype(np.float32)))
+    cat = tmp_path / "cat.yaml"
+    cat.write_text(f"scenes:\n  - {{name: cap, group: captures, path: {tmp_path / 'cap.ply'}, format: inria_ply}}\n")
+    other = "synthetic.layout.room_size_max_m=4.3"
+    a, b = config_hashes(make_cfg(tmp_path)), config_hashes(make_cfg(tmp_path, other))
+    assert all(a[k] != b[k] for k in a)  # a generated scene: synthesize heads every chain
+    assert a.captured == b.captured and "synthesize" not in a.captured
+    assert a.captured["ingest"] != a["ingest"]
+    root = tmp_path / "d"
+    first = execute(make_cfg(root, f"scenes.catalog={cat}", "scenes.count=null", "stages=[ingest]"))
+    assert statuses(first) == {"synthesize": "n/a", "ingest": "done"}
+    marker = json.loads(next((root / "_markers" / "ingest").glob("*.json")).read_text())
+    assert marker["config_hash"] == a.captured["ingest"] == first["captured_config_hashes"]["ingest"]
+    again = execute(make_cfg(root, f"scenes.catalog={cat}", "scenes.count=null", "stages=[ingest]", other))
+    assert statuses(again) == {"synthesize": "n/a", "ingest": "cached"}

@@ -4,6 +4,7 @@ up direction and of the floor (cameras are above the floor, their up vectors poi
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,12 @@ import numpy as np
 from navcore.gaussians.model import quat_to_rotmat
 
 CAMERA_FILE = "cameras.json"
+
+
+def intrinsics(width: int, height: int, hfov_deg: float) -> np.ndarray:
+    """[3, 3] float32 pinhole intrinsics for a horizontal field of view."""
+    f = (width / 2) / math.tan(math.radians(hfov_deg) / 2)
+    return np.array([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]], np.float32)
 
 
 def read_cameras(path: Path, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
@@ -28,8 +35,6 @@ def cameras_from_json(data, width: int, height: int) -> tuple[np.ndarray, np.nda
     Two layouts: ours (synthetic scenes: {hfov_deg, poses: [{position, quat_wxyz}]}) and the INRIA
     3DGS training output's cameras.json ([{width, height, position, rotation (camera -> world,
     3x3), fx, fy}, ...])."""
-    from navcore.render.camera import intrinsics
-
     c2w, ks = [], []
     if isinstance(data, dict):
         k = intrinsics(width, height, data["hfov_deg"])

@@ -16,6 +16,10 @@ import math
 
 import numpy as np
 
+from navcore.gaussians.cameras import intrinsics  # the pinhole of a field of view lives with the capture cameras
+
+__all__ = ["camera_to_world", "embodiment_camera", "intrinsics", "viewmats"]
+
 
 def camera_to_world(x: float, y: float, yaw: float, height: float, pitch_deg: float = 0.0) -> np.ndarray:
     """4x4 camera -> world transform (OpenCV camera axes) of a robot pose."""
@@ -35,12 +39,6 @@ def viewmats(poses: np.ndarray, height: float, pitch_deg: float = 0.0) -> np.nda
     for i, (x, y, yaw) in enumerate(np.asarray(poses, float).reshape(-1, 3)):
         out[i] = np.linalg.inv(camera_to_world(x, y, yaw, height, pitch_deg))
     return out.astype(np.float32)
-
-
-def intrinsics(width: int, height: int, hfov_deg: float) -> np.ndarray:
-    """[3, 3] float32 pinhole intrinsics for a horizontal field of view."""
-    f = (width / 2) / math.tan(math.radians(hfov_deg) / 2)
-    return np.array([[f, 0, width / 2], [0, f, height / 2], [0, 0, 1]], np.float32)
 
 
 def embodiment_camera(emb, poses: np.ndarray, width: int | None = None, height: int | None = None):

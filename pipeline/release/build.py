@@ -53,7 +53,7 @@ from navcore.io.release import (
 )
 from navcore.io.stamps import build_time
 from navcore.nav.eval_set import build_listing
-from pipeline.graph import DEFAULT_STAGES, closure, config_hashes, scene_hash
+from pipeline.graph import DEFAULT_STAGES, closure, config_hashes
 from pipeline.markers import read_marker
 from pipeline.release.stats import Stats
 from pipeline.tasks import current
@@ -92,7 +92,7 @@ def not_done(cfg, catalog, scenes) -> list[str]:
     problems = []
     for scene in scenes:
         for st in closure(list(DEFAULT_STAGES)):
-            h = scene_hash(hashes[st.name], st.name, scene)
+            h = hashes.of(st.name, scene)
             if current(st.name, scene, catalog, h, False, verify) is not None:
                 continue
             m = read_marker(catalog.path("markers", scene, stage=st.name))
@@ -331,7 +331,7 @@ def build_release(cfg, out: Path | None = None, console=None) -> dict:
             "name": rcfg.name, "version": rcfg.version, "created": created, "public": bool(rcfg.public),
             "code": code_version(),
             "config": resolved, "config_sha256": hashlib.sha256(resolved_text.encode()).hexdigest(),
-            "stage_hashes": hashes,
+            "stage_hashes": dict(hashes), "captured_stage_hashes": hashes.captured,
             "catalog": {"file": str(cat_file), "sha256": sha256_file(cat_file), "text": Path(cat_file).read_text()},
             "seeds": {"episodes": int(cfg.episodes.seed), "evaluate": int(cfg.evaluate.seed), "eval_set": int(es.seed),
                       "streams": "each (scene, task) draws from sha256('{seed}:{scene_id}:{task}'): navcore/seeds.py"},

@@ -160,7 +160,7 @@ def markers_current(root: Path, scenes: int) -> list[str]:
 
     from navcore.io.catalog import open_catalog
     from pipeline.config import CONF_DIR, register_configs
-    from pipeline.graph import closure, config_hashes, scene_hash
+    from pipeline.graph import closure, config_hashes
     from pipeline.tasks import current
 
     register_configs()
@@ -171,7 +171,7 @@ def markers_current(root: Path, scenes: int) -> list[str]:
     bad = []
     for scene in selected:
         for st in closure(list(cfg.stages)):
-            if current(st.name, scene, catalog, scene_hash(hashes[st.name], st.name, scene), False, "checksum") is None:
+            if current(st.name, scene, catalog, hashes.of(st.name, scene), False, "checksum") is None:
                 bad.append(f"{st.name}/{scene.scene_id}")
     return bad
 
