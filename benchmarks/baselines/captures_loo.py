@@ -7,7 +7,8 @@ so that a run cut by a machine's time limit goes on where it stopped:
     python -m benchmarks.baselines.captures_loo cap NAME=PATH [...]     # a capture's data root (200 PointNav episodes, half test)
     python -m benchmarks.baselines.captures_loo train [--rounds 4 --episodes 2048]
     python -m benchmarks.baselines.captures_loo zeroshot                # the world's policy, pointnav_bc, depth_reactive on every capture
-    python -m benchmarks.baselines.captures_loo loo                     # per capture: fine-tune on the others, evaluate on it
+    python -m benchmarks.baselines.captures_loo loo                     # per capture: fine-tune on the others, evaluate on it;
+                                                                        # and the control: the same fine-tune without captures
     python -m benchmarks.baselines.captures_loo report --out DIR        # the table: DIR/captures_loo.{json,md}
 
 gen: the baselines' reference scenes (benchmarks.baselines.reference: the first SCENES=128 generated
@@ -41,6 +42,8 @@ RUNS = Path(os.environ.get("RUNS", "data/runs_loo"))
 EVAL = Path(os.environ.get("EVAL", "data/eval_loo"))
 WORKERS = int(os.environ.get("WORKERS", str(max(1, (os.cpu_count() or 2) - 2))))
 WORLD = "pn_world"
+CONTROL = "ft_world"
+"""loo's control: the world's policy fine-tuned with the leave-one-out recipe on the generated scenes alone."""
 AGENTS = ("world", "pointnav_bc", "depth_reactive")
 """Zero-shot on each capture: the generated world's policy (RUNS/pn_world), the shipped policy, the
 hand-written controller."""
@@ -111,7 +114,7 @@ def train(rounds: int, episodes: int, grad_steps: int, extra: list[str]) -> int:
 
 
 def agent_args(agent: str) -> list[str]:
-    if agent in ("world",) or agent.startswith("loo_"):
+    if agent in ("world",) or agent.startswith(("loo_", "ft_")):
         return ["--agent", "learned", "--agent-arg", f"checkpoint={RUNS / (WORLD if agent == 'world' else agent) / 'model.pt'}"]
     return ["--agent", agent]
 
@@ -137,24 +140,32 @@ def zeroshot(n: int, per_gpu: int, renderer: str, size, gen_n: int, agents=AGENT
     return max(evaluate(jobs, n, per_gpu, renderer, size), evaluate(gen, gen_n, per_gpu, renderer, size))
 
 
-def loo(rounds: int, episodes: int, grad_steps: int, share: float, n: int, per_gpu: int, renderer: str, size) -> int:
+def loo(rounds: int, episodes: int, grad_steps: int, share: float, n: int, per_gpu: int, renderer: str, size,
+        control: bool = True, extra: tuple = ()) -> int:
     caps = captures()
     if len(caps) < 2:
         log(f"loo: needs at least 2 captures, has {caps}")
         return 1
+    # (label, the captures trained on): one fine-tune per held-out capture, and the control (the same
+    # fine-tune on the generated scenes alone: what the extra rounds buy without the captures)
+    plans = [(f"loo_{held}", [CAPS / c for c in caps if c != held]) for held in caps]
+    if control:
+        plans.append((CONTROL, []))
     runs = []
-    for held in caps:
-        out = RUNS / f"loo_{held}"
+    for label, others in plans:
+        out = RUNS / label
         if (out / "model_card.json").is_file():
             continue
-        others = [CAPS / c for c in caps if c != held]
+        share_args = ["--capture-share", share] if others else []
         cmd = [PY, "-m", "navarena", "train", ROOT, *others, "--out", out, "--init", RUNS / WORLD / "model.pt",
                "--first-round", "dagger", "--rounds", rounds, "--episodes-per-round", episodes, "--grad-steps", grad_steps,
-               "--capture-share", share, "--workers", max(1, WORKERS // len(caps))]
-        runs.append((cmd, RUNS / f"loo_{held}.log"))
-    with ThreadPoolExecutor(max(1, len(runs))) as pool:  # the held-out captures' fine-tunes side by side
-        rc = max([0, *pool.map(lambda r: run(*r, threads(len(caps))), runs)])
+               *share_args, "--workers", max(1, WORKERS // len(plans)), *extra]
+        runs.append((cmd, RUNS / f"{label}.log"))
+    with ThreadPoolExecutor(max(1, len(runs))) as pool:  # the fine-tunes side by side
+        rc = max([0, *pool.map(lambda r: run(*r, threads(len(plans))), runs)])
     jobs = [(f"loo_{c}", CAPS / c, "test", f"loo_{c}") for c in caps if (RUNS / f"loo_{c}" / "model.pt").is_file()]
+    if control and (RUNS / CONTROL / "model.pt").is_file():
+        jobs += [(f"zs_{c}_{CONTROL}", CAPS / c, "test", CONTROL) for c in caps]
     return max(rc, evaluate(jobs, n, per_gpu, renderer, size))
 
 
@@ -195,6 +206,7 @@ def main(argv=None) -> int:
     ap.add_argument("--loo-episodes", type=int, default=768)
     ap.add_argument("--loo-grad-steps", type=int, default=1000)
     ap.add_argument("--capture-share", type=float, default=0.5)
+    ap.add_argument("--no-control", action="store_true", help="loo: without the control fine-tune on the generated scenes alone")
     ap.add_argument("-n", "--episodes-per-capture", type=int, default=100)
     ap.add_argument("--gen-episodes", type=int, default=30, help="zeroshot: per held-out generated scene (0: none)")
     ap.add_argument("--per-gpu", type=int, default=6)
@@ -213,7 +225,7 @@ def main(argv=None) -> int:
         return zeroshot(a.episodes_per_capture, a.per_gpu, a.renderer, a.size, a.gen_episodes, a.agents.split(","))
     if a.phase == "loo":
         return loo(a.loo_rounds, a.loo_episodes, a.loo_grad_steps, a.capture_share, a.episodes_per_capture, a.per_gpu,
-                   a.renderer, a.size)
+                   a.renderer, a.size, not a.no_control, a.train_arg)
     report(a.out)
     return 0
 
