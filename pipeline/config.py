@@ -147,9 +147,9 @@ class AssetConfig:
     files.aligned_ply is null for spz, and NavArena's tools load either. source: no file at all,
     the asset's link to the original (asset.source=reference) plus the manifest's
     aligned_from_source (how ingest read it, a checksum) and extrinsic matrix give the same
-    Gaussians to the bit (navcore.io.asset_files.load_aligned): the smallest asset (the real SOG
-    room 1.28x -> 0.05x of its source with voxels and maps, the SPZ hall 1.30x -> 0.20x), read
-    only by NavArena's tools; not with export.formats habitat, whose episodes name an aligned
+    Gaussians to the bit (navcore.io.asset_files.load_aligned): the smallest asset (a twentieth of
+    its source on the real SOG room, with voxels and maps: docs/scale.md), read only by NavArena's
+    tools; not with export.formats habitat, whose episodes name an aligned
     file."""
     labels: str = "model_predicted"
     """labels.json from: model_predicted (the semantics stage's instances) | ground_truth (synthetic

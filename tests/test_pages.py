@@ -120,6 +120,42 @@ def test_hand_written_pages_include_the_generated_figures_instead_of_copying_the
     assert not broken, broken
 
 
+FIGURE = __import__("re").compile(
+    r"(?<![\w.,])(\d{1,3}(?:,\d{3})+(?![\d.])|\d[\d,]*\.\d+\s?(?:x|s|ms|us|frames/s|steps/s|%|KB|MB|GiB|dB)"
+    r"|\d{3,}\s?(?:s|frames/s|steps/s))(?![\w/])")
+"""A measured figure as the pages write it: 3,282 / 1.77x / 60.9 % / 395 s / 111.6 dB."""
+
+
+def _distinctive(token: str) -> bool:
+    """Three significant digits or more and not a round number (2,000 episodes is a setting, 2,459 a
+    measurement)."""
+    digits = "".join(c for c in token if c.isdigit()).lstrip("0")
+    return len(digits) >= 3 and not digits.endswith("00")
+
+
+def test_hand_written_prose_holds_no_figure_of_a_benchmark_page():
+    """The figures of a benchmark page reach the guides through its tables' includes (or a link),
+    never retyped into prose or a hand-made table, where they drift when the page is re-measured: no
+    distinctive figure of a generated page (three significant digits, not round, with its unit) in a
+    hand-written page."""
+    generated: dict[str, str] = {}
+    for p in sorted((ROOT / PAGES_DIR).glob("bench_*.md")):
+        for m in FIGURE.finditer(p.read_text()):
+            if _distinctive(m[0]):
+                generated.setdefault(m[0], p.name)
+    written = [p for p in (ROOT / "docs").rglob("*.md") if "benchmarks" not in p.relative_to(ROOT / "docs").parts]
+    copies = []
+    for page in [*written, ROOT / "README.md"]:
+        # the Baselines section of evaluation.md is generated too (from the model cards), lines kept
+        # and a guide's own measurements (`<!-- own-figures: how they were measured -->`, up to the next
+        # heading) are not a page's
+        text = __import__("re").sub(r"<!-- baselines:begin.*?<!-- baselines:end -->|<!-- own-figures:.*?(?=^#|\Z)",
+                                    lambda m: "\n" * m[0].count("\n"), page.read_text(), flags=__import__("re").S | __import__("re").M)
+        copies += [f"{page.relative_to(ROOT)}:{text[:m.start()].count(chr(10)) + 1}: {m[0]} (from {generated[m[0]]})"
+                   for m in FIGURE.finditer(text) if m[0] in generated]
+    assert not copies, "include the page's table or link to it instead:\n" + "\n".join(copies)
+
+
 def test_section_markers_wrap_every_table_and_are_idempotent():
     from benchmarks.pages import mark_sections
 

@@ -52,10 +52,8 @@ class CostmapConfig:
     raw_resolution: float = 0.005
     """Target xy cell size of the body-band voxelization that locates obstacle boundaries, metres
     (rounded so that an odd number of fine cells spans one map cell: 11 per 5 cm cell). The fast
-    setting 0.01 (5 per cell) runs the fine pass 3-4x faster (1.27 vs 4.23 s median on the 1 M
-    generated scenes, 9.1 vs 37.9 s on the 1.5 M real room) for 0.8 / 0.9 points more state /
-    motion FP against the mesh (2.98 / 3.24 % vs 2.21 / 2.31 %, bench-spatial's 10 scenes at
-    0.05 m; 0.006 gives 2.34 / 2.56 %); FN 0 at all (stages/costmap/design.md)."""
+    setting 0.01 (5 per cell) runs the fine pass 3-4x faster for under a point more state / motion
+    FP against the mesh, FN 0 at all (the measurements: stages/costmap/design.md)."""
     z_resolution: float = 0.05
     """Voxel height in the body band, metres (evidence=voxel)."""
     evidence: str = "voxel"
