@@ -64,8 +64,11 @@ def config_changes(cfg, catalog, scenes, stages, hashes) -> dict[str, dict]:
             else:
                 ups = [n for n in BY_NAME[st.name].needs if n in out]
                 newer = [] if ups else recomputed_since(m, st.name, scene, catalog)
+                before_keying = not scene.synthetic and m.get("keyed") != "captured"
                 row["cause"] = row["cause"] or (
                     f"its upstream {', '.join(ups)} changed" if ups else
+                    "made before scenes read from files were keyed apart from the generator's settings: recompute "
+                    "once, after which a synthetic.* setting no longer touches them" if before_keying else
                     f"it was made from an older {', '.join(newer)}: {'they were' if len(newer) > 1 else 'that stage was'}"
                     f" recomputed since, with the settings of this run, and {st.name} was not" if newer else
                     "the stage's code version or the scene's catalog options changed")

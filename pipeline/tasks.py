@@ -124,7 +124,10 @@ def _run_locked(stage, stage_name, scene, cfg, catalog, config_hash, force, veri
         write_marker(marker, {"stage": stage_name, "scene_id": scene.scene_id, "config_hash": config_hash,
                               "config": stage_config(cfg, stage_name), "storage": stage_storage(cfg, stage_name),
                               "duration_s": duration, "info": info, "sources": used, "run": run,
-                              "manifest": manifest})
+                              "manifest": manifest,
+                              # keyed by the captured scenes' chain (pipeline.graph.StageHashes): the config
+                              # guard tells a root made before that keying from one made with other settings
+                              **({} if scene.synthetic else {"keyed": "captured"})})
     except OSError as e:  # an output gone after the stage, or no room for the marker: not done
         marker.unlink(missing_ok=True)
         return {**base, "status": "failed", "error": f"after the stage: {describe(e, catalog)}",

@@ -1116,3 +1116,10 @@ def test_a_generator_setting_recomputes_no_captured_scene(tmp_path, make_cfg):
     assert marker["config_hash"] == a.captured["ingest"] == first["captured_config_hashes"]["ingest"]
     again = execute(make_cfg(root, f"scenes.catalog={cat}", "scenes.count=null", "stages=[ingest]", other))
     assert statuses(again) == {"synthesize": "n/a", "ingest": "cached"}
+    assert marker["keyed"] == "captured"
+    # a root made before the keying (its marker keyed by the generated scenes' chain): the guard says so
+    path = next((root / "_markers" / "ingest").glob("*.json"))
+    old = {k: v for k, v in marker.items() if k != "keyed"} | {"config_hash": a["ingest"]}
+    path.write_text(json.dumps(old))
+    refused = execute(make_cfg(root, f"scenes.catalog={cat}", "scenes.count=null", "stages=[voxelize]"))
+    assert "keyed apart from the generator's settings" in refused["refused"]
