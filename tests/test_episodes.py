@@ -265,6 +265,22 @@ def test_generator_yields_valid_balanced_episodes(task, room_with_door):
 
 # ---- the stage on a generated scene: storage, re-check, determinism, exports ---------------------
 
+def test_every_goal_category_a_generated_scene_holds_gets_objectnav_episodes(episode_run):
+    """The new world's furniture and clutter leave every goal object reachable as a goal: each
+    category among the scene's ground-truth objects has ObjectNav episodes (the default dataset's
+    4 scenes: all 8 categories)."""
+    from stages.synthesize.generate import load_ground_truth
+
+    root, _, summary = episode_run
+    obj = pd.read_parquet(root / "05_episodes", filters=[("task", "==", "objectnav")])
+    names = {r["scene_id"]: r["scene"] for r in summary["results"] if r["stage"] == "synthesize"}
+    for sid, name in names.items():
+        gt = load_ground_truth(root / "00_sources" / "synthetic" / name)
+        held = {o["category"] for o in gt["objects"]}
+        got = set(obj.loc[obj["scene_id"] == sid, "goal_object_category"])
+        assert held and held <= got, (name, sorted(held - got))
+
+
 def test_stored_episodes_query_with_pandas_and_pass_the_recheck(episode_run):
     root, _, summary = episode_run
     eps = pd.read_parquet(root / "05_episodes")

@@ -103,3 +103,19 @@ def test_dressed_surfaces_carry_texture_and_windows_are_bright():
     looks = plan_rooms(s.layout, np.random.default_rng(9), cfg)
     windows = [d for look in looks for _, d in look.decals if d.kind == "window"]
     assert windows and all(d.colour.min() > 0.8 for d in windows)
+
+
+def test_every_objectnav_category_is_placed_by_the_default_layout():
+    """The goal objects' categories keep their labels through the new world's furniture: over 40
+    seeds of the default layout every ObjectNav category is placed, in at least a tenth of the scenes
+    (the default dataset's ObjectNav episodes then cover every category a scene holds: test_episodes)."""
+    from navcore.nav.tasks import OBJECTNAV_CATEGORIES
+    from stages.synthesize.layout import make_layout
+
+    cfg = SyntheticConfig()
+    seen = {c: 0 for c in OBJECTNAV_CATEGORIES}
+    for seed in range(40):
+        for cat in {o.category for o in make_layout(np.random.default_rng(seed), cfg.layout).objects}:
+            seen[cat] += 1
+    assert set(CATEGORIES) == set(OBJECTNAV_CATEGORIES)
+    assert min(seen.values()) >= 4, seen
