@@ -141,7 +141,7 @@ def zeroshot(n: int, per_gpu: int, renderer: str, size, gen_n: int, agents=AGENT
 
 
 def loo(rounds: int, episodes: int, grad_steps: int, share: float, n: int, per_gpu: int, renderer: str, size,
-        control: bool = True, extra: tuple = ()) -> int:
+        control: bool = True, extra: tuple = (), captures_only: bool = False) -> int:
     caps = captures()
     if len(caps) < 2:
         log(f"loo: needs at least 2 captures, has {caps}")
@@ -149,15 +149,16 @@ def loo(rounds: int, episodes: int, grad_steps: int, share: float, n: int, per_g
     # (label, the captures trained on): one fine-tune per held-out capture, and the control (the same
     # fine-tune on the generated scenes alone: what the extra rounds buy without the captures)
     plans = [(f"loo_{held}", [CAPS / c for c in caps if c != held]) for held in caps]
-    if control:
+    if control and not captures_only:
         plans.append((CONTROL, []))
     runs = []
     for label, others in plans:
         out = RUNS / label
         if (out / "model_card.json").is_file():
             continue
-        share_args = ["--capture-share", share] if others else []
-        cmd = [PY, "-m", "navarena", "train", ROOT, *others, "--out", out, "--init", RUNS / WORLD / "model.pt",
+        share_args = ["--capture-share", share] if others and not captures_only else []
+        roots = others if captures_only else [ROOT, *others]
+        cmd = [PY, "-m", "navarena", "train", *roots, "--out", out, "--init", RUNS / WORLD / "model.pt",
                "--first-round", "dagger", "--rounds", rounds, "--episodes-per-round", episodes, "--grad-steps", grad_steps,
                *share_args, "--workers", max(1, WORKERS // len(plans)), *extra]
         runs.append((cmd, RUNS / f"{label}.log"))
@@ -207,6 +208,8 @@ def main(argv=None) -> int:
     ap.add_argument("--loo-grad-steps", type=int, default=1000)
     ap.add_argument("--capture-share", type=float, default=0.5)
     ap.add_argument("--no-control", action="store_true", help="loo: without the control fine-tune on the generated scenes alone")
+    ap.add_argument("--captures-only", action="store_true",
+                    help="loo: fine-tune on the two other captures alone (no generated scenes, no control; no gen phase needed)")
     ap.add_argument("-n", "--episodes-per-capture", type=int, default=100)
     ap.add_argument("--gen-episodes", type=int, default=30, help="zeroshot: per held-out generated scene (0: none)")
     ap.add_argument("--per-gpu", type=int, default=6)
@@ -225,7 +228,7 @@ def main(argv=None) -> int:
         return zeroshot(a.episodes_per_capture, a.per_gpu, a.renderer, a.size, a.gen_episodes, a.agents.split(","))
     if a.phase == "loo":
         return loo(a.loo_rounds, a.loo_episodes, a.loo_grad_steps, a.capture_share, a.episodes_per_capture, a.per_gpu,
-                   a.renderer, a.size, not a.no_control, a.train_arg)
+                   a.renderer, a.size, not a.no_control, a.train_arg, a.captures_only)
     report(a.out)
     return 0
 
