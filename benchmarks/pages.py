@@ -89,7 +89,7 @@ PAGES: dict[str, Page] = {
                                         ("semantics",), captured=True),
     "bench_semantics_views.md": Page("python -m benchmarks.goals.semantics_views --data DATA --docs",
                                      ("benchmarks/goals/semantics_views.py",), ("semantics",)),
-    "bench_blind_views.md": Page("python -m benchmarks.dataset.blind_views --docs docs/bench_blind_views.md",
+    "bench_blind_views.md": Page("python -m benchmarks.dataset.blind_views --docs docs/benchmarks/bench_blind_views.md",
                                  ("benchmarks/dataset/blind_views.py", *_RENDER), ("episodes",), captured=True),
     "bench_faults.md": Page("make test-faults", ("tests/faults/suite.py", "tests/faults/faults.py",
                                                  "tests/faults/fuzz_frames.py",
