@@ -129,7 +129,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--level", default="moderate", help="oracle corruption level: none | moderate | heavy")
     ap.add_argument("--renderer", default="auto")
     ap.add_argument("--out", default="data/08_reports")
-    ap.add_argument("--docs", action="store_true", help="also write docs/bench_semantics_views.md")
+    ap.add_argument("--docs", action="store_true", help="also write docs/benchmarks/bench_semantics_views.md")
     ap.add_argument("overrides", nargs="*", help="Hydra overrides of the data root's config")
     args = ap.parse_args(argv)
     rep = run(args)

@@ -257,7 +257,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="data/08_reports")
     ap.add_argument("--eval-episodes", type=int, default=64, help="evaluated episodes per scene and task")
     ap.add_argument("--markdown", action="store_true", help="print the page of an existing multi_gpu.json")
-    ap.add_argument("--docs", action="store_true", help="write docs/bench_multi_gpu.md from an existing multi_gpu.json")
+    ap.add_argument("--docs", action="store_true", help="write docs/benchmarks/bench_multi_gpu.md from an existing multi_gpu.json")
     ap.add_argument("--renderer", default="gsplat", help="the evaluation's renderer (cpu: a smoke test without CUDA)")
     # an env worker process (started by the env phase)
     ap.add_argument("--env-worker", action="store_true", help=argparse.SUPPRESS)

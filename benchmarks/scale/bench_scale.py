@@ -399,7 +399,7 @@ def main(argv=None) -> int:
     rp.add_argument("--data", default="data")
     rp.add_argument("--real-root")
     rp.add_argument("--compact-root")
-    rp.add_argument("--docs", help="also write the markdown report here (make bench-scale: docs/bench_scale.md)")
+    rp.add_argument("--docs", help="also write the markdown report here (make bench-scale: docs/benchmarks/bench_scale.md)")
     rp.add_argument("--notes", help="a markdown file appended to the report (what the run found)")
     for p in sub.choices.values():
         p.add_argument("--out", default="data/08_reports")

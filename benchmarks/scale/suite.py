@@ -36,7 +36,7 @@ def _run(args: list[str], env: dict | None = None) -> None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--skip-runs", action="store_true", help="reuse the pipeline runs' data roots already there")
-    ap.add_argument("--docs", default="docs/bench_scale.md")
+    ap.add_argument("--docs", default="docs/benchmarks/bench_scale.md")
     a = ap.parse_args(argv)
     try:
         if not a.skip_runs:
