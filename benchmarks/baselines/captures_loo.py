@@ -170,6 +170,64 @@ def loo(rounds: int, episodes: int, grad_steps: int, share: float, n: int, per_g
     return max(rc, evaluate(jobs, n, per_gpu, renderer, size))
 
 
+RUN_ORDER = ("world", CONTROL, "loo", "pointnav_bc", "depth_reactive", "random")
+"""The capture table's columns: zero-shot, the control, leave-one-out, the shipped policy, the references."""
+
+
+def run_of(label: str, caps: list[str]) -> tuple[str, str] | None:
+    """(capture, run) of an evaluation's label: loo_<capture> or zs_<capture>_<agent>."""
+    for c in sorted(caps, key=len, reverse=True):
+        if label == f"loo_{c}":
+            return c, "loo"
+        if label.startswith(f"zs_{c}_"):
+            return c, label[len(f"zs_{c}_"):]
+    return None
+
+
+def paired(a, b) -> dict:
+    """Two runs' successes on the episodes both finished without an error: SR of each, the episodes
+    only one of them solved, and the two-sided sign test's p over those."""
+    from scipy.stats import binomtest
+
+    a, b = (x[x["error"].isna() | (x["error"] == "")].set_index("episode_id")["sr"] for x in (a, b))
+    both = a.index.intersection(b.index)
+    a, b = a[both] > 0.5, b[both] > 0.5
+    only_a, only_b = int((a & ~b).sum()), int((b & ~a).sum())
+    p = binomtest(only_a, only_a + only_b).pvalue if only_a + only_b else 1.0
+    return {"episodes": len(both), "sr": float(a.mean()) if len(both) else None,
+            "sr_ref": float(b.mean()) if len(both) else None, "only": only_a, "only_ref": only_b, "p": round(float(p), 4)}
+
+
+def capture_table(caps: list[str], ref: str = "depth_reactive") -> tuple[list[dict], list[str]]:
+    """Per capture and run: SR on the capture's evaluated test episodes, paired with `ref` on the same
+    episodes (rows, and the markdown table: capture x run, 'SR (n); +only / -only_ref, p')."""
+    import pandas as pd
+
+    res: dict[tuple[str, str], object] = {}
+    for d in sorted(EVAL.glob("*/results.parquet")):
+        key = run_of(d.parent.name, caps)
+        if key:
+            res[key] = pd.read_parquet(d)
+    runs = [r for r in RUN_ORDER if any(k[1] == r for k in res)] + sorted({k[1] for k in res} - set(RUN_ORDER))
+    rows, lines = [], ["| capture | " + " | ".join(runs) + " |", "|---|" + "---:|" * len(runs)]
+    for c in caps:
+        cells = []
+        for r in runs:
+            if (c, r) not in res:
+                cells.append("-")
+                continue
+            if r != ref and (c, ref) in res:
+                pr = paired(res[(c, r)], res[(c, ref)])
+                rows.append({"capture": c, "run": r, "ref": ref, **pr})
+                cells.append(f"{pr['sr']:.2f} ({pr['episodes']}); +{pr['only']} / -{pr['only_ref']}, p {pr['p']:.2g}")
+            else:
+                t = res[(c, r)]
+                rows.append({"capture": c, "run": r, "episodes": len(t), "sr": float(t["sr"].mean())})
+                cells.append(f"{t['sr'].mean():.2f} ({len(t)})")
+        lines.append(f"| {c} | " + " | ".join(cells) + " |")
+    return rows, lines
+
+
 def report(out: Path) -> dict:
     rows = []
     for s in sorted(EVAL.glob("*/summary.json")):
@@ -182,11 +240,15 @@ def report(out: Path) -> dict:
     res = {"rows": rows, "runs": {k: {"curve": c["curve"], "data": c["data"], "train_seconds": c.get("train_seconds"),
                                       "trained_on": c.get("trained_on"), "sha256": c["sha256"]} for k, c in cards.items()}}
     out.mkdir(parents=True, exist_ok=True)
-    (out / "captures_loo.json").write_text(json.dumps(res, indent=1, default=str) + "\n")
     lines = ["| run | data | agent | episodes | SR | SPL | CR |", "|---|---|---|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['label']} | {r['root']} | {r['agent']} | {r['episodes']} | {r['sr']:.3f} | {r['spl']:.3f} | "
                      f"{r['cr']:.3f} |")
+    table_rows, table = capture_table(captures())
+    res["captures"] = table_rows
+    (out / "captures_loo.json").write_text(json.dumps(res, indent=1, default=str) + "\n")
+    lines += ["", "Per capture (SR on its evaluated test episodes; beside depth_reactive on the same episodes: "
+              "episodes only this run solved / only depth_reactive solved, two-sided sign test):", "", *table]
     (out / "captures_loo.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     return res

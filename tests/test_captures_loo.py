@@ -1,0 +1,34 @@
+"""The leave-one-capture-out run's table (benchmarks.baselines.captures_loo): runs read from their
+evaluation labels, paired with the reference on the same episodes."""
+import pandas as pd
+import pytest
+
+from benchmarks.baselines import captures_loo
+
+
+def _results(path, successes, error_at=None):
+    path.mkdir(parents=True)
+    pd.DataFrame({"episode_id": [f"test_{i}" for i in range(len(successes))],
+                  "sr": [float(s) for s in successes],
+                  "error": ["boom" if i == error_at else None for i in range(len(successes))]}
+                 ).to_parquet(path / "results.parquet")
+
+
+def test_capture_table_pairs_each_run_with_the_reference(tmp_path, monkeypatch):
+    monkeypatch.setattr(captures_loo, "EVAL", tmp_path)
+    _results(tmp_path / "zs_room_world", [1, 1, 0, 0, 1, 0])
+    _results(tmp_path / "zs_room_depth_reactive", [1, 0, 0, 1, 0, 0])
+    _results(tmp_path / "loo_room", [1, 1, 1, 1, 1, 1], error_at=5)  # the errored episode is left out of the pair
+    _results(tmp_path / "zs_room_b_world", [0, 0])  # another capture whose name starts like this one
+    assert captures_loo.run_of("zs_room_b_world", ["room", "room_b"]) == ("room_b", "world")
+    assert captures_loo.run_of("loo_room", ["room", "room_b"]) == ("room", "loo")
+    rows, lines = captures_loo.capture_table(["room", "room_b"])
+    by = {(r["capture"], r["run"]): r for r in rows}
+    world, loo = by[("room", "world")], by[("room", "loo")]
+    assert (world["episodes"], world["sr"], world["sr_ref"], world["only"], world["only_ref"]) == (6, 0.5, 1 / 3, 2, 1)
+    assert world["p"] == pytest.approx(1.0)  # 2 against 1: no evidence either way
+    assert (loo["episodes"], loo["only"], loo["only_ref"], loo["sr"]) == (5, 3, 0, 1.0)
+    assert loo["p"] == pytest.approx(0.25)
+    assert by[("room", "depth_reactive")] == {"capture": "room", "run": "depth_reactive", "episodes": 6, "sr": 1 / 3}
+    assert lines[0] == "| capture | world | loo | depth_reactive |"
+    assert lines[3] == "| room_b | 0.00 (2) | - | - |"
