@@ -156,7 +156,8 @@ eval: $(STAMP)
 # the generated world against the real captures (issue 82): image statistics of frames at matched camera
 # heights and pitches, and a generated-vs-real classifier's held-out accuracy, before (the same scenes without
 # synthetic.look, data/realism/before) and after (make dataset's) -> docs/benchmarks/bench_realism.md
-REALISM_STAGES := stages=[synthesize,ingest,voxelize,align,costmap,screen,episodes]
+# frames need no semantics: the stage named (so a root made with other detector settings is not refused) and off
+REALISM_STAGES := stages=[synthesize,ingest,voxelize,align,costmap,screen,episodes,semantics] semantics.enabled=false
 bench-realism: dataset
 	$(BIN)/python -m pipeline $(REALISM_STAGES) scenes=real_indoor data_root=data/realism/captures
 	$(BIN)/python -m pipeline $(REALISM_STAGES) data_root=data/realism/before synthetic.look.enabled=false \

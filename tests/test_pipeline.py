@@ -1123,3 +1123,17 @@ def test_a_generator_setting_recomputes_no_captured_scene(tmp_path, make_cfg):
     path.write_text(json.dumps(old))
     refused = execute(make_cfg(root, f"scenes.catalog={cat}", "scenes.count=null", "stages=[voxelize]"))
     assert "keyed apart from the generator's settings" in refused["refused"]
+
+
+def test_semantics_off_gives_objectnav_a_said_shortfall_not_a_failure(tmp_path, make_cfg, costmap_root):
+    """The own-capture guide's quick first look (semantics.enabled=false) on the default tasks: the
+    run succeeds, ObjectNav has no episodes and the summary says why; PointNav and ImageNav stand."""
+    costmap_root(tmp_path)
+    s = execute(make_cfg(tmp_path, "stages=[episodes]", "semantics.enabled=false"))
+    assert not s["failures"], s["failures"]
+    on = next(r for r in s["results"] if r["stage"] == "objectnav_episodes")
+    (short,) = on["shortfall"]
+    assert on["status"] == "done" and short["task"] == "objectnav" and short["episodes"] == 0
+    assert "semantics.enabled=false" in short["reason"]
+    eps = pd.read_parquet(tmp_path / "05_episodes")
+    assert set(eps["task"]) == {"pointnav", "imagenav"} and len(eps) > 0

@@ -134,9 +134,14 @@ def generate(scene, cfg, catalog, objects: bool) -> dict:
     shortfalls = []
     for name in tasks:
         tcfg: TaskConfig = OmegaConf.to_object(cfg.task[name])
-        instances = None
+        instances, why_none = None, None
         if tcfg.type == "objectnav":
-            instances = load_instances(scene, catalog, tcfg.instance_source).to_pylist()
+            if tcfg.instance_source == "model_predicted" and not cfg.semantics.enabled:
+                # the quick first look (docs/own-capture.md): no goal instances, said, and the other tasks stand
+                instances, why_none = [], ("no goal instances: semantics.enabled=false (the semantics stage made none; "
+                                           "enable it, or use labels the dataset ships, for ObjectNav)")
+            else:
+                instances = load_instances(scene, catalog, tcfg.instance_source).to_pylist()
         seed = stream_seed(ecfg.seed, scene.scene_id, name)
         if not screen["kept"]:  # screen.reject: the scene's verdict is reject; its shards stay empty
             for ds, schema in (("episodes", EPISODE_SCHEMA), ("trajectories", TRAJECTORY_SCHEMA)):
@@ -163,7 +168,7 @@ def generate(scene, cfg, catalog, objects: bool) -> dict:
         result["tasks"][name]["difficulty"] = shares
         if len(res.episodes) < res.requested:
             shortfalls.append({"task": name, "episodes": len(res.episodes), "requested": res.requested,
-                               "rejections": dict(sorted(res.rejections.items()))})
+                               "rejections": dict(sorted(res.rejections.items())), **({"reason": why_none} if why_none else {})})
         elif ecfg.difficulty.balance and res.episodes and max(abs(s - 1 / len(shares)) for s in shares.values()) > 0.1:
             longest = max(e["geodesic_distance"] for e in res.episodes)
             shortfalls.append({"task": name, "episodes": len(res.episodes), "requested": res.requested, "rejections": {},
