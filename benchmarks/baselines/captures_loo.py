@@ -187,13 +187,12 @@ def run_of(label: str, caps: list[str]) -> tuple[str, str] | None:
 def paired(a, b) -> dict:
     """Two runs' successes on the episodes both finished without an error: SR of each, the episodes
     only one of them solved, and the two-sided sign test's p over those."""
-    from scipy.stats import binomtest
+    from benchmarks.baselines.goal_ablation import sign_test
 
     a, b = (x[x["error"].isna() | (x["error"] == "")].set_index("episode_id")["sr"] for x in (a, b))
     both = a.index.intersection(b.index)
     a, b = a[both] > 0.5, b[both] > 0.5
-    only_a, only_b = int((a & ~b).sum()), int((b & ~a).sum())
-    p = binomtest(only_a, only_a + only_b).pvalue if only_a + only_b else 1.0
+    only_a, only_b, p = sign_test(a.tolist(), b.tolist())
     return {"episodes": len(both), "sr": float(a.mean()) if len(both) else None,
             "sr_ref": float(b.mean()) if len(both) else None, "only": only_a, "only_ref": only_b, "p": round(float(p), 4)}
 

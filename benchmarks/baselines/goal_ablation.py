@@ -82,11 +82,19 @@ def measure(root: str, split: str = "val_unseen", per_scene: int = 10, agent: st
                                       render=f"{width}x{height} cpu", protocol=protocol))
 
 
+def sign_test(a, b) -> tuple[int, int, float]:
+    """Two runs' successes on the same episodes (booleans, in the same order): the episodes only the
+    first solved, only the second, and the two-sided sign test's p over those (1.0 when none)."""
+    from scipy.stats import binomtest
+
+    only_a = sum(bool(x) and not y for x, y in zip(a, b))
+    only_b = sum(bool(y) and not x for x, y in zip(a, b))
+    return only_a, only_b, float(binomtest(only_a, only_a + only_b).pvalue) if only_a + only_b else 1.0
+
+
 def report(rows: dict[str, list[dict]], seconds: dict[str, float], setting: dict) -> dict:
     """Per variant SR, SPL, steps and walked metres; per pair of variants the episodes that succeed for
     one alone and the sign test's p."""
-    from scipy.stats import binomtest
-
     key = {v: {(r["scene_id"], r["episode_id"]): r for r in rs} for v, rs in rows.items()}
     common = sorted(set.intersection(*(set(k) for k in key.values())))
     out = {"setting": setting, "episodes": len(common), "variants": {}, "pairs": {}}
@@ -100,9 +108,7 @@ def report(rows: dict[str, list[dict]], seconds: dict[str, float], setting: dict
     names = list(rows)
     for i, a in enumerate(names):
         for b in names[i + 1:]:
-            only_a = sum(key[a][k]["sr"] > 0 and key[b][k]["sr"] == 0 for k in common)
-            only_b = sum(key[a][k]["sr"] == 0 and key[b][k]["sr"] > 0 for k in common)
-            p = binomtest(only_a, only_a + only_b).pvalue if only_a + only_b else 1.0
+            only_a, only_b, p = sign_test([key[a][k]["sr"] > 0 for k in common], [key[b][k]["sr"] > 0 for k in common])
             out["pairs"][f"{a}/{b}"] = {f"only_{a}": int(only_a), f"only_{b}": int(only_b), "sign_test_p": float(p)}
     return out
 
