@@ -211,17 +211,18 @@ def config_hashes(cfg) -> StageHashes:
     that changing one recomputes no later stage (what they read is the same); the stage itself
     is recomputed, its hash mixing in the key's value, but only when the value is not the default:
     a data root written before the key existed stays valid."""
-    return StageHashes(_chain(cfg, synthetic=True), _chain(cfg, synthetic=False))
+    # each stage's config once (its inputs may read files): both chains hash the same parts
+    parts = {s.name: stage_config(cfg, s.name) for s in STAGES}
+    return StageHashes(_chain(cfg, parts, synthetic=True), _chain(cfg, parts, synthetic=False))
 
 
-def _chain(cfg, synthetic: bool) -> dict[str, str]:
+def _chain(cfg, parts: dict[str, dict], synthetic: bool) -> dict[str, str]:
     chain: dict[str, str] = {}
     out: dict[str, str] = {}
     for s in STAGES:
         if s.only_synthetic and not synthetic:
             continue
-        part = stage_config(cfg, s.name)
-        blob = json.dumps({"stage": s.name, "version": s.version, "config": part,
+        blob = json.dumps({"stage": s.name, "version": s.version, "config": parts[s.name],
                            "needs": [chain[n] for n in s.needs if n in chain]}, sort_keys=True, default=str)
         chain[s.name] = out[s.name] = hashlib.sha256(blob.encode()).hexdigest()[:16]
         kept = {f"{sec}.{key}": v for sec, key, default in s.storage
