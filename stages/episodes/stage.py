@@ -139,7 +139,7 @@ def generate(scene, cfg, catalog, objects: bool) -> dict:
             if tcfg.instance_source == "model_predicted" and not cfg.semantics.enabled:
                 # the quick first look (docs/own-capture.md): no goal instances, said, and the other tasks stand
                 instances, why_none = [], ("no goal instances: semantics.enabled=false (the semantics stage made none; "
-                                           "enable it, or use labels the dataset ships, for ObjectNav)")
+                                           "enable it for ObjectNav: it also reads the labels a dataset ships)")
             else:
                 instances = load_instances(scene, catalog, tcfg.instance_source).to_pylist()
         seed = stream_seed(ecfg.seed, scene.scene_id, name)
