@@ -228,6 +228,8 @@ def capture_table(caps: list[str], ref: str = "depth_reactive") -> tuple[list[di
 
 
 def report(out: Path) -> dict:
+    from navcore.io import jsonio
+
     rows = []
     for s in sorted(EVAL.glob("*/summary.json")):
         d = json.loads(s.read_text())
@@ -245,7 +247,7 @@ def report(out: Path) -> dict:
                      f"{r['cr']:.3f} |")
     table_rows, table = capture_table(captures())
     res["captures"] = table_rows
-    (out / "captures_loo.json").write_text(json.dumps(res, indent=1, default=str) + "\n")
+    (out / "captures_loo.json").write_text(jsonio.dumps(res, indent=1, default=str) + "\n")  # null, never NaN
     lines += ["", "Per capture (SR on its evaluated test episodes; beside depth_reactive on the same episodes: "
               "episodes only this run solved / only depth_reactive solved, two-sided sign test):", "", *table]
     (out / "captures_loo.md").write_text("\n".join(lines) + "\n")
