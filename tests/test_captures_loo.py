@@ -32,3 +32,37 @@ def test_capture_table_pairs_each_run_with_the_reference(tmp_path, monkeypatch):
     assert by[("room", "depth_reactive")] == {"capture": "room", "run": "depth_reactive", "episodes": 6, "sr": 1 / 3}
     assert lines[0] == "| capture | world | loo | depth_reactive |"
     assert lines[3] == "| room_b | 0.00 (2) | - | - |"
+
+
+def test_loo_evaluates_only_finished_fine_tunes_one_after_the_other(tmp_path, monkeypatch):
+    """A fine-tune that failed part-way (out of GPU memory: a model.pt of its --init weights, no card)
+    is not evaluated as the leave-one-out run; by default the fine-tunes run one at a time, each with
+    every worker."""
+    caps, runs = tmp_path / "caps", tmp_path / "runs"
+    for c in ("a", "b", "c"):
+        (caps / c / "05_episodes" / "task=pointnav" / "x").mkdir(parents=True)
+    monkeypatch.setattr(captures_loo, "CAPS", caps)
+    monkeypatch.setattr(captures_loo, "RUNS", runs)
+    monkeypatch.setattr(captures_loo, "WORKERS", 12)
+    started, live, most = [], [0], [0]
+
+    def fake_run(cmd, out=None, env=None):
+        label = out.stem
+        live[0] += 1
+        most[0] = max(most[0], live[0])
+        started.append((label, cmd[cmd.index("--workers") + 1]))
+        folder = runs / label
+        folder.mkdir(parents=True)
+        (folder / "model.pt").write_bytes(b"init")
+        if label != "loo_b":  # loo_b dies after writing its driver weights
+            (folder / "model_card.json").write_text("{}")
+        live[0] -= 1
+        return 0 if label != "loo_b" else 1
+
+    evaluated = []
+    monkeypatch.setattr(captures_loo, "run", fake_run)
+    monkeypatch.setattr(captures_loo, "evaluate", lambda jobs, *a: evaluated.extend(j[0] for j in jobs) or 0)
+    rc = captures_loo.loo(1, 8, 10, 0.5, 5, 1, "cpu", (64, 48), control=False, captures_only=True)
+    assert rc == 1
+    assert sorted(evaluated) == ["loo_a", "loo_c"]
+    assert most[0] == 1 and all(w == 12 for _, w in started)

@@ -141,7 +141,7 @@ def zeroshot(n: int, per_gpu: int, renderer: str, size, gen_n: int, agents=AGENT
 
 
 def loo(rounds: int, episodes: int, grad_steps: int, share: float, n: int, per_gpu: int, renderer: str, size,
-        control: bool = True, extra: tuple = (), captures_only: bool = False) -> int:
+        control: bool = True, extra: tuple = (), captures_only: bool = False, parallel: int = 1) -> int:
     caps = captures()
     if len(caps) < 2:
         log(f"loo: needs at least 2 captures, has {caps}")
@@ -160,12 +160,21 @@ def loo(rounds: int, episodes: int, grad_steps: int, share: float, n: int, per_g
         roots = others if captures_only else [ROOT, *others]
         cmd = [PY, "-m", "navarena", "train", *roots, "--out", out, "--init", RUNS / WORLD / "model.pt",
                "--first-round", "dagger", "--rounds", rounds, "--episodes-per-round", episodes, "--grad-steps", grad_steps,
-               *share_args, "--workers", max(1, WORKERS // len(plans)), *extra]
+               *share_args, "--workers", max(1, WORKERS // max(1, parallel)), *extra]
         runs.append((cmd, RUNS / f"{label}.log"))
-    with ThreadPoolExecutor(max(1, len(runs))) as pool:  # the fine-tunes side by side
-        rc = max([0, *pool.map(lambda r: run(*r, threads(len(plans))), runs)])
-    jobs = [(f"loo_{c}", CAPS / c, "test", f"loo_{c}") for c in caps if (RUNS / f"loo_{c}" / "model.pt").is_file()]
-    if control and (RUNS / CONTROL / "model.pt").is_file():
+    # `parallel` fine-tunes side by side (1: one after the other, each with every worker): three side by
+    # side on one 80 GB GPU ran out of its memory (every collector worker holds a renderer of its scene)
+    side = max(1, min(parallel, len(runs)))
+    with ThreadPoolExecutor(side) as pool:
+        rc = max([0, *pool.map(lambda r: run(*r, threads(side)), runs)])
+    # a finished run has its card (written last); a run that failed part-way leaves a model.pt (the
+    # --init weights, or an earlier round's) that must not be evaluated as the run's
+    done = {label for label, _ in plans if (RUNS / label / "model_card.json").is_file()}
+    for label, _ in plans:
+        if label not in done:
+            log(f"loo: {label} did not finish (no model_card.json; see {RUNS / f'{label}.log'}): not evaluated")
+    jobs = [(f"loo_{c}", CAPS / c, "test", f"loo_{c}") for c in caps if f"loo_{c}" in done]
+    if control and CONTROL in done:
         jobs += [(f"zs_{c}_{CONTROL}", CAPS / c, "test", CONTROL) for c in caps]
     return max(rc, evaluate(jobs, n, per_gpu, renderer, size))
 
@@ -276,6 +285,9 @@ def main(argv=None) -> int:
     ap.add_argument("-n", "--episodes-per-capture", type=int, default=100)
     ap.add_argument("--gen-episodes", type=int, default=30, help="zeroshot: per held-out generated scene (0: none)")
     ap.add_argument("--per-gpu", type=int, default=6)
+    ap.add_argument("--parallel", type=int, default=1,
+                    help="loo: fine-tunes side by side (each gets WORKERS / parallel collector workers; three side by "
+                         "side ran out of an 80 GB GPU's memory)")
     ap.add_argument("--agents", default=",".join(AGENTS), help="zeroshot: which of " + ",".join(AGENTS))
     ap.add_argument("--renderer", default="gsplat")
     ap.add_argument("--size", type=int, nargs=2, default=(640, 480))
@@ -291,7 +303,7 @@ def main(argv=None) -> int:
         return zeroshot(a.episodes_per_capture, a.per_gpu, a.renderer, a.size, a.gen_episodes, a.agents.split(","))
     if a.phase == "loo":
         return loo(a.loo_rounds, a.loo_episodes, a.loo_grad_steps, a.capture_share, a.episodes_per_capture, a.per_gpu,
-                   a.renderer, a.size, not a.no_control, a.train_arg, a.captures_only)
+                   a.renderer, a.size, not a.no_control, a.train_arg, a.captures_only, a.parallel)
     report(a.out)
     return 0
 
