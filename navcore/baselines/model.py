@@ -27,7 +27,7 @@ NUM_ACTIONS = 4
 NO_ACTION = NUM_ACTIONS
 """The previous-action input at an episode's first step."""
 
-ENCODERS = ("cnn", "resnet")
+ENCODERS = ("cnn", "resnet", "effnet_lite0")
 
 TRACKS = {"pointnav": (True, False, "point"), "imagenav": (False, True, "image"), "objectnav": (True, True, "category")}
 """task -> (depth, RGB, goal kind) of its baseline."""
@@ -64,7 +64,11 @@ class NavSpec:
     """cnn: the first baselines' 4 strided convolutions (64 x 48 in); resnet: a ResNet-9 (a stem and four
     residual stages of two 3 x 3 convolutions, GroupNorm, global average pooling), the encoder of the
     early-fusion ImageNav study, for larger inputs (128 x 96: depth_w=128, depth_h=96), where two views
-    of a room can be matched."""
+    of a room can be matched; effnet_lite0: ImageNet-pretrained EfficientNet-Lite0 (navcore.baselines.
+    pretrained), frozen, read to its block PRETRAINED_BLOCK (112 channels at 1/16 of the input), then
+    trainable layers (`PretrainedEncoder`): RGB tracks only, with depth through the small CNN beside it;
+    ImageNav's goal image goes through the same frozen network and joins as feature-map channels. Its
+    weights are not stored in checkpoints (the `pretrained` extra's package holds them)."""
     film: bool = False
     """The goal conditions the visual features from the first layers: after each encoder stage, a per-channel
     scale and shift computed from the goal (FiLM). ObjectNav: from the category's embedding, so that what
@@ -80,6 +84,8 @@ class NavSpec:
             raise ValueError("aux_goal applies to the imagenav and objectnav networks, not 'pointnav' (its goal is an input)")
         if self.encoder not in ENCODERS:
             raise ValueError(f"encoder={self.encoder!r}: one of {ENCODERS}")
+        if self.encoder == "effnet_lite0" and self.task == "pointnav":
+            raise ValueError("encoder=effnet_lite0 reads RGB: the imagenav and objectnav networks, not 'pointnav' (depth only)")
         if self.film and self.task == "pointnav":
             raise ValueError("film applies to the imagenav and objectnav networks, not 'pointnav'")
         object.__setattr__(self, "categories", tuple(self.categories))
@@ -198,7 +204,10 @@ class NavNet(nn.Module):
         self.spec = spec
         # the goal image joins as channels (early fusion), or, with film, conditions the encoder instead
         channels = spec.obs_channels + (3 if spec.goal == "image" and not spec.film else 0)
-        if spec.encoder == "cnn" and not spec.film:  # the first baselines' encoder (their parameter names)
+        if spec.encoder == "effnet_lite0":  # reads the goal image itself (frames' last 3 channels)
+            self.cnn = PretrainedEncoder(spec)
+            channels = spec.obs_channels + 3 * (spec.goal == "image")
+        elif spec.encoder == "cnn" and not spec.film:  # the first baselines' encoder (their parameter names)
             self.cnn = nn.Sequential(
                 nn.Conv2d(channels, 32, 5, stride=2, padding=2), nn.ReLU(),
                 nn.Conv2d(32, 64, 3, stride=2, padding=1), nn.ReLU(),
@@ -212,7 +221,7 @@ class NavNet(nn.Module):
                 self.goal_proj = nn.Linear(self.goal_cnn.width, FILM_INPUT)
         with torch.no_grad():
             probe = torch.zeros(1, channels, spec.depth_h, spec.depth_w)
-            n = (self.cnn(probe, torch.zeros(1, FILM_INPUT)) if isinstance(self.cnn, Encoder) and spec.film
+            n = (self.cnn(probe, torch.zeros(1, FILM_INPUT)) if spec.film and not isinstance(self.cnn, nn.Sequential)
                  else self.cnn(probe)).shape[1]
         self.fc = nn.Sequential(nn.Linear(n, spec.embed), nn.ReLU())
         goal_width = 0
@@ -229,7 +238,10 @@ class NavNet(nn.Module):
     def features(self, frames: torch.Tensor, goal: torch.Tensor, prev: torch.Tensor) -> torch.Tensor:
         """[N, C, h, w], [N, goal_size], [N] long -> [N, F] (the GRU's input)."""
         spec = self.spec
-        if spec.film:
+        if spec.encoder == "effnet_lite0":  # the goal image (ImageNav) is read inside; FiLM from the category
+            cond = self.goal(goal[:, 0].long()) if spec.film and spec.goal == "category" else None
+            parts = [self.fc(self.cnn(frames, cond))]
+        elif spec.film:
             if spec.goal == "category":
                 cond = self.goal(goal[:, 0].long())
             else:  # the goal image: the frames' last 3 channels (observation_input and the trainer stack it there)
@@ -302,6 +314,76 @@ class Encoder(nn.Module):
                 gamma, beta = self.films[i](cond).chunk(2, 1)
                 x = x * (1 + gamma[:, :, None, None]) + beta[:, :, None, None]
         return x.flatten(1) if self.kind == "cnn" else x.mean((2, 3))
+
+
+PRETRAINED_BLOCK = 10
+"""The last block of the frozen EfficientNet-Lite0 the pretrained encoder reads: the end of its fifth
+stage, 112 channels at 1/16 of the input (an 8 x 6 map of a 128 x 96 view)."""
+
+
+class PretrainedEncoder(nn.Module):
+    """encoder=effnet_lite0: the frozen ImageNet EfficientNet-Lite0 to block PRETRAINED_BLOCK on the
+    RGB frame (and on ImageNav's goal image, whose map joins the frame's as channels: early fusion at
+    the feature level; with film it gives the FiLM input instead), then trainable layers: a 1 x 1 and a
+    3 x 3 convolution (128 channels, GroupNorm, each followed by FiLM from the goal's code when film), a
+    1 x 1 to 32 channels, flattened (the map keeps where things are). Depth, where the track reads it,
+    goes through the first baselines' small CNN beside it. The frozen network is held outside the
+    module's parameters: it is neither trained nor stored in checkpoints, follows the module's device
+    and dtype, and stays in eval mode (its batch-norm statistics are ImageNet's)."""
+
+    def __init__(self, spec: NavSpec):
+        super().__init__()
+        from navcore.baselines.pretrained import block_channels, load_pretrained
+
+        self.__dict__["backbone"] = load_pretrained()
+        self.depth, self.image_goal, self.film = spec.depth, spec.goal == "image", spec.film
+        c = block_channels(PRETRAINED_BLOCK)
+        fused = c * (2 if self.image_goal and not self.film else 1)
+        self.adapt = nn.Sequential(nn.Conv2d(fused, 128, 1, bias=False), nn.GroupNorm(8, 128), nn.ReLU())
+        self.mix = nn.Sequential(nn.Conv2d(128, 128, 3, padding=1, bias=False), nn.GroupNorm(8, 128), nn.ReLU())
+        self.out = nn.Sequential(nn.Conv2d(128, 32, 1), nn.ReLU(), nn.Flatten())
+        if self.film:
+            self.films = nn.ModuleList(nn.Linear(FILM_INPUT, 2 * 128) for _ in range(2))
+            for f in self.films:  # the identity at the start, as Encoder's
+                nn.init.zeros_(f.weight), nn.init.zeros_(f.bias)
+            if self.image_goal:
+                self.goal_proj = nn.Linear(c, FILM_INPUT)
+        if self.depth:
+            self.depth_cnn = Encoder(1, "cnn")
+
+    def _apply(self, fn, recurse=True):
+        super()._apply(fn, recurse)
+        self.backbone._apply(fn, recurse)
+        return self
+
+    def train(self, mode: bool = True):
+        super().train(mode)
+        self.backbone.eval()
+        return self
+
+    def forward(self, frames: torch.Tensor, cond: torch.Tensor | None = None) -> torch.Tensor:
+        d = int(self.depth)
+        images = frames[:, d:d + 3]
+        if self.image_goal:  # one pass of the frozen network over the frames and the goal images
+            images = torch.cat([images, frames[:, -3:]])
+        with torch.no_grad():
+            maps = self.backbone.features(self.backbone.normalise(images), PRETRAINED_BLOCK)
+        if self.image_goal:
+            maps, goal = maps.chunk(2)
+            if self.film:
+                cond = torch.relu(self.goal_proj(goal.mean((2, 3))))
+            else:
+                maps = torch.cat([maps, goal], 1)
+        x = maps
+        for i, layer in enumerate((self.adapt, self.mix)):
+            x = layer(x)
+            if self.film:
+                gamma, beta = self.films[i](cond).chunk(2, 1)
+                x = x * (1 + gamma[:, :, None, None]) + beta[:, :, None, None]
+        parts = [self.out(x)]
+        if self.depth:
+            parts.append(self.depth_cnn(frames[:, :1]))
+        return torch.cat(parts, 1)
 
 
 class ResBlock(nn.Module):
