@@ -15,6 +15,7 @@ CONSUMER = {"inspect": ("navarena.inspect_scene", "a 3DGS file before any run: f
             "doctor": ("navarena.doctor", "what this machine has: Python, packages, GPU, gsplat, FFmpeg, extras"),
             "eval": ("navarena.evaluate", "evaluate an agent in closed loop on a data root or a release"),
             "train": ("navarena.train", "train a learned baseline (behaviour cloning + DAgger) on a data root or release"),
+            "train-rl": ("navarena.train_rl", "fine-tune a learned baseline with PPO (after BC + DAgger) in the batched environment"),
             "train-stop": ("navarena.train_stop", "train ObjectNav's stop verifier (which categories a STOP succeeds for)"),
             "card": ("navarena.card", "a training run's model card: ship it, add figures, write its markdown"),
             "serve-agent": ("navarena.serve_agent", "serve an agent over the agent-server protocol"),

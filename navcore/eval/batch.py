@@ -32,9 +32,14 @@ class BatchNavEnv:
         return self._observe(range(len(episodes)))
 
     def reset_slot(self, i: int, ep) -> dict:
-        self.envs[i].reset(ep)
-        self._goal_images([i])
-        return self._observe([i])[0]
+        return self.reset_slots({i: ep})[i]
+
+    def reset_slots(self, episodes: dict) -> dict:
+        """New episodes in several slots ({slot: episode}), their first views in one render call."""
+        for i, ep in episodes.items():
+            self.envs[i].reset(ep)
+        self._goal_images(list(episodes))
+        return dict(zip(episodes, self._observe(list(episodes))))
 
     def step(self, actions) -> tuple[list[dict], list[dict]]:
         """actions: one per slot (None for a finished slot)."""

@@ -1,0 +1,48 @@
+"""PPO fine-tuning (navcore.baselines.ppo, navarena train-rl): GAE's known answers, and a tiny run on
+the CPU whose policy any learned agent reads, deterministic for a seed, which resumes where it stopped."""
+import json
+
+import torch
+
+from navcore.baselines.ppo import gae
+
+TINY = ["--task", "pointnav", "--slots", "8", "--horizon", "24", "--minibatches", "2", "--epochs", "2", "--lr", "0.002",
+        "--width", "32", "--height", "24", "--renderer", "cpu", "--input", "32", "24", "--protocol", "distance",
+        "--quiet"]
+
+
+def test_gae_known_answers():
+    """One step, gamma 0.5, lambda 1: the advantage is r + gamma V' - V; an ended episode bootstraps
+    nothing; lambda 0 is the one-step TD error at every step."""
+    r = torch.tensor([[1.0], [2.0]])
+    v = torch.tensor([[0.5], [1.0]])
+    last = torch.tensor([4.0])
+    adv, ret = gae(r, v, torch.zeros(2, 1), last, 0.5, 1.0)
+    d1 = 2.0 + 0.5 * 4.0 - 1.0
+    d0 = 1.0 + 0.5 * 1.0 - 0.5
+    assert torch.allclose(adv[:, 0], torch.tensor([d0 + 0.5 * d1, d1]))
+    assert torch.allclose(ret, adv + v)
+    adv, _ = gae(r, v, torch.tensor([[1.0], [0.0]]), last, 0.5, 1.0)  # the first episode ended at step 0
+    assert torch.allclose(adv[:, 0], torch.tensor([1.0 - 0.5, d1]))
+    adv, _ = gae(r, v, torch.zeros(2, 1), last, 0.5, 0.0)
+    assert torch.allclose(adv[:, 0], torch.tensor([d0, d1]))
+
+
+def test_ppo_runs_writes_a_policy_any_learned_agent_reads_and_resumes(episode_run, tmp_path):
+    """Two updates: the card's curve, a model.pt the learned agent loads, the same bytes for the same
+    seed, and --resume goes on from the checkpoint with the curve kept."""
+    from navarena.train_rl import main
+    from navcore.baselines.agent import LearnedNavAgent
+
+    root = episode_run[0]
+    args = [str(root), "--horizon", "8", "--updates", "2", "--save-every", "1", *TINY]
+    assert main([*args, "--out", str(tmp_path / "a")]) == 0
+    card = json.loads((tmp_path / "a" / "rl_card.json").read_text())
+    assert [c["update"] for c in card["curve"]] == [0, 1] and card["recipe"] == "ppo"
+    assert {"return", "sr", "policy_loss", "value_loss", "entropy", "frames_per_s"} <= set(card["curve"][0])
+    LearnedNavAgent(checkpoint=str(tmp_path / "a" / "model.pt"))  # a policy any learned agent reads
+    assert main([*args, "--out", str(tmp_path / "b")]) == 0  # same seed, same policy bytes (CPU)
+    assert (tmp_path / "a" / "model.pt").read_bytes() == (tmp_path / "b" / "model.pt").read_bytes()
+    assert main([str(root), "--out", str(tmp_path / "a"), "--horizon", "8", "--updates", "3", "--resume", *TINY]) == 0
+    again = json.loads((tmp_path / "a" / "rl_card.json").read_text())
+    assert [c["update"] for c in again["curve"]] == [0, 1, 2] and again["curve"][:2] == card["curve"]
