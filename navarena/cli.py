@@ -104,6 +104,15 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(code)
 
 
+def help_all(build_parser, argv: list[str] | None) -> bool:
+    """A subcommand's --help-all: when argv (or the command line) asks for it, the help of
+    build_parser(show_all=True), every option with the finer knobs, is printed; True when it was."""
+    if "--help-all" not in (sys.argv[1:] if argv is None else argv):
+        return False
+    build_parser(show_all=True).print_help()
+    return True
+
+
 def _dispatch(args: list[str]):
     if args[0] in CONSUMER:
         code = importlib.import_module(CONSUMER[args[0]][0]).main(args[1:])

@@ -11,6 +11,7 @@ import argparse
 import sys
 
 from navarena import quick
+from navarena.cli import help_all
 from navarena.quick import shorten
 from navcore.baselines.model import ENCODERS, TRACKS, NavSpec
 from navcore.baselines.train import TrainConfig, Trainer, init_checkpoint
@@ -74,8 +75,7 @@ def build_parser(ap: argparse.ArgumentParser | None = None, show_all: bool = Fal
 
 
 def main(argv: list[str] | None = None) -> int:
-    if "--help-all" in (sys.argv[1:] if argv is None else argv):
-        build_parser(show_all=True).print_help()
+    if help_all(build_parser, argv):
         return 0
     a = build_parser().parse_args(argv)
     shorten(a, quick.TRAIN, "navarena train")

@@ -12,8 +12,10 @@ import argparse
 import sys
 from dataclasses import asdict
 
+from navarena.cli import help_all
 from navcore.baselines.model import NavSpec
-from navcore.baselines.ppo import PPOConfig, PPOTrainer, init_of
+from navcore.baselines.ppo import PPOConfig, PPOTrainer
+from navcore.baselines.train import init_checkpoint
 
 ADVANCED = {"epochs", "minibatches", "clip", "gamma", "lam", "value_coef", "entropy_coef", "max_grad_norm",
             "collision_reward", "split", "save_every", "scene_updates"}
@@ -43,8 +45,7 @@ def build_parser(show_all: bool = False) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    if "--help-all" in (sys.argv[1:] if argv is None else argv):
-        build_parser(show_all=True).print_help()
+    if help_all(build_parser, argv):
         return 0
     a = build_parser().parse_args(argv)
     fields_ = {k: getattr(a, k) for k in PPOConfig.__dataclass_fields__ if k != "spec"}
@@ -53,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
         fields_["spec"] = NavSpec(task=a.task, rgbd=a.task == "imagenav", depth_w=w, depth_h=h)
     try:
         cfg = PPOConfig(**fields_)
-        trainer = PPOTrainer(a.root, a.out, cfg, init=init_of(a.init, a.task), quiet=a.quiet)
+        trainer = PPOTrainer(a.root, a.out, cfg, init=init_checkpoint(a.init, a.task) if a.init else None, quiet=a.quiet)
     except ValueError as e:
         print(f"navarena train-rl: {e}", file=sys.stderr)
         return 2

@@ -322,13 +322,3 @@ class PPOTrainer:
         card = {"name": self.out.name, "file": "model.pt", "sha256": sha, "task": self.cfg.task, **meta,
                 "root": str(self.root), "device": self.device, "curve": self.curve}
         write_text_atomic(self.out / "rl_card.json", jsonio.dumps(card, indent=1, default=str) + "\n")
-
-
-def init_of(init: str | None, task: str) -> dict | None:
-    """The --init checkpoint (a file or a shipped name), or None."""
-    if init is None:
-        return None
-    from navcore.baselines.train import init_checkpoint
-
-    return init_checkpoint(init, task)
-
