@@ -434,6 +434,13 @@ def _shard_runs(root: Path, since: float = 0.0) -> list[dict]:
     return out
 
 
+def _until_a_third(root: Path, ref: Path, timeout: float = 900) -> None:
+    """Wait until a batch job on root has written a third of the reference's markers."""
+    deadline = time.time() + timeout
+    while len(markers(root)) < len(markers(ref)) // 3 and time.time() < deadline:
+        time.sleep(0.2)
+
+
 def slurm_cancel(ref: Path, work: Path) -> dict:
     """A running array job cancelled (scancel) mid-stage, then resubmitted: it completes, redoes
     nothing that was done, and matches."""
@@ -441,9 +448,7 @@ def slurm_cancel(ref: Path, work: Path) -> dict:
         return result("slurm_cancel", 0, 0, [], skipped=why)
     root = work / "slurm_cancel"
     job = _submit(root, "--requeue-before", "0")
-    deadline = time.time() + 900
-    while len(markers(root)) < len(markers(ref)) // 3 and time.time() < deadline:
-        time.sleep(0.2)
+    _until_a_third(root, ref)
     subprocess.run(["scancel", job], check=True)
     _wait_job(job)
     before = markers(root)
@@ -476,9 +481,7 @@ def slurm_time_limit(ref: Path, work: Path) -> dict:
     job = _submit(root, "--time", "00:10:00", "--requeue-before", "30", "--max-requeues", "20")
     script = "".join(p.read_text() for p in (root / "_submit").glob("*.sh"))
     wired = "--signal=B:USR1@30" in script and "trap requeue USR1" in script
-    deadline = time.time() + 900
-    while len(markers(root)) < len(markers(ref)) // 3 and time.time() < deadline:
-        time.sleep(0.2)
+    _until_a_third(root, ref)
     running = subprocess.run(["squeue", "-h", "-j", job, "-t", "R", "-o", "%i"], capture_output=True,
                              text=True).stdout.split()
     subprocess.run(["scancel", "--signal=USR1", "--batch", job], check=True)
