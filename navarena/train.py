@@ -26,7 +26,7 @@ def _flag(text: str) -> bool:
     raise argparse.ArgumentTypeError(f"{text!r}: true or false")
 
 
-ADVANCED = ("batch_episodes", "slots", "max_learner_steps", "view_overlap", "beta", "stop_veto", "lr", "weight_decay",
+ADVANCED = ("batch_episodes", "encode_chunk", "slots", "max_learner_steps", "view_overlap", "beta", "stop_veto", "lr", "weight_decay",
             "aux_weight", "train_split", "val_split", "keep", "first_round", "expert")
 """Options `--help` leaves to `--help-all` (so that the help fits a screen): the recipe's finer knobs."""
 
@@ -40,7 +40,8 @@ def build_parser(ap: argparse.ArgumentParser | None = None, show_all: bool = Fal
     ap.add_argument("--resume", action="store_true", help="go on after the last finished round in --out")
     d = TrainConfig()
     helps = {"task": None, "rounds": "0: behaviour cloning, then DAgger", "episodes_per_round": None, "grad_steps": None,
-             "batch_episodes": None, "slots": "episodes stepped together", "width": "render size", "height": None,
+             "batch_episodes": None, "encode_chunk": "frames encoded at once (checkpointed; 0: all)",
+             "slots": "episodes stepped together", "width": "render size", "height": None,
              "val_episodes": "held-out check", "keep": "best|last round into model.pt", "scenes": "first N train scenes",
              "capture_share": "episodes from non-generated scenes", "seed": None,
              "init": "fine-tune: a model.pt or shipped name", "first_round": "bc|dagger: round 0 (dagger: --init drives)",

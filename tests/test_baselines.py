@@ -889,3 +889,31 @@ def test_a_film_network_conditions_its_visual_features_on_the_goal_and_learns_a_
             cond = torch.relu(net.goal_proj(net.goal_cnn(images)))
         feats = net.cnn(frames[:2], cond)
     assert not torch.allclose(feats[0], feats[1])  # the goal reached the encoder, not only the recurrent core
+
+
+@pytest.mark.parametrize("task,encoder", [("imagenav", "resnet"), ("objectnav", "cnn")])
+def test_chunked_encoding_gives_the_same_outputs_and_gradients(task, encoder):
+    """The trainer's encode_chunk (gradient checkpointing, a chunk of frames at a time) is a memory
+    bound, not another model: outputs and every parameter's gradient match the whole batch at once."""
+    torch.manual_seed(0)
+    spec = NavSpec(task=task, hidden=16, embed=16, depth_w=32, depth_h=24, rgbd=task == "imagenav", encoder=encoder,
+                   film=task == "objectnav", aux_goal=True)
+    net = NavNet(spec).train()
+    t, b = 7, 3
+    frames = torch.rand(t, b, spec.obs_channels + (3 if spec.goal == "image" else 0), 24, 32)
+    goal = (torch.randint(0, len(spec.categories), (t, b, 1)).float() if spec.goal == "category"
+            else torch.zeros(t, b, 0))
+    prev = torch.randint(0, 5, (t, b))
+    runs = []
+    for chunk in (0, 4, 5):  # whole, uneven chunks (21 frames: 4 x 5 + 1), 5 x 4 + 1
+        net.zero_grad()
+        logits, h, pred = net(frames, goal, prev, aux=True, chunk=chunk)
+        (logits.square().sum() + pred.sum() + h.sum()).backward()
+        runs.append((logits.detach(), pred.detach(), {k: p.grad.clone() for k, p in net.named_parameters() if p.grad is not None}))
+    for logits, pred, grads in runs[1:]:
+        assert torch.allclose(logits, runs[0][0], atol=1e-5) and torch.allclose(pred, runs[0][1], atol=1e-5)
+        assert grads.keys() == runs[0][2].keys() and len(grads) > 10
+        for k, g in grads.items():
+            assert torch.allclose(g, runs[0][2][k], atol=1e-4, rtol=1e-4), k
+    with torch.no_grad():  # evaluation: no checkpointing, the same chunks
+        assert torch.allclose(net(frames, goal, prev, chunk=4)[0], runs[0][0], atol=1e-5)

@@ -20,6 +20,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 from torch import nn
+from torch.utils.checkpoint import checkpoint
 
 from navcore.labels import GOAL_CATEGORIES
 
@@ -257,12 +258,23 @@ class NavNet(nn.Module):
         parts.append(self.prev(prev))
         return torch.cat(parts, 1)
 
-    def forward(self, frames, goal, prev, h0=None, aux: bool = False):
+    def forward(self, frames, goal, prev, h0=None, aux: bool = False, chunk: int = 0):
         """Sequences: frames [T, B, C, h, w], goal [T, B, goal_size], prev [T, B] -> logits [T, B, 4]
         and the last state [1, B, hidden]; with aux (an aux_goal network) also the goal predictions
-        [T, B, 3]."""
+        [T, B, 3]. chunk > 0: the T x B frames are encoded `chunk` at a time and, while gradients are
+        recorded, the encoder's activations are recomputed in the backward pass instead of kept
+        (gradient checkpointing): the same outputs and gradients, the encoder's memory bounded by
+        `chunk` frames instead of T x B."""
         t, b = prev.shape
-        x = self.features(frames.flatten(0, 1), goal.flatten(0, 1), prev.flatten(0, 1)).view(t, b, -1)
+        f, g, p = frames.flatten(0, 1), goal.flatten(0, 1), prev.flatten(0, 1)
+        if 0 < chunk < len(p):
+            keep = torch.is_grad_enabled()
+            parts = [checkpoint(self.features, f[i:i + chunk], g[i:i + chunk], p[i:i + chunk], use_reentrant=False)
+                     if keep else self.features(f[i:i + chunk], g[i:i + chunk], p[i:i + chunk])
+                     for i in range(0, len(p), chunk)]
+            x = torch.cat(parts).view(t, b, -1)
+        else:
+            x = self.features(f, g, p).view(t, b, -1)
         out, h = self.gru(x, h0)
         return (self.head(out), h, self.aux(out)) if aux else (self.head(out), h)
 
