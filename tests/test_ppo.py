@@ -50,6 +50,25 @@ def test_ppo_runs_writes_a_policy_any_learned_agent_reads_and_resumes(episode_ru
     assert [c["update"] for c in again["curve"]] == [0, 1, 2] and again["curve"][:2] == card["curve"]
 
 
+
+def test_the_update_replays_the_rollout_as_the_policy_read_it(episode_run, tmp_path):
+    """Before any gradient step, replaying a rollout (stored frames, the GRU from the rollout's first
+    state, reset where an episode began) gives back, bit for bit, the log-probabilities and values the policy
+    had while acting: PPO's first ratio is exactly 1 (the policy reads the frames at the 8 bits they are
+    stored in). Episodes end inside the rollout, so the resets are replayed too."""
+    from navcore.baselines.model import NavSpec
+    from navcore.baselines.ppo import PPOConfig, PPOTrainer
+
+    cfg = PPOConfig(slots=4, horizon=40, minibatches=2, width=32, height=24, renderer="cpu", protocol="explicit_stop",
+                    spec=NavSpec(depth_w=32, depth_h=24, hidden=32, embed=32))
+    tr = PPOTrainer(episode_run[0], tmp_path / "run", cfg, quiet=True)
+    r, finished = tr.rollout(0)
+    assert r.frames.dtype == torch.uint8 and r.first[1:].sum() >= 1  # an episode began inside the rollout
+    with torch.no_grad():
+        logp, value, _ = tr.replay(r, torch.arange(cfg.slots))
+    # every slot at once, as while acting: the same operations on the same inputs, the same bits
+    assert torch.equal(logp, r.logp) and torch.equal(value, r.value)
+
 @pytest.mark.slow
 def test_ppo_from_scratch_raises_its_return(tmp_path):
     """From scratch on the CPU (two generated scenes of 30 k Gaussians, PointNav at 32 x 24, 240 updates of

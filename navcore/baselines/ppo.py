@@ -205,7 +205,10 @@ class PPOTrainer:
         torch.manual_seed(stream_seed(cfg.seed, "ppo-act", str(u)) % 2**63)
         for _ in range(cfg.horizon):
             frames, goal = observation_input(obs, spec, dev)
-            pi, value, h = self.model.step(frames, goal, prev, h)
+            # the policy reads the frames as they are stored (8 bits), so that the update's replay of
+            # them gives the same log-probabilities (the first epoch's ratio is 1)
+            stored = (frames * 255 + 0.5).to(torch.uint8)
+            pi, value, h = self.model.step(stored.float() / 255, goal, prev, h)
             action = pi.sample()
             logp = pi.log_prob(action)
             before = [e.state.collisions for e in env.envs]
@@ -221,7 +224,7 @@ class PPOTrainer:
                 dist[i] = d
                 ret[i] += reward[i]
                 done[i] = float(info["done"])
-            for k, v in zip(keys, ((frames * 255 + 0.5).to(torch.uint8).cpu(), goal.cpu(), prev.cpu(), action.cpu(),
+            for k, v in zip(keys, (stored.cpu(), goal.cpu(), prev.cpu(), action.cpu(),
                                    logp.cpu(), value.cpu(), reward, done, first.clone())):
                 buf[k].append(v)
             prev = action.clone()
@@ -244,6 +247,22 @@ class PPOTrainer:
         t = {k: torch.stack(v) for k, v in buf.items()}
         return Rollout(**t, h0=h0.cpu(), last_value=last_value.cpu()), finished
 
+    def replay(self, r: Rollout, slots: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The rollout's `slots` replayed through the current network from the rollout's first state
+        (the state reset where an episode began): log-probabilities of the actions taken, values and
+        entropies, each [T, len(slots)]."""
+        dev = self.device
+        h = r.h0[:, slots].to(dev)
+        logps, values, ents = [], [], []
+        for t in range(r.action.shape[0]):
+            h = h * (1.0 - r.first[t, slots].to(dev))[None, :, None]
+            frames = r.frames[t, slots].to(dev).float() / 255
+            pi, v, h = self.model.step(frames, r.goal[t, slots].to(dev), r.prev[t, slots].to(dev), h)
+            logps.append(pi.log_prob(r.action[t, slots].to(dev)))
+            values.append(v)
+            ents.append(pi.entropy())
+        return torch.stack(logps), torch.stack(values), torch.stack(ents)
+
     def optimise(self, r: Rollout) -> dict:
         cfg, dev = self.cfg, self.device
         adv, ret = gae(r.reward, r.value, r.done, r.last_value, cfg.gamma, cfg.lam)
@@ -254,16 +273,7 @@ class PPOTrainer:
         self.model.train()
         for _ in range(cfg.epochs):
             for slots in torch.randperm(n, generator=gen).chunk(cfg.minibatches):
-                h = r.h0[:, slots].to(dev)
-                logps, values, ents = [], [], []
-                for t in range(r.action.shape[0]):
-                    h = h * (1.0 - r.first[t, slots].to(dev))[None, :, None]
-                    frames = r.frames[t, slots].to(dev).float() / 255
-                    pi, v, h = self.model.step(frames, r.goal[t, slots].to(dev), r.prev[t, slots].to(dev), h)
-                    logps.append(pi.log_prob(r.action[t, slots].to(dev)))
-                    values.append(v)
-                    ents.append(pi.entropy())
-                logp, value, ent = torch.stack(logps), torch.stack(values), torch.stack(ents)
+                logp, value, ent = self.replay(r, slots)
                 a, old = adv[:, slots].to(dev), r.logp[:, slots].to(dev)
                 ratio = torch.exp(logp - old)
                 policy_loss = -torch.min(ratio * a, ratio.clamp(1 - cfg.clip, 1 + cfg.clip) * a).mean()
