@@ -111,7 +111,8 @@ class TrainConfig:
     """Frames encoded at once in a gradient step, their activations recomputed in the backward pass
     (NavNet.forward's chunk; 0: every frame of the batch at once). Bounds the encoder's memory: 32
     ImageNav episodes padded to the longest (up to 12,800 frames) through the ResNet-9 at 128 x 96 at
-    once took 65 GB of an 80 GB H100 and ran it out of memory."""
+    once took 65 GB of an 80 GB H100 and ran it out of memory. The price: the encoder runs forward
+    twice in a step whose batch holds more frames than this."""
     lr: float = 5e-4
     weight_decay: float = 1e-5
     depth_noise: float = 0.0
