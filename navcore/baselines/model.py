@@ -268,11 +268,10 @@ class NavNet(nn.Module):
         t, b = prev.shape
         f, g, p = frames.flatten(0, 1), goal.flatten(0, 1), prev.flatten(0, 1)
         if 0 < chunk < len(p):
-            keep = torch.is_grad_enabled()
-            parts = [checkpoint(self.features, f[i:i + chunk], g[i:i + chunk], p[i:i + chunk], use_reentrant=False)
-                     if keep else self.features(f[i:i + chunk], g[i:i + chunk], p[i:i + chunk])
-                     for i in range(0, len(p), chunk)]
-            x = torch.cat(parts).view(t, b, -1)
+            encode = (lambda *a: checkpoint(self.features, *a, use_reentrant=False)) if torch.is_grad_enabled() \
+                else self.features
+            x = torch.cat([encode(f[i:i + chunk], g[i:i + chunk], p[i:i + chunk])
+                           for i in range(0, len(p), chunk)]).view(t, b, -1)
         else:
             x = self.features(f, g, p).view(t, b, -1)
         out, h = self.gru(x, h0)
