@@ -64,5 +64,28 @@ def test_loo_evaluates_only_finished_fine_tunes_one_after_the_other(tmp_path, mo
     monkeypatch.setattr(captures_loo, "evaluate", lambda jobs, *a: evaluated.extend(j[0] for j in jobs) or 0)
     rc = captures_loo.loo(1, 8, 10, 0.5, 5, 1, "cpu", (64, 48), control=False, captures_only=True)
     assert rc == 1
-    assert sorted(evaluated) == ["loo_a", "loo_c"]
+    assert sorted(evaluated) == ["loo_a", "loo_a_sample", "loo_c", "loo_c_sample"]  # greedy and sampled
     assert most[0] == 1 and all(w == 12 for _, w in started)
+
+
+def test_sampled_decoding_is_its_own_run_of_the_same_policy(tmp_path, monkeypatch):
+    """`world+sample` evaluates the world's checkpoint with its moves sampled, under its own label and
+    column; a registry name takes the suffix too; a bad --loo-decoding is refused."""
+    monkeypatch.setattr(captures_loo, "RUNS", tmp_path)
+    greedy, sampled = captures_loo.agent_args("world"), captures_loo.agent_args("world+sample")
+    assert sampled == greedy + ["--agent-arg", "sample=true"] and "sample=true" not in greedy
+    assert captures_loo.agent_args("loo_room+sample")[3] == f"checkpoint={tmp_path / 'loo_room' / 'model.pt'}"
+    assert captures_loo.agent_args("pointnav_bc+sample") == ["--agent", "pointnav_bc", "--agent-arg", "sample=true"]
+    assert captures_loo.label_of("world+sample") == "world_sample" and captures_loo.label_of("world") == "world"
+    assert captures_loo.run_of("loo_room_sample", ["room"]) == ("room", "loo_sample")
+    assert captures_loo.run_of("zs_room_world_sample", ["room"]) == ("room", "world_sample")
+    assert captures_loo.decodings("sample") == ("+sample",) and captures_loo.decodings("greedy,sample,greedy") == ("", "+sample")
+    with pytest.raises(SystemExit, match="greedy, sample or both"):
+        captures_loo.decodings("beam")
+    monkeypatch.setattr(captures_loo, "EVAL", tmp_path / "eval")
+    _results(tmp_path / "eval" / "zs_room_world", [1, 0, 0, 0])
+    _results(tmp_path / "eval" / "zs_room_world_sample", [1, 1, 1, 0])
+    _results(tmp_path / "eval" / "zs_room_depth_reactive", [0, 0, 1, 0])
+    rows, lines = captures_loo.capture_table(["room"])
+    assert lines[0] == "| capture | world | world_sample | depth_reactive |"
+    assert {r["run"]: r["sr"] for r in rows} == {"world": 0.25, "world_sample": 0.75, "depth_reactive": 0.25}
