@@ -891,6 +891,36 @@ def test_a_film_network_conditions_its_visual_features_on_the_goal_and_learns_a_
     assert not torch.allclose(feats[0], feats[1])  # the goal reached the encoder, not only the recurrent core
 
 
+@pytest.mark.parametrize("chunk", [0, 4])
+def test_packed_encoding_of_uneven_episodes_matches_the_padded_batch(chunk):
+    """The trainer encodes only its episodes' own steps (valid), not the padding after the shorter
+    ones: every valid step's outputs and every gradient equal the padded batch's, whatever the
+    padding frames hold."""
+    torch.manual_seed(0)
+    spec = NavSpec(task="objectnav", hidden=16, embed=16, depth_w=32, depth_h=24, film=True, aux_goal=True)
+    net = NavNet(spec).train()
+    t, b = 6, 3
+    lens = torch.tensor([6, 2, 4])
+    valid = torch.arange(t)[:, None] < lens[None]
+    frames = torch.rand(t, b, spec.obs_channels, 24, 32)
+    goal = torch.randint(0, len(spec.categories), (t, b, 1)).float()
+    prev = torch.randint(0, 5, (t, b))
+    runs = []
+    for packed in (False, True):
+        net.zero_grad()
+        f = frames[valid] if packed else torch.where(valid[..., None, None, None], frames, torch.rand_like(frames))
+        logits, _, pred = net(f, goal, prev, aux=True, chunk=chunk, valid=valid if packed else None)
+        logits, pred = logits[valid], pred[valid]
+        (logits.square().sum() + pred.sum()).backward()
+        runs.append((logits.detach(), pred.detach(), {k: q.grad.clone() for k, q in net.named_parameters() if q.grad is not None}))
+    (l0, p0, g0), (l1, p1, g1) = runs
+    assert l1.shape == (int(lens.sum()), 4)
+    assert torch.allclose(l0, l1, atol=1e-5) and torch.allclose(p0, p1, atol=1e-5)
+    assert g0.keys() == g1.keys() and len(g0) > 10
+    for k in g0:
+        assert torch.allclose(g0[k], g1[k], atol=1e-4, rtol=1e-4), k
+
+
 @pytest.mark.parametrize("task,encoder", [("imagenav", "resnet"), ("objectnav", "cnn")])
 def test_chunked_encoding_gives_the_same_outputs_and_gradients(task, encoder):
     """The trainer's encode_chunk (gradient checkpointing, a chunk of frames at a time) is a memory

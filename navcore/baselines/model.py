@@ -258,22 +258,28 @@ class NavNet(nn.Module):
         parts.append(self.prev(prev))
         return torch.cat(parts, 1)
 
-    def forward(self, frames, goal, prev, h0=None, aux: bool = False, chunk: int = 0):
+    def forward(self, frames, goal, prev, h0=None, aux: bool = False, chunk: int = 0, valid=None):
         """Sequences: frames [T, B, C, h, w], goal [T, B, goal_size], prev [T, B] -> logits [T, B, 4]
         and the last state [1, B, hidden]; with aux (an aux_goal network) also the goal predictions
         [T, B, 3]. chunk > 0: the T x B frames are encoded `chunk` at a time and, while gradients are
         recorded, the encoder's activations are recomputed in the backward pass instead of kept
         (gradient checkpointing): the same outputs and gradients, the encoder's memory bounded by
-        `chunk` frames instead of T x B."""
+        `chunk` frames instead of T x B. valid [T, B] bool (episodes of uneven lengths, padded at
+        their ends): frames holds only the valid steps' frames, [N, C, h, w] in valid's row-major
+        order, and only those are encoded (a padded step's input to the recurrent layer is zero; it
+        comes after its episode's last step, so no valid output depends on it)."""
         t, b = prev.shape
-        f, g, p = frames.flatten(0, 1), goal.flatten(0, 1), prev.flatten(0, 1)
+        if valid is None:
+            f, g, p = frames.flatten(0, 1), goal.flatten(0, 1), prev.flatten(0, 1)
+        else:
+            f, g, p = frames, goal[valid], prev[valid]
         if 0 < chunk < len(p):
             encode = (lambda *a: checkpoint(self.features, *a, use_reentrant=False)) if torch.is_grad_enabled() \
                 else self.features
-            x = torch.cat([encode(f[i:i + chunk], g[i:i + chunk], p[i:i + chunk])
-                           for i in range(0, len(p), chunk)]).view(t, b, -1)
+            x = torch.cat([encode(f[i:i + chunk], g[i:i + chunk], p[i:i + chunk]) for i in range(0, len(p), chunk)])
         else:
-            x = self.features(f, g, p).view(t, b, -1)
+            x = self.features(f, g, p)
+        x = x.view(t, b, -1) if valid is None else x.new_zeros(t, b, x.shape[-1]).masked_scatter(valid[..., None], x)
         out, h = self.gru(x, h0)
         return (self.head(out), h, self.aux(out)) if aux else (self.head(out), h)
 

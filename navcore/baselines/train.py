@@ -303,20 +303,22 @@ class Trainer:
             tidx = np.arange(tmax)[:, None]
             mask = tidx < lens[None]
             rows = np.where(mask, data.starts[pick][None] + np.minimum(tidx, lens[None] - 1), 0)
-            frames = augment(torch.from_numpy(data.obs[rows]).to(dev).float().div_(255), cfg, gen)
+            # only the episodes' own frames are moved, augmented and encoded, not the padding after
+            # the shorter ones (32 ObjectNav episodes padded to their longest were 5-6x their frames)
+            frames = augment(torch.from_numpy(data.obs[rows[mask]]).to(dev).float().div_(255)[:, None], cfg, gen)[:, 0]
             if data.seq_goal.shape[1]:  # the episode's goal image as more channels of every frame
                 g = torch.from_numpy(data.seq_goal[pick]).to(dev).float().div_(255)
                 if cfg.rgb_noise > 0:
                     g = augment_rgb(g, cfg.rgb_noise, gen)
-                frames = torch.cat([frames, g[None].expand(tmax, *g.shape)], 2)
+                frames = torch.cat([frames, g[torch.from_numpy(np.nonzero(mask)[1]).to(dev)]], 1)
             goal = torch.from_numpy(data.goal[rows]).to(dev)
             prev = torch.from_numpy(data.prev[rows].astype(np.int64)).to(dev)
             label = torch.from_numpy(data.label[rows].astype(np.int64)).to(dev)
             m = torch.from_numpy(mask).to(dev)
             if cfg.spec.aux_goal:
-                logits, _, pred = self.net(frames, goal, prev, aux=True, chunk=cfg.encode_chunk)
+                logits, _, pred = self.net(frames, goal, prev, aux=True, chunk=cfg.encode_chunk, valid=m)
             else:
-                logits, _ = self.net(frames, goal, prev, chunk=cfg.encode_chunk)
+                logits, _ = self.net(frames, goal, prev, chunk=cfg.encode_chunk, valid=m)
             loss = (nn.functional.cross_entropy(logits.flatten(0, 1), label.flatten(), reduction="none")
                     * m.flatten()).sum() / m.sum()
             if cfg.spec.aux_goal:  # the goal's position, where the step has one (rounds from before: NaN)
