@@ -8,6 +8,7 @@ from navcore.gaussians import GaussianScene
 from navcore.gaussians.cameras import cameras_from_json
 from navcore.gaussians.content import content_mask
 from navcore.gaussians.floor import AlignConfig, axis_name, fit_floor, floor_transform
+from navcore.nav.costmap import Costmap
 from navcore.nav.embodiment import Embodiment
 from navcore.voxels import VoxelizeConfig
 from navcore.voxels.grid import grid_for_points
@@ -631,26 +632,85 @@ def sparse_cube(centre, alpha: float = 0.45):
 def test_a_few_half_transparent_splats_block_on_a_pruned_noisy_floor():
     """Known answer (issue 84): on a sparse floor of half-transparent splats (6,000 for 16 m2, noise 8 mm),
     a 6 cm cube made of six splats of opacity 0.45 blocks every cell within the robot's radius of it,
-    at 0.05 and 0.02 m, and the floor around stays free, with costmap.cell_evidence (no fine cell of the
-    cube reaches tau_occ alone: without it the cube is free, every one of those cells)."""
+    at 0.05 and 0.02 m, and the floor around stays free, with costmap.cell_evidence or evidence=surface (no
+    fine cell of the cube reaches tau_occ alone: with neither the cube is free, every one of those cells)."""
     rng = np.random.default_rng(0)
     floor = flat_floor(rng, 6000, 0.008)
     floor.opacity_logits[:] = np.log(0.45 / 0.55)
     scene = concat(floor, sparse_cube((2.0, 2.0)))
     emb = Embodiment()
     for res in (0.05, 0.02):
-        for cell_evidence in (False, True):
-            cfg = CostmapConfig(resolution=res, margin_xy=0.0, cell_evidence=cell_evidence)
+        for cell_evidence, evidence in ((False, "voxel"), (True, "voxel"), (False, "surface")):
+            cfg = CostmapConfig(resolution=res, margin_xy=0.0, cell_evidence=cell_evidence, evidence=evidence)
             layers, _ = build_costmap(scene, emb, cfg, VoxelizeConfig())
             ny, nx = layers.shape
             x, y = np.meshgrid(layers.origin[0] + (np.arange(nx) + 0.5) * res, layers.origin[1] + (np.arange(ny) + 0.5) * res)
             d = np.hypot(np.maximum(np.abs(x - 2.0) - 0.03, 0), np.maximum(np.abs(y - 2.0) - 0.03, 0))
-            must = d < emb.radius
-            if cell_evidence:
+            # surface places the obstacle where the splats are (each centre grown by surface_min_reach): the
+            # cube's corners, 3 cm from any of its six splats, come up to 2 cm short
+            must = d < emb.radius - (0.02 if evidence == "surface" else 0.0)
+            if cell_evidence or evidence == "surface":
                 assert layers.occ[must].all(), (res, int((must & ~layers.occ).sum()))
             else:
                 assert not layers.occ[must].any()  # the failure the option fixes: sparse evidence, no obstacle
             assert not layers.occ[(d > emb.radius + 0.1) & layers.support].any()
+
+
+def test_surface_evidence_gathers_a_column_and_places_the_obstacle_at_the_centres():
+    """evidence=surface, known answers: a column of 10 cm admits its band Gaussians when their opacities
+    gather 1 - prod(1 - alpha) >= tau_occ (three of 0.26: 0.59; two: 0.45, not), Gaussians whose z extent
+    misses the band never; and the obstacle is each admitted centre grown by surface_min_reach, not the
+    extent of its density: the clearance at a cell is its distance to the nearest centre less the reach,
+    within a fine cell."""
+    from stages.costmap.build import surface_admitted
+
+    def splats(pts, alpha, sigma=0.005):
+        n = len(pts)
+        return GaussianScene.from_colors(np.array(pts, float), np.tile([1.0, 0, 0, 0], (n, 1)), np.full((n, 3), sigma),
+                                         np.full(n, alpha), np.full((n, 3), 0.3))
+
+    emb = Embodiment()
+    three = splats([[0.52, 0.52, 0.3], [0.55, 0.55, 0.4], [0.58, 0.52, 0.5]], 0.26)
+    two = splats([[1.52, 0.52, 0.3], [1.57, 0.55, 0.4]], 0.26)
+    high = splats([[2.5, 0.5, 1.5], [2.52, 0.5, 1.5], [2.54, 0.5, 1.5]], 0.9)  # above the band
+    ok = surface_admitted(concat(three, two, high), emb, 0.1, 0.5, 2.0)
+    assert ok.tolist() == [True] * 3 + [False] * 2 + [False] * 3
+    rng = np.random.default_rng(1)
+    centres = np.array([[2.0, 2.0, 0.3], [2.03, 2.0, 0.31], [2.0, 2.03, 0.32], [2.03, 2.03, 0.33], [2.015, 2.015, 0.34]])
+    scene = concat(flat_floor(rng, 20_000, 0.005), splats(centres, 0.45))
+    for evidence in ("voxel", "surface"):
+        cfg = CostmapConfig(resolution=0.05, margin_xy=0.0, evidence=evidence)
+        layers, _ = build_costmap(scene, emb, cfg, VoxelizeConfig())
+        cm = Costmap.from_layers(layers)
+        ny, nx = layers.shape
+        x, y = np.meshgrid(layers.origin[0] + (np.arange(nx) + 0.5) * 0.05, layers.origin[1] + (np.arange(ny) + 0.5) * 0.05)
+        xy = np.column_stack([x.ravel(), y.ravel()])
+        d = np.min(np.hypot(xy[:, :1] - centres[None, :, 0], xy[:, 1:] - centres[None, :, 1]), 1)
+        near = (d < 0.5) & (cm.clearance_at(xy) >= 0)
+        if evidence == "voxel":  # no fine cell of five separate 0.45 splats reaches tau_occ: nothing there
+            assert (cm.clearance_at(xy)[near] > 0.4).all()
+        else:
+            err = cm.clearance_at(xy)[near] - np.maximum(d[near] - cfg.surface_min_reach, 0)
+            assert np.abs(err).max() <= 0.05 / 11 * 1.5, np.abs(err).max()
+
+
+def test_isolated_splats_are_noise_only_where_the_model_is_dense():
+    """noise_dense_count: the same lone opaque splat 12 cm up is noise over a densely reconstructed
+    floor and an obstacle candidate over a sparse one (fewer than the count of Gaussians within
+    noise_dense_radius); with the count 0 it is noise over both."""
+    from stages.costmap.build import obstacle_classes
+
+    rng = np.random.default_rng(3)
+    dense = flat_floor(rng, 30_000, 0.004, size=2.0)
+    sparse = flat_floor(rng, 200, 0.004, size=2.0)
+    sparse.means[:, 0] += 3.0
+    lone = GaussianScene.from_colors(np.array([[1.0, 1.0, 0.12], [4.0, 1.0, 0.12]]), np.tile([1.0, 0, 0, 0], (2, 1)),
+                                     np.full((2, 3), 0.02), np.full(2, 0.95), np.full((2, 3), 0.3))
+    scene = concat(dense, sparse, raised_box((0.5, 0.5), 0.2, 0.5), lone)  # the box: obstacles to test against
+    for count, kept in ((0, [False, False]), (30, [False, True])):
+        cand, isolated, info = obstacle_classes(scene, CostmapConfig(noise_dense_count=count))
+        assert cand[-2:].tolist() == kept and isolated[-2:].tolist() == [not k for k in kept]
+        assert info.get("isolated_kept_sparse", 0) >= (1 if count else 0)
 
 
 def test_one_room_at_two_densities_gives_maps_that_agree():

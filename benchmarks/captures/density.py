@@ -104,7 +104,8 @@ def agreement(a, b) -> dict:
 
 
 CONFIGS = {"defaults": (), "cell evidence": ("costmap.cell_evidence=true",),
-           "cell evidence + density radius": ("costmap.cell_evidence=true", "costmap.outlier_density=2.8")}
+           "cell evidence + density radius": ("costmap.cell_evidence=true", "costmap.outlier_density=2.8"),
+           "surface + dense-only noise": ("costmap.evidence=surface", "costmap.noise_dense_count=30")}
 """The costmap settings measured: the defaults and the sparse-evidence options (stages/costmap/build.py)."""
 
 

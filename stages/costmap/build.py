@@ -60,7 +60,22 @@ class CostmapConfig:
     """How the body band's Gaussians make an obstacle column: voxel (a voxel of z_resolution whose
     accumulated opacity reaches tau_occ) | column (the opacity the whole band accumulates along the
     column, each Gaussian counted once at its largest density there: a table leg of a few
-    half-transparent splats stacked up blocks, where no single 5 cm voxel of it reached tau_occ)."""
+    half-transparent splats stacked up blocks, where no single 5 cm voxel of it reached tau_occ) |
+    surface (evidence and place apart, each margin counted once: a Gaussian centred in the band is
+    an obstacle when the band's centres in its column of cell_evidence_size gather opacity
+    1 - prod(1 - alpha) >= tau_occ, and the obstacle is where it is, its centre grown by
+    surface_reach_sigmas standard deviations and at least surface_min_reach, not the extent its
+    density and its neighbours' tails reach past the surface; with noise_dense_count, the sparse
+    models' mode: docs/benchmarks/bench_density.md)."""
+    surface_reach_sigmas: float = 0.0
+    """evidence=surface: an obstacle Gaussian's footprint is its ellipsoid at this many standard
+    deviations (0: its centre alone, grown by surface_min_reach)."""
+    surface_band_sigmas: float = 2.0
+    """evidence=surface: a Gaussian is of the body band when its centre lies within this many of its z
+    standard deviations of it (a 6 cm object's side splats, centred 3.5 cm up, reach a band from 5 cm)."""
+    surface_min_reach: float = 0.01
+    """evidence=surface: the footprint reaches at least this far from the centre along every axis,
+    metres (what a centre can be off its surface; it joins splats a few cm apart)."""
     margin_xy: float = 0.5
     """Map border around the scene's Gaussians, metres."""
     extent_quantile: float = 0.1
@@ -141,6 +156,15 @@ class CostmapConfig:
     was counted as obstacle before the robot's radius was added on top (0 keeps the full extent)."""
     outlier_min_neighbours: int = 4
     """Non-floor Gaussians with fewer other centres within their radius are noise, not obstacles."""
+    noise_dense_count: int = 0
+    """The isolated test calls a Gaussian noise only where the model is dense around it: at least this
+    many Gaussians of any kind (floor and itself included) within noise_dense_radius; where fewer, it stays an
+    obstacle candidate (0: noise wherever isolated). Floor streaks and floaters hover over well
+    reconstructed floors; in a sparse region a real low obstacle (a 5 cm object by a wall) is itself
+    a few opaque splats too far apart for the test (trained ScanNet 3DGS: the isolated splats on the
+    scan's surfaces had a median 41 Gaussians within 0.2 m, the ones more than 0.1 m from it 72)."""
+    noise_dense_radius: float = 0.2
+    """The radius of noise_dense_count, metres."""
     min_obstacle_alpha: float = 0.25
     """Gaussians with a lower opacity are never obstacles (haze of trained scenes; 0 keeps all).
     At synthetic.realism.level=moderate (1 M Gaussians) haze alone puts about a third of the free
@@ -310,6 +334,13 @@ def obstacle_classes(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarr
         # near the floor, long splats are the floor's own streaks (trained floors' blurred texture)
         radius[scene.means[idx, 2] - top[idx] < cfg.outlier_floor_clearance] = base
         isolated[idx] = isolated_points(scene.means[idx], radius, cfg.outlier_min_neighbours)
+        if cfg.noise_dense_count > 0 and isolated.any():
+            from scipy.spatial import cKDTree
+
+            alone = np.nonzero(isolated)[0]
+            around = cKDTree(scene.means).query_ball_point(scene.means[alone], cfg.noise_dense_radius, return_length=True)
+            isolated[alone[around < cfg.noise_dense_count]] = False
+            info["isolated_kept_sparse"] = int((around < cfg.noise_dense_count).sum())
         cand &= ~isolated
         info["isolated_dropped"] = int(isolated.sum())
     return cand, isolated, info
@@ -405,12 +436,14 @@ def raw_obstacles_fine(scene: GaussianScene, origin, shape, s: int, emb: Embodim
                        vcfg: VoxelizeConfig) -> np.ndarray:
     """Fine [ny*s, nx*s] bool: body-band obstacle per fine cell (voxel z-layers start at h_min)."""
     res_f = cfg.resolution / s
+    if cfg.evidence == "surface":
+        return surface_obstacles_fine(scene, origin, shape, s, emb, cfg, vcfg)
     if cfg.evidence == "column":  # one voxel spans the band: each Gaussian's largest density over it, once
         dz, nz = emb.h_max - emb.h_min, 1
     elif cfg.evidence == "voxel":
         dz, nz = cfg.z_resolution, max(1, int(np.ceil((emb.h_max - emb.h_min) / cfg.z_resolution - 1e-9)))
     else:
-        raise ValueError(f"costmap.evidence={cfg.evidence!r}; choose voxel | column")
+        raise ValueError(f"costmap.evidence={cfg.evidence!r}; choose voxel | column | surface")
     grid = VoxelGrid((origin[0], origin[1], emb.h_min), (res_f, res_f, dz), (shape[1] * s, shape[0] * s, nz))
     if cfg.footprint_max_sigma > 0:
         scene = GaussianScene(scene.means, scene.quats, np.minimum(scene.log_scales, np.float32(np.log(cfg.footprint_max_sigma))),
@@ -438,6 +471,50 @@ def raw_obstacles_fine(scene: GaussianScene, origin, shape, s: int, emb: Embodim
         peak = ndimage.maximum_filter(a, size=int(np.ceil(size / res_f)) | 1, mode="nearest")
         fine |= held & (a >= cfg.cell_evidence_share * peak) & (a >= cfg.cell_evidence_floor)
     return fine.T
+
+
+def surface_admitted(scene: GaussianScene, emb: Embodiment, size: float, tau: float, band_sigmas: float) -> np.ndarray:
+    """[N] bool: Gaussians of the body band (their centre within band_sigmas z standard deviations of
+    it) whose column of `size` cells (in either of two grids, the second offset by half a cell, so
+    that an object on a cell boundary is gathered whole in one) gathers 1 - prod(1 - alpha) >= tau
+    over the band's Gaussians: the evidence of evidence=surface, each Gaussian counted once with its
+    own opacity, wherever its tails reach."""
+    from navcore.gaussians.model import axis_sigmas
+
+    m = scene.means.astype(np.float64)
+    sz = band_sigmas * axis_sigmas(scene.quats, scene.log_scales)[:, 2] if band_sigmas > 0 else 0.0
+    band = np.nonzero((m[:, 2] + sz >= emb.h_min) & (m[:, 2] - sz <= emb.h_max))[0]
+    ok = np.zeros(len(m), bool)
+    if not len(band):
+        return ok
+    log_clear = np.log1p(-np.clip(scene.alphas[band].astype(np.float64), 0.0, 1.0 - 1e-6))
+    for shift in (0.0, 0.5 * size):
+        c = np.floor((m[band, :2] + shift) / size).astype(np.int64)
+        c -= c.min(0)
+        lin = c[:, 0] * (int(c[:, 1].max()) + 1) + c[:, 1]
+        ok[band] |= -np.expm1(np.bincount(lin, weights=log_clear)[lin]) >= tau
+    return ok
+
+
+def surface_obstacles_fine(scene: GaussianScene, origin, shape, s: int, emb: Embodiment, cfg: CostmapConfig,
+                           vcfg: VoxelizeConfig) -> np.ndarray:
+    """Fine [ny*s, nx*s] bool of evidence=surface: the footprints (ellipsoids at surface_reach_sigmas,
+    each axis at least surface_min_reach) of the surface_admitted Gaussians, rasterized exactly on the
+    fine cells (the voxel kernel with opacity 1 and a one-sigma support)."""
+    from dataclasses import replace
+
+    g = scene.subset(surface_admitted(scene, emb, cfg.cell_evidence_size, vcfg.tau_occ, cfg.surface_band_sigmas))
+    if cfg.surface_reach_sigmas > 0:
+        log_reach = g.log_scales.astype(np.float64) + np.log(cfg.surface_reach_sigmas)
+    else:
+        log_reach = np.full(g.log_scales.shape, -np.inf)
+    log_reach = np.maximum(log_reach, np.log(max(cfg.surface_min_reach, 1e-4)))
+    foot = GaussianScene(g.means, g.quats, log_reach.astype(np.float32), np.full(len(g.means), 20.0, np.float32),
+                         g.sh[:, :1])
+    res_f = cfg.resolution / s
+    grid = VoxelGrid((origin[0], origin[1], emb.h_min), (res_f, res_f, emb.h_max - emb.h_min), (shape[1] * s, shape[0] * s, 1))
+    a = column_max_opacity(foot, grid, replace(vcfg, truncation=1.0, min_alpha=1e-6))
+    return (a > 0.1).T  # inside a footprint the density is at least exp(-1/2); outside it, none
 
 
 def support_mask(scene: GaussianScene, origin, shape, cfg: CostmapConfig, vcfg: VoxelizeConfig) -> tuple[np.ndarray, dict]:
