@@ -134,12 +134,12 @@ def align_synthetic(sc, cameras: bool = False) -> tuple[np.ndarray, np.ndarray, 
 def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_states: int,
               n_motions: int, realism: "str | RealismConfig" = "none", resolutions=RESOLUTIONS, timing: bool = True,
               render_check: RenderCheckConfig | None = None, ablations: dict | None = None,
-              cameras: bool = False) -> dict:
+              cameras: bool = False, costmap: dict | None = None) -> dict:
     """One synthetic scene through content -> align -> costmap, against FCL on the mesh; with
     render_check, the render-based estimate of the 0.05 m map's FP / FN rates at the first
     render_check.poses of the same states, beside the true rates there; ablations: name -> CostmapConfig
     overrides whose 0.05 m state FP / FN are reported beside the default's; cameras: align with the
-    capture path as evidence."""
+    capture path as evidence; costmap: CostmapConfig fields other than the defaults (--costmap)."""
     real = realism if isinstance(realism, RealismConfig) else RealismConfig(level=realism)
     sc = generate_scene(seed, SyntheticConfig(num_gaussians=n_gauss, realism=real))
     n, t_align, renderable, aligned = align_synthetic(sc, cameras)
@@ -167,7 +167,7 @@ def run_scene(seed: int, n_gauss: int, emb: Embodiment, vcfg: VoxelizeConfig, n_
            "fcl_state_positive": int(ref_state.sum()), "fcl_motion_positive": int(ref_motion.sum()), "res": {}}
     for res in resolutions:
         t0 = time.perf_counter()
-        layers, info = build_costmap(aligned, emb, CostmapConfig(resolution=res), vcfg)
+        layers, info = build_costmap(aligned, emb, CostmapConfig(resolution=res, **(costmap or {})), vcfg)
         build_s = time.perf_counter() - t0
         cm = Costmap.from_layers(layers)
         ours_state = ~cm.are_states_valid(states)
@@ -264,10 +264,17 @@ def main(argv=None) -> int:
     ap.add_argument("--ablate-faint", action="store_true",
                     help="realism table: also build each map with every opacity as a potential obstacle")
     ap.add_argument("--docs", action="store_true", help="also write docs/bench_spatial.md (make bench-spatial)")
+    ap.add_argument("--costmap", action="append", default=[], metavar="K=V",
+                    help="a CostmapConfig field other than its default (repeatable; e.g. evidence=surface): the "
+                         "figures a changed default would give; refused with --docs, whose page is the defaults'")
     ap.add_argument("--merge-gpu", action="store_true",
                     help="only fold OUT/voxelize_gpu.json into an existing OUT/bench_spatial.json")
     args = ap.parse_args(argv)
     out = Path(args.out)
+    costmap = costmap_overrides(args.costmap)
+    if costmap and args.docs:
+        raise SystemExit("bench-spatial: --costmap measures a setting that is not the default; its page is the defaults' "
+                         "(leave out --docs, write to another --out)")
     if args.merge_gpu:
         rep = json.loads((out / "bench_spatial.json").read_text())
         write_report(rep, out, args.docs)
@@ -278,7 +285,7 @@ def main(argv=None) -> int:
     scenes = []
     for k in range(args.scenes):
         t0 = time.perf_counter()
-        r = run_scene(100 + k, args.gaussians, emb, vcfg, args.states, args.motions)
+        r = run_scene(100 + k, args.gaussians, emb, vcfg, args.states, args.motions, costmap=costmap)
         scenes.append(r)
         r5 = r["res"]["0.05"]
         print(f"scene {k}: FN state {r5['fn_state']} motion {r5['fn_motion']}  FP state {r5['fp_state']}/{r5['neg_state']} "
@@ -317,7 +324,7 @@ def main(argv=None) -> int:
         rows = []
         for k in range(args.realism_scenes):
             r = run_scene(300 + k, args.gaussians, emb, vcfg, args.states, args.motions, realism="moderate",
-                          resolutions=(0.05,), timing=False,
+                          resolutions=(0.05,), timing=False, costmap=costmap,
                           ablations={"all_opacities": {"min_obstacle_alpha": 0.0}} if args.ablate_faint else None)
             rows.append(r)
             r5 = r["res"]["0.05"]
@@ -336,10 +343,27 @@ def main(argv=None) -> int:
             rep["realism_moderate"]["fp_state_all_opacities"] = sum(a["fp_state"] for a in abl) / max(tot("neg_state"), 1)
             rep["realism_moderate"]["fn_state_all_opacities"] = sum(a["fn_state"] for a in abl) / max(tot("pos_state"), 1)
     rep["per_scene"] = scenes
+    rep["costmap_overrides"] = costmap
     rep["wall_s"] = time.perf_counter() - t_run
     rep["argv"] = " ".join(argv if argv is not None else sys.argv[1:])
     write_report(rep, out, args.docs)
     return 0
+
+
+def costmap_overrides(items: list[str]) -> dict:
+    """--costmap K=V items -> CostmapConfig keyword arguments, each value typed as its field's default."""
+    import dataclasses
+
+    fields = {f.name: f for f in dataclasses.fields(CostmapConfig)}
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or key not in fields:
+            raise SystemExit(f"bench-spatial: --costmap {item!r}: K=V with K a CostmapConfig field ({', '.join(fields)})")
+        default = fields[key].default
+        out[key] = (value.lower() in ("1", "true", "yes")) if isinstance(default, bool) else type(default)(value) \
+            if isinstance(default, (int, float)) else value
+    return out
 
 
 def write_report(rep: dict, out: Path, docs: bool = False) -> None:
