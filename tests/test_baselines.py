@@ -947,3 +947,17 @@ def test_chunked_encoding_gives_the_same_outputs_and_gradients(task, encoder):
             assert torch.allclose(g, runs[0][2][k], atol=1e-4, rtol=1e-4), k
     with torch.no_grad():  # evaluation: no checkpointing, the same chunks
         assert torch.allclose(net(frames, goal, prev, chunk=4)[0], runs[0][0], atol=1e-5)
+
+
+def test_fit_step_benchmark_times_the_same_episodes_both_ways(tmp_path):
+    """benchmarks.baselines.fit_step: both ways see the same episode lengths (the padded batch's share of
+    padding is what packing saves), a report is written, and each way's own-frame rate is positive."""
+    import json
+
+    from benchmarks.baselines.fit_step import main
+
+    r = main(["--task", "pointnav", "--batch", "3", "--steps", "1", "--mean-length", "6", "--max-length", "12",
+              "--size", "32", "24", "--out", str(tmp_path)])
+    assert json.loads((tmp_path / "fit_step.json").read_text())["speedup"] == pytest.approx(r["speedup"])
+    assert 0.0 < r["padding_share"] < 1.0
+    assert r["padded"]["frames_per_s"] > 0 and r["packed"]["frames_per_s"] > 0
