@@ -6,9 +6,11 @@ so that a run cut by a machine's time limit goes on where it stopped:
     python -m benchmarks.baselines.captures_loo gen                     # the generated training world
     python -m benchmarks.baselines.captures_loo cap NAME=PATH [...]     # a capture's data root (200 PointNav episodes, half test)
     python -m benchmarks.baselines.captures_loo train [--rounds 4 --episodes 2048]
-    python -m benchmarks.baselines.captures_loo zeroshot                # the world's policy, pointnav_bc, depth_reactive on every capture
-    python -m benchmarks.baselines.captures_loo loo                     # per capture: fine-tune on the others, evaluate on it;
-                                                                        # and the control: the same fine-tune without captures
+    python -m benchmarks.baselines.captures_loo zeroshot                # the world's policy (greedy and sampled: world+sample),
+                                                                        # pointnav_bc, depth_reactive on every capture
+    python -m benchmarks.baselines.captures_loo loo                     # per capture: fine-tune on the others, evaluate on it
+                                                                        # greedy and sampled (--loo-decoding); and the control:
+                                                                        # the same fine-tune without captures
     python -m benchmarks.baselines.captures_loo report --out DIR        # the table: DIR/captures_loo.{json,md}
 
 gen: the baselines' reference scenes (benchmarks.baselines.reference: the first SCENES=128 generated
