@@ -692,6 +692,17 @@ def test_surface_evidence_gathers_a_column_and_places_the_obstacle_at_the_centre
         else:
             err = cm.clearance_at(xy)[near] - np.maximum(d[near] - cfg.surface_min_reach, 0)
             assert np.abs(err).max() <= 0.05 / 11 * 1.5, np.abs(err).max()
+    # surface_reach_spacing: the reach is that share of the obstacle splats' median spacing (the distance
+    # to the 4th nearest other: of five splats, the farthest one), in place of surface_min_reach
+    from stages.costmap.build import neighbour_spacing
+
+    spacing = neighbour_spacing(centres, 4)
+    farthest = np.linalg.norm(centres[:, None] - centres[None], axis=-1).max(1)
+    assert spacing == pytest.approx(np.median(farthest))
+    cfg = CostmapConfig(resolution=0.05, margin_xy=0.0, evidence="surface", surface_reach_spacing=1.0)
+    cm = Costmap.from_layers(build_costmap(scene, emb, cfg, VoxelizeConfig())[0])
+    err = cm.clearance_at(xy)[near] - np.maximum(d[near] - spacing, 0)
+    assert np.abs(err).max() <= 0.05 / 11 * 1.5, np.abs(err).max()
 
 
 def test_isolated_splats_are_noise_only_where_the_model_is_dense():

@@ -105,7 +105,9 @@ def agreement(a, b) -> dict:
 
 CONFIGS = {"defaults": (), "cell evidence": ("costmap.cell_evidence=true",),
            "cell evidence + density radius": ("costmap.cell_evidence=true", "costmap.outlier_density=2.8"),
-           "surface + dense-only noise": ("costmap.evidence=surface", "costmap.noise_dense_count=30")}
+           "surface + dense-only noise": ("costmap.evidence=surface", "costmap.noise_dense_count=30"),
+           "surface, reach 0.2 spacing, + dense-only noise": ("costmap.evidence=surface", "costmap.noise_dense_count=30",
+                                                              "costmap.surface_reach_spacing=0.2")}
 """The costmap settings measured: the defaults and the sparse-evidence options (stages/costmap/build.py)."""
 
 

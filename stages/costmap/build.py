@@ -70,6 +70,9 @@ class CostmapConfig:
     surface_reach_sigmas: float = 0.0
     """evidence=surface: an obstacle Gaussian's footprint is its ellipsoid at this many standard
     deviations (0: its centre alone, grown by surface_min_reach)."""
+    surface_reach_spacing: float = 0.0
+    """evidence=surface: the smallest reach is this share of the obstacle splats' median spacing (the
+    distance to their outlier_min_neighbours-th nearest), in place of surface_min_reach (0: that)."""
     surface_band_sigmas: float = 2.0
     """evidence=surface: a Gaussian is of the body band when its centre lies within this many of its z
     standard deviations of it (a 6 cm object's side splats, centred 3.5 cm up, reach a band from 5 cm)."""
@@ -508,7 +511,10 @@ def surface_obstacles_fine(scene: GaussianScene, origin, shape, s: int, emb: Emb
         log_reach = g.log_scales.astype(np.float64) + np.log(cfg.surface_reach_sigmas)
     else:
         log_reach = np.full(g.log_scales.shape, -np.inf)
-    log_reach = np.maximum(log_reach, np.log(max(cfg.surface_min_reach, 1e-4)))
+    reach = cfg.surface_min_reach
+    if cfg.surface_reach_spacing > 0 and len(g.means) > cfg.outlier_min_neighbours:
+        reach = cfg.surface_reach_spacing * neighbour_spacing(g.means, cfg.outlier_min_neighbours)
+    log_reach = np.maximum(log_reach, np.log(max(reach, 1e-4)))
     foot = GaussianScene(g.means, g.quats, log_reach.astype(np.float32), np.full(len(g.means), 20.0, np.float32),
                          g.sh[:, :1])
     res_f = cfg.resolution / s
