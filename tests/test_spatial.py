@@ -443,14 +443,14 @@ def test_camera_scene_leaves_out_the_stored_hidden_splats(tmp_path):
 
 
 def test_bench_spatial_costmap_overrides_are_typed_and_checked():
-    """bench-spatial --costmap K=V: each value typed as its CostmapConfig field's default; an unknown
-    field, a missing '=' and --docs with a non-default setting are refused."""
+    """bench-spatial --costmap K=V: each value typed by CostmapConfig's schema; an unknown
+    field, a missing '=', a value not of its type and --docs with a non-default setting are refused."""
     from benchmarks.map.spatial import costmap_overrides, main
 
     assert costmap_overrides(["evidence=surface", "noise_dense_count=30", "cell_evidence=true", "surface_min_reach=0.02"]) \
         == {"evidence": "surface", "noise_dense_count": 30, "cell_evidence": True, "surface_min_reach": 0.02}
     assert CostmapConfig(**costmap_overrides(["noise_dense_count=30"])).noise_dense_count == 30
-    for bad in (["nonsense=1"], ["evidence"]):
+    for bad in (["nonsense=1"], ["evidence"], ["noise_dense_count=abc"]):
         with pytest.raises(SystemExit, match="CostmapConfig field"):
             costmap_overrides(bad)
     with pytest.raises(SystemExit, match="not the default"):

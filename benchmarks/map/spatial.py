@@ -351,19 +351,20 @@ def main(argv=None) -> int:
 
 
 def costmap_overrides(items: list[str]) -> dict:
-    """--costmap K=V items -> CostmapConfig keyword arguments, each value typed as its field's default."""
-    import dataclasses
+    """--costmap K=V items -> CostmapConfig keyword arguments, typed and checked by the config's own
+    schema (OmegaConf, as the pipeline's overrides are)."""
+    from omegaconf import OmegaConf
+    from omegaconf.errors import OmegaConfBaseException
 
-    fields = {f.name: f for f in dataclasses.fields(CostmapConfig)}
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or key not in fields:
-            raise SystemExit(f"bench-spatial: --costmap {item!r}: K=V with K a CostmapConfig field ({', '.join(fields)})")
-        default = fields[key].default
-        out[key] = (value.lower() in ("1", "true", "yes")) if isinstance(default, bool) else type(default)(value) \
-            if isinstance(default, (int, float)) else value
-    return out
+    keys = [item.partition("=")[0] for item in items]
+    try:
+        if not all("=" in item for item in items):
+            raise ValueError("no '='")
+        typed = OmegaConf.merge(OmegaConf.structured(CostmapConfig), OmegaConf.from_dotlist(items))
+    except (OmegaConfBaseException, ValueError) as e:
+        raise SystemExit(f"bench-spatial: --costmap {' '.join(items)}: K=V with K a CostmapConfig field and V of its "
+                         f"type ({str(e).splitlines()[0]})") from None
+    return {k: typed[k] for k in keys}
 
 
 def write_report(rep: dict, out: Path, docs: bool = False) -> None:

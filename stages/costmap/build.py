@@ -61,8 +61,8 @@ class CostmapConfig:
     accumulated opacity reaches tau_occ) | column (the opacity the whole band accumulates along the
     column, each Gaussian counted once at its largest density there: a table leg of a few
     half-transparent splats stacked up blocks, where no single 5 cm voxel of it reached tau_occ) |
-    surface (evidence and place apart, each margin counted once: a Gaussian centred in the band is
-    an obstacle when the band's centres in its column of cell_evidence_size gather opacity
+    surface (evidence and place apart, each margin counted once: a Gaussian of the band (within
+    surface_band_sigmas) is an obstacle when the band's Gaussians in its column of cell_evidence_size gather opacity
     1 - prod(1 - alpha) >= tau_occ, and the obstacle is where it is, its centre grown by
     surface_reach_sigmas standard deviations and at least surface_min_reach, not the extent its
     density and its neighbours' tails reach past the surface; with noise_dense_count, the sparse
@@ -342,8 +342,9 @@ def obstacle_classes(scene: GaussianScene, cfg: CostmapConfig) -> tuple[np.ndarr
 
             alone = np.nonzero(isolated)[0]
             around = cKDTree(scene.means).query_ball_point(scene.means[alone], cfg.noise_dense_radius, return_length=True)
-            isolated[alone[around < cfg.noise_dense_count]] = False
-            info["isolated_kept_sparse"] = int((around < cfg.noise_dense_count).sum())
+            sparse = alone[around < cfg.noise_dense_count]
+            isolated[sparse] = False
+            info["isolated_kept_sparse"] = len(sparse)
         cand &= ~isolated
         info["isolated_dropped"] = int(isolated.sum())
     return cand, isolated, info
