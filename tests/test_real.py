@@ -705,6 +705,27 @@ def test_surface_evidence_gathers_a_column_and_places_the_obstacle_at_the_centre
     assert np.abs(err).max() <= 0.05 / 11 * 1.5, np.abs(err).max()
 
 
+def test_surface_flat_ratio_lets_only_surfels_reach_their_extent():
+    """surface_reach_sigmas with surface_flat_ratio: a flat opaque splat (a 30 cm wall patch, 1 cm thick)
+    blocks along its whole one-sigma extent; a round one of 10 cm sigma keeps the smallest reach; with
+    the ratio 0 both reach their ellipsoid (known answers by clearance, within a fine cell)."""
+    rng = np.random.default_rng(4)
+    wall = GaussianScene.from_colors(np.array([[1.0, 1.0, 0.3], [3.0, 1.0, 0.3]]), np.tile([1.0, 0, 0, 0], (2, 1)),
+                                     np.array([[0.15, 0.005, 0.15], [0.1, 0.1, 0.1]]), np.full(2, 0.9), np.full((2, 3), 0.3))
+    scene = concat(flat_floor(rng, 20_000, 0.005, size=4.0), wall)
+    for ratio in (0.2, 0.0):
+        cfg = CostmapConfig(resolution=0.05, margin_xy=0.0, evidence="surface", surface_reach_sigmas=1.0,
+                            surface_flat_ratio=ratio)
+        layers = build_costmap(scene, Embodiment(), cfg, VoxelizeConfig())[0]
+        cm = Costmap.from_layers(layers)
+        # cell centres (where the map's clearance is exact to a fine cell) near the wall's end, beside the
+        # round splat and across the wall
+        q = layers.origin[:2] + (np.floor((np.array([[1.12, 1.0], [3.08, 1.0], [1.0, 1.1]]) - layers.origin[:2]) / 0.05) + 0.5) * 0.05
+        wall_d = np.hypot(np.maximum(np.abs(q[:, 0] - 1.0) - 0.15, 0), np.maximum(np.abs(q[:, 1] - 1.0) - 0.01, 0))
+        round_d = np.maximum(np.hypot(q[:, 0] - 3.0, q[:, 1] - 1.0) - (0.01 if ratio else 0.1), 0)
+        np.testing.assert_allclose(cm.clearance_at(q), np.minimum(wall_d, round_d), atol=0.05 / 11 * 1.5)
+
+
 def test_isolated_splats_are_noise_only_where_the_model_is_dense():
     """noise_dense_count: the same lone opaque splat 12 cm up is noise over a densely reconstructed
     floor and an obstacle candidate over a sparse one (fewer than the count of Gaussians within

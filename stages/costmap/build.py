@@ -70,6 +70,11 @@ class CostmapConfig:
     surface_reach_sigmas: float = 0.0
     """evidence=surface: an obstacle Gaussian's footprint is its ellipsoid at this many standard
     deviations (0: its centre alone, grown by surface_min_reach)."""
+    surface_flat_ratio: float = 0.0
+    """evidence=surface: with surface_reach_sigmas, only the flat Gaussians (smallest / largest standard
+    deviation below this ratio: a surfel, which stands for the patch of surface it spans) reach their
+    ellipsoid; the others keep the smallest reach (0: every Gaussian reaches its ellipsoid). Big flat
+    splats make the walls of some captures, big round ones the fuzz around a dense model's objects."""
     surface_reach_spacing: float = 0.0
     """evidence=surface: the smallest reach is this share of the obstacle splats' median spacing (the
     distance to their outlier_min_neighbours-th nearest), in place of surface_min_reach (0: that)."""
@@ -510,6 +515,10 @@ def surface_obstacles_fine(scene: GaussianScene, origin, shape, s: int, emb: Emb
     g = scene.subset(surface_admitted(scene, emb, cfg.cell_evidence_size, vcfg.tau_occ, cfg.surface_band_sigmas))
     if cfg.surface_reach_sigmas > 0:
         log_reach = g.log_scales.astype(np.float64) + np.log(cfg.surface_reach_sigmas)
+        if cfg.surface_flat_ratio > 0:
+            ls = g.log_scales.astype(np.float64)
+            round_ = ls.min(1) - ls.max(1) >= np.log(cfg.surface_flat_ratio)
+            log_reach[round_] = -np.inf
     else:
         log_reach = np.full(g.log_scales.shape, -np.inf)
     reach = cfg.surface_min_reach

@@ -32,7 +32,7 @@ ADDED_KEYS = (("costmap", "evidence", "voxel"), ("costmap", "cell_evidence", Fal
               ("costmap", "cell_evidence_share", 0.1), ("costmap", "cell_evidence_floor", 0.05),
               ("costmap", "outlier_density", 0.0), ("costmap", "footprint_max_sigma", 0.0),
               ("costmap", "surface_reach_sigmas", 0.0), ("costmap", "surface_band_sigmas", 2.0), ("costmap", "surface_min_reach", 0.01),
-              ("costmap", "surface_reach_spacing", 0.0),
+              ("costmap", "surface_reach_spacing", 0.0), ("costmap", "surface_flat_ratio", 0.0),
               ("costmap", "noise_dense_count", 0), ("costmap", "noise_dense_radius", 0.2))
 """Keys added after data roots were made with this stage: at their defaults they leave its hash
 as it was (pipeline.graph.Stage.added)."""

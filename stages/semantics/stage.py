@@ -25,7 +25,8 @@ from stages.semantics.segmenters import SEGMENTERS, SegmenterUnavailable
 
 ADDED_KEYS = (("semantics", "view_selection", "grid"), ("semantics", "coverage", asdict(CoverageConfig())),
               ("semantics", "detector.models", {}), ("semantics", "lifting.confusable", None),
-              ("semantics", "lifting.confusable_overlap", 0.3))
+              ("semantics", "lifting.confusable_overlap", 0.3), ("semantics", "detector.tiles", 1),
+              ("semantics", "detector.tile_overlap", 0.25))
 """Keys added after data roots were made with this stage: at their defaults they leave its hash
 as it was (pipeline.graph.Stage.added)."""
 
