@@ -10,8 +10,7 @@ import pytest
 
 from navcore.io.models import DEFAULT_MODEL, MODELS_ROOT, SHIPPED, load_net
 from navcore.io.release import sha256_file
-from stages.semantics.detector import (COCO_TO_GOAL, DetectorConfig, box_mask, boxes_of, detect, detect_tiled, resolved,
-                                       tile_windows)
+from stages.semantics.detector import COCO_TO_GOAL, DetectorConfig, box_mask, boxes_of, detect, detect_tiled, resolved, tile_windows
 from stages.semantics.lifting import LiftingConfig, lift, view_support
 
 SHARED_MODELS = Path(__file__).resolve().parents[2] / "shared" / "models"
