@@ -10,7 +10,7 @@ import pytest
 
 from navcore.io.models import DEFAULT_MODEL, MODELS_ROOT, SHIPPED, load_net
 from navcore.io.release import sha256_file
-from stages.semantics.detector import COCO_TO_GOAL, DetectorConfig, box_mask, boxes_of, detect, detect_tiled, resolved, tile_windows
+from stages.semantics.detector import COCO_TO_GOAL, DetectorConfig, box_mask, boxes_of, detect, resolved
 from stages.semantics.lifting import LiftingConfig, lift, view_support
 
 SHARED_MODELS = Path(__file__).resolve().parents[2] / "shared" / "models"
@@ -83,45 +83,6 @@ def test_the_shipped_onnx_detectors_box_the_bed_of_a_real_photo_as_upstream_does
     cx, cy, bw, bh = raw[best, :4] * [w, h, w, h]
     assert names[cls[best]] == "bed" and scores[best] == pytest.approx(score, abs=0.01)
     np.testing.assert_allclose([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], box, atol=2)
-
-
-def test_tile_windows_cover_the_frame_with_the_overlap_asked():
-    assert tile_windows(320, 240, 1, 0.25) == [(0, 0, 320, 240)]
-    wins = tile_windows(700, 525, 2, 0.25)
-    assert len(wins) == 4 and {(x, y) for x, y, _, _ in wins} == {(0, 0), (300, 0), (0, 225), (300, 225)}
-    assert all((w, h) == (400, 300) for _, _, w, h in wins)  # 1 / 1.75 of a side: neighbours share 100 px = 25 %
-    covered = np.zeros((525, 700), bool)
-    for x, y, w, h in tile_windows(700, 525, 3, 0.4):
-        covered[y:y + h, x:x + w] = True
-        assert x + w <= 700 and y + h <= 525
-    assert covered.all()
-    with pytest.raises(ValueError, match="tile_overlap"):
-        tile_windows(320, 240, 2, 1.0)
-
-
-@pytest.mark.skipif(not PHOTO.is_file(), reason="needs ../shared/data/real_labelled (the SUN RGB-D photo)")
-def test_a_tiles_box_lands_where_the_object_is_in_the_whole_frame():
-    """The bedroom photo pasted as the top-left tile of a grey frame 1.75 times its size: the tiled
-    detection holds the bed at the photo's own known box and score (the test above), in the frame's
-    coordinates."""
-    import cv2
-
-    photo = np.ascontiguousarray(cv2.imread(str(PHOTO))[..., ::-1])
-    ph, pw = photo.shape[:2]
-    frame = np.full((int(round(ph * 1.75)), int(round(pw * 1.75)), 3), 128, np.uint8)
-    x0, y0, tw, th = tile_windows(frame.shape[1], frame.shape[0], 2, 0.25)[0]
-    assert (x0, y0) == (0, 0) and abs(tw - pw) <= 1 and abs(th - ph) <= 1
-    frame[:th, :tw] = cv2.resize(photo, (tw, th))
-    n, names, spec = load_net("picodet_s_320_coco")
-    raw = detect_tiled(n, frame, spec.input_size, spec, tiles=2, overlap=0.25)
-    assert len(raw) == 5 * len(detect(n, frame, spec.input_size, spec))  # the frame and its 4 tiles
-    h, w = frame.shape[:2]
-    cls = raw[:, 5:].argmax(1)
-    scores = raw[:, 4] * raw[np.arange(len(raw)), 5 + cls]
-    beds = [i for i in np.flatnonzero(scores > 0.8) if names[cls[i]] == "bed"]
-    assert beds
-    cx, cy, bw, bh = raw[beds[int(np.argmax(scores[beds]))], :4] * [w, h, w, h]
-    np.testing.assert_allclose([cx - bw / 2, cy - bh / 2, cx + bw / 2, cy + bh / 2], [178, 150, 643, 518], atol=4)
 
 
 def test_the_default_detector_and_the_thresholds_come_from_files_the_benchmark_writes():

@@ -48,7 +48,7 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
                camera_height: float | None = None, pitch: float | None = None, robot_camera: bool = False,
                overrides: tuple[str, ...] = (), detector: str | None = None,
                detector_models: dict[str, str] | None = None, final=None,
-               candidates: dict[str, str | None] | None = None, tiles: int = 1) -> dict:
+               candidates: dict[str, str | None] | None = None) -> dict:
     """The measures of the module doc on the scan (or, with `model`, on a 3DGS trained in the scan's
     frame, whose Gaussians take the instance of the nearest scanned point within transfer_radius).
     `overrides`: more config overrides of both runs (e.g. semantics.view_selection=coverage);
@@ -56,8 +56,7 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
     `detector_models`: categories boxed by other models (semantics.detector.models); `final`: the
     DetectorConfig whose thresholds, allow-list and min_views make the "defaults" figures (None:
     the shipped defaults). `candidates` ({label: model}): several detectors on the same rendered views,
-    one report each ({label: report}; `detector` and `detector_models` are then unused); `tiles`:
-    semantics.detector.tiles of every detector."""
+    one report each ({label: report}; `detector` and `detector_models` are then unused)."""
     from omegaconf import OmegaConf
 
     from navcore.instances import shipped_instances, table_to_labels
@@ -119,7 +118,7 @@ def bench_scan(scan: Path, width: int, height: int, tol: float, input_size: int 
         # per-category mix where none is named
         base = resolved(DetectorConfig(model=detector, models=dict(detector_models or {})))
         dcfg = {label: DetectorConfig(categories=all_cats, confidence={}, default_confidence=min(THRESHOLDS),
-                                      model_thresholds=False, input_size=input_size, tiles=tiles,
+                                      model_thresholds=False, input_size=input_size,
                                       model=m if candidates is not None else base.model,
                                       models={} if candidates is not None else dict(base.models))
                 for label, m in runs.items()}

@@ -97,14 +97,6 @@ class DetectorConfig:
     model's own size (its JSON beside it) takes precedence."""
     nms: float = 0.45
     """Non-maximum suppression IoU, per category."""
-    tiles: int = 1
-    """1: the whole frame, once a view; n > 1: also n x n overlapping tiles of the frame (each spans
-    1 / (n - (n - 1) x tile_overlap) of a side and is resized to the network's input), the boxes of
-    all merged by the per-category NMS: small or far objects get about n times the pixels a side.
-    Costs 1 + n^2 detector runs a view."""
-    tile_overlap: float = 0.25
-    """Share of a tile's side that overlaps its neighbour's (an object cut by one tile's edge lies
-    whole in the next)."""
     threads: int = 0
     """OpenCV threads (0 = OpenCV's default: every core)."""
     mask: str = "depth"
@@ -172,40 +164,6 @@ def preprocess(rgb: np.ndarray, spec: ModelSpec, size: int) -> tuple[np.ndarray,
         fx = fy = 1.0
     x = (canvas * np.float32(spec.scale) - np.asarray(spec.mean, np.float32)) / np.asarray(spec.std, np.float32)
     return np.ascontiguousarray(x.transpose(2, 0, 1)[None], dtype=np.float32), fx, fy
-
-
-def tile_windows(width: int, height: int, n: int, overlap: float) -> list[tuple[int, int, int, int]]:
-    """(x0, y0, w, h) of the n x n overlapping tiles of a frame: each spans 1 / (n - (n - 1) * overlap)
-    of a side, the first at 0, the last at the far edge (n = 1: the whole frame)."""
-    if n < 1 or not 0.0 <= overlap < 1.0:
-        raise ValueError(f"semantics.detector.tiles={n}, tile_overlap={overlap}: need tiles >= 1 and 0 <= overlap < 1")
-    out = []
-    tw, th = (int(round(s / (n - (n - 1) * overlap))) for s in (width, height))
-    xs = np.linspace(0, width - tw, n).round().astype(int) if n > 1 else [0]
-    ys = np.linspace(0, height - th, n).round().astype(int) if n > 1 else [0]
-    for y in ys:
-        for x in xs:
-            out.append((int(x), int(y), tw, th))
-    return out
-
-
-def detect_tiled(net, rgb: np.ndarray, size: int, spec: ModelSpec | None = None, tiles: int = 1,
-                 overlap: float = 0.25) -> np.ndarray:
-    """detect() on the whole frame and, for tiles > 1, on each of tile_windows' crops, the crops' rows
-    mapped back to the whole frame's normalised coordinates (one array for boxes_of's NMS)."""
-    raw = detect(net, rgb, size, spec)
-    if tiles <= 1:
-        return raw
-    h, w = rgb.shape[:2]
-    parts = [raw]
-    for x0, y0, tw, th in tile_windows(w, h, tiles, overlap):
-        r = detect(net, np.ascontiguousarray(rgb[y0:y0 + th, x0:x0 + tw]), size, spec).copy()
-        r[:, 0] = (x0 + r[:, 0] * tw) / w
-        r[:, 1] = (y0 + r[:, 1] * th) / h
-        r[:, 2] *= tw / w
-        r[:, 3] *= th / h
-        parts.append(r)
-    return np.concatenate(parts)
 
 
 def detect(net, rgb: np.ndarray, size: int, spec: ModelSpec | None = None) -> np.ndarray:
@@ -399,8 +357,7 @@ class DetectorSegmenter(Segmenter):
         out: dict[str, list] = {p: [] for p in prompts}
         frame = np.ascontiguousarray(rgb)
         self.last_boxes = [b for net, names, spec, size, cfg in self.runs
-                           for b in boxes_of(detect_tiled(net, frame, size, spec, cfg.tiles, cfg.tile_overlap),
-                                             names, cfg, w, h)]
+                           for b in boxes_of(detect(net, frame, size, spec), names, cfg, w, h)]
         for cat, box, score in self.last_boxes:
             p = self.prompts_of.get(cat)
             if p not in out:

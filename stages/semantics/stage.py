@@ -25,8 +25,7 @@ from stages.semantics.segmenters import SEGMENTERS, SegmenterUnavailable
 
 ADDED_KEYS = (("semantics", "view_selection", "grid"), ("semantics", "coverage", asdict(CoverageConfig())),
               ("semantics", "detector.models", {}), ("semantics", "lifting.confusable", None),
-              ("semantics", "lifting.confusable_overlap", 0.3), ("semantics", "detector.tiles", 1),
-              ("semantics", "detector.tile_overlap", 0.25))
+              ("semantics", "lifting.confusable_overlap", 0.3))
 """Keys added after data roots were made with this stage: at their defaults they leave its hash
 as it was (pipeline.graph.Stage.added)."""
 
