@@ -820,6 +820,34 @@ def test_storage_measure_counts_a_hard_link_to_the_source_once_and_names_stale_o
     assert s["store_and_asset_bytes"] == 1500 + (scene / "ingest.json").stat().st_size
 
 
+def test_storage_measure_of_a_scene_set_leaves_out_the_other_scenes_of_the_root(tmp_path):
+    """A data root holding the default scenes and a scene another catalog put there: measured for the
+    default set, neither the other scene's store nor its episode rows count."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from benchmarks.dataset.storage import measure
+
+    root = tmp_path / "d"
+    for sid, size, rows in (("s1", 1000, 3), ("other", 9000, 5)):
+        src = tmp_path / f"{sid}.ply"
+        src.write_bytes(b"x" * size)
+        (root / "01_scenes" / sid).mkdir(parents=True)
+        (root / "01_scenes" / sid / "ingest.json").write_text(json.dumps({"scene_id": sid, "group": "g", "source": str(src)}))
+        (root / "09_assets" / "g" / sid).mkdir(parents=True)
+        (root / "09_assets" / "g" / sid / "aligned.ply").write_bytes(b"y" * size)
+        for top in ("05_episodes", "06_trajectories"):
+            d = root / top / "task=pointnav" / f"scene_id={sid}"
+            d.mkdir(parents=True)
+            pq.write_table(pa.table({"episode_id": list(range(rows))}), d / "part-0.parquet")
+    every, one = measure(root), measure(root, {"s1"})
+    assert [s["scene_id"] for s in every["scenes"]] == ["other", "s1"] and every["episodes"] == 8
+    assert [s["scene_id"] for s in one["scenes"]] == ["s1"] and one["episodes"] == 3
+    own = sum(f.stat().st_size for top in ("05_episodes", "06_trajectories")
+              for f in (root / top / "task=pointnav" / "scene_id=s1").iterdir())
+    assert one["bytes_per_episode"] == pytest.approx(own / 3)
+
+
 def test_gpu_job_workers_are_pinned_to_their_own_gpu(monkeypatch):
     """Worker k of a GPU batch job (dask names it <job>-k) keeps only the job's k-th GPU."""
     from types import SimpleNamespace

@@ -39,7 +39,9 @@ def unlinked_source_files(asset: Path, source_inodes: set) -> list[str]:
             if f.is_file() and not f.is_symlink() and (f.stat().st_dev, f.stat().st_ino) not in source_inodes]
 
 
-def measure(root: Path) -> dict:
+def measure(root: Path, scene_ids: set[str] | None = None) -> dict:
+    """Bytes of each scene of the root (of `scene_ids` only, where given: a root may also hold other
+    catalogs' scenes) and of its episode tables."""
     import pyarrow.parquet as pq
 
     from navcore.gaussians.formats import source_files
@@ -48,6 +50,8 @@ def measure(root: Path) -> dict:
     for rep in sorted((root / "01_scenes").glob("*/ingest.json")):
         ing = json.loads(rep.read_text())
         sid, seen = ing["scene_id"], set()
+        if scene_ids is not None and sid not in scene_ids:
+            continue
         src = tree_bytes(source_files(ing["source"])[1], seen)  # counted first: links to it are free
         asset = root / "09_assets" / ing["group"] / sid
         stale = unlinked_source_files(asset, seen)
@@ -63,9 +67,11 @@ def measure(root: Path) -> dict:
                        "ratio": store / src if src else None, "ratio_with_maps": (store + maps) / src if src else None,
                        "ratio_all": sum(per_stage.values()) / src if src else None,
                        "unlinked_source_files": stale})
-    eps = sorted((root / "05_episodes").glob("task=*/scene_id=*/part-0.parquet"))
-    n = sum(pq.read_metadata(f).num_rows for f in eps)
-    tables = tree_bytes([root / "05_episodes", root / "06_trajectories"], set())
+    parts = sorted(d for top in ("05_episodes", "06_trajectories") for d in (root / top).glob("task=*/scene_id=*")
+                   if scene_ids is None or d.name.split("=", 1)[1] in scene_ids)
+    n = sum(pq.read_metadata(d / "part-0.parquet").num_rows for d in parts
+            if d.parent.parent.name == "05_episodes" and (d / "part-0.parquet").is_file())
+    tables = tree_bytes(parts, set())
     return {"scenes": scenes, "episodes": n, "bytes_per_episode": tables / n if n else None}
 
 

@@ -239,11 +239,25 @@ def load(out: Path, name: str) -> dict | None:
     return json.loads(p.read_text()) if p.exists() else None
 
 
+def default_scene_ids(data: Path) -> set[str]:
+    """The ids of the default scene set (the catalog `make dataset` runs): the data root may also
+    hold scenes another catalog put there, which are not the default dataset's storage."""
+    from hydra import compose, initialize_config_dir
+
+    from navcore.io.catalog import Catalog
+    from pipeline.config import CONF_DIR, register_configs
+
+    register_configs()
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose("config", overrides=[f"data_root={data}"])
+    return {s.scene_id for s in Catalog(CONF_DIR.parent / cfg.scenes.catalog, data).select()}
+
+
 def report(args) -> dict:
     from benchmarks.dataset.storage import measure
 
     out = Path(args.out)
-    st = {"default": measure(Path(args.data))}
+    st = {"default": measure(Path(args.data), default_scene_ids(Path(args.data)))}
     if args.real_root and Path(args.real_root).exists():
         st["real_indoor"] = measure(Path(args.real_root))
     if args.compact_root and Path(args.compact_root).exists():
