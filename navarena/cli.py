@@ -27,7 +27,9 @@ CONSUMER = {"inspect": ("navarena.inspect_scene", "a 3DGS file before any run: f
 PRODUCER = {"run": ("pipeline.__main__", "the pipeline; Hydra overrides as arguments, e.g.\n"
                     "                   navarena run scenes=real_indoor stages=[costmap] costmap.resolution=0.02\n"
                     "                   (navarena run --help: Hydra's help; --cfg job: the resolved config)"),
-            "release": ("pipeline.release.__main__", "assemble a release folder from a finished data root")}
+            "release": ("pipeline.release.__main__", "assemble a release folder from a finished data root"),
+            "check-costmap": ("pipeline.check_costmap",
+                              "the render check of a data root's costmaps: FP / FN estimates, no ground truth")}
 """Subcommands of the pipeline project (a checkout): module (with main(argv)) and help."""
 
 PIPELINE_HOME = "https://github.com/EI-Nav/NavArena"

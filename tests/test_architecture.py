@@ -208,7 +208,8 @@ def test_pipeline_holds_orchestration_only(project_root):
                      "submit", "summary", "tasks", "config_guard", "episode_progress",
                      "sources",  # whether the outside files a marker's outputs came from are still those
                      "config_reference",  # the configuration / CLI reference pages, generated from config and __main__
-                     "kernels"}  # compiles the CPU kernels ahead of a first run (a tiny run of the stages)
+                     "kernels",  # compiles the CPU kernels ahead of a first run (a tiny run of the stages)
+                     "check_costmap"}  # navarena check-costmap: a finished run's costmaps checked with its markers' configs
     found = {p.stem for p in (project_root / "pipeline").glob("*.py")}
     assert found <= orchestration, found - orchestration
 

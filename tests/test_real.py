@@ -764,3 +764,35 @@ def test_one_room_at_two_densities_gives_maps_that_agree():
     b, _ = build_costmap(quarter, emb, cfg, VoxelizeConfig(), extent=extent)
     agree = agreement(a, b)
     assert agree["blocked_kept"] >= 0.97 and agree["free_kept"] >= 0.97, agree
+
+
+def test_check_costmap_runs_the_render_check_with_the_config_its_costmap_was_built_with(episode_run, make_cfg, capsys):
+    """`navarena check-costmap ROOT`: each scene's render check with the costmap config and embodiment
+    its stage marker recorded gives the same rates as the check run by hand with the run's composed
+    config; a root with no run and an unknown scene are refused in one line."""
+    from omegaconf import OmegaConf
+
+    from navcore.gaussians.content import content_of
+    from navcore.io.catalog import Catalog
+    from pipeline.check_costmap import check_root, main
+    from pipeline.config import CONF_DIR
+    from stages.costmap.build import obstacle_classes
+    from stages.costmap.render_check import RenderCheckConfig, check_costmap
+
+    root, over, _ = episode_run
+    res = check_root(root, poses=30, backend="cpu")
+    (name, r), = res.items()
+    cfg = make_cfg(root, *over)
+    catalog = Catalog(CONF_DIR.parent / cfg.scenes.catalog, root)
+    (scene,) = [s for s in catalog.select() if s.scene_id == r["scene_id"]]
+    emb = OmegaConf.to_object(cfg.embodiment)
+    content = content_of(catalog.dataset("aligned", scene).load(view_dependent=False)[0])
+    _, noise, _ = obstacle_classes(content, OmegaConf.to_object(cfg.costmap))
+    ref = check_costmap(content, catalog.dataset("costmaps", scene).load(emb.name), emb, RenderCheckConfig(poses=30),
+                        backend="cpu", noise=noise)
+    assert name == scene.name and r["embodiment"] == emb.name and r["poses"] == 30
+    assert (r["fp_est"], r["fn_est"], r["fn_noise_only"]) == (ref["fp_est"], ref["fn_est"], ref["fn_noise_only"])
+    assert main([str(root), "--poses", "10", "--backend", "cpu"]) == 0
+    assert capsys.readouterr().out.startswith(f"{name} ({emb.name}): 10 poses")
+    assert main([str(root / "nothing")]) == 2 and "no pipeline run here" in capsys.readouterr().err
+    assert main([str(root), "--scenes", "no_such_scene"]) == 2 and "no_such_scene" in capsys.readouterr().err
