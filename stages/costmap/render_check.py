@@ -312,4 +312,3 @@ def check_costmap(scene, costmap, emb, cfg: RenderCheckConfig, xy: np.ndarray | 
             len(fn) else np.zeros(0)
         out["fn_noise_only"] = int((clean >= emb.radius).sum())
     return out
-
