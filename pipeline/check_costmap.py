@@ -34,16 +34,18 @@ def check_root(root: str | Path = "data", scenes: list[str] | None = None, poses
     chosen = [s for s in catalog.select() if not scenes or s.name in scenes or s.scene_id in scenes]
     if scenes and not chosen:
         raise ValueError(f"{root}: no scene named {', '.join(scenes)} in {catalog.file}")
+    markers = {s.name: catalog.path("markers", s, stage="costmap") for s in chosen}
+    done_by = {name: read_marker(m) for name, m in markers.items()}  # each marker read once
     if not scenes:  # every scene the costmap stage finished (a run may have taken part of the catalog)
-        chosen = [s for s in chosen if catalog.path("markers", s, stage="costmap").is_file()]
+        chosen = [s for s in chosen if done_by[s.name] is not None]
         if not chosen:
             raise FileNotFoundError(f"{root}: no costmap here: run the costmap stage first")
     out = {}
     for scene in chosen:
-        marker = catalog.path("markers", scene, stage="costmap")
-        done = read_marker(marker)
+        done = done_by[scene.name]
         if done is None:
-            out[scene.name] = {"error": f"no costmap ({marker} is missing): run the costmap stage first"}
+            out[scene.name] = {"error": f"no costmap ({markers[scene.name]} is missing or unreadable): run the costmap "
+                                        "stage first"}
             continue
         used = done["config"]
         ccfg = OmegaConf.to_object(OmegaConf.merge(OmegaConf.structured(CostmapConfig), used["costmap"]))
@@ -64,7 +66,8 @@ def main(argv=None) -> int:
     """``navarena check-costmap [ROOT] [--scenes NAME ...] [--poses N]``: the render check of a data
     root's costmaps (module doc), one line a scene (--json: the figures)."""
     import argparse
-    import json
+
+    from navcore.io import jsonio
 
     ap = argparse.ArgumentParser(prog="navarena check-costmap", description=(
         "The render check of a data root's costmaps, each with the costmap config and embodiment it was built "
@@ -83,7 +86,7 @@ def main(argv=None) -> int:
         print(f"navarena check-costmap: {e}", file=sys.stderr)
         return 2
     if a.json:
-        print(json.dumps(res, indent=1))
+        print(jsonio.dumps(res, indent=1))  # strict JSON: a non-finite rate (no pose of a kind) is null
         return 0
     pct = lambda ci: f"{100 * ci[0]:.1f}-{100 * ci[1]:.1f} %"  # noqa: E731
     for name, r in res.items():
