@@ -22,6 +22,7 @@ from pathlib import Path
 import yaml
 
 from navcore.gaussians.formats import detect_format
+from navcore.io.atomic import TEMP_PREFIXES
 from navcore.io.datasets import TYPES, Dataset
 from navcore.io.licences import PROJECT_LICENSE
 from navcore.labels.shipped import LabelSpec
@@ -323,7 +324,9 @@ class Catalog:
         regex = re.escape(pattern).replace(re.escape("*"), "([^/]+)")
         for p in sorted(anchor.glob(str(Path(pattern).relative_to(anchor)))):
             m = re.fullmatch(regex, str(p))
-            if m:
+            # an atomic write in progress (another process's .tmp-*, or the .old-* it swaps out) is
+            # no dataset yet: a dataset-level step listing a folder while a shard writes into it
+            if m and not any(g.startswith(TEMP_PREFIXES) for g in m.groups()):
                 values = dict(zip(free, m.groups()))
                 found["/".join(m.groups())] = self.dataset(dataset, scene, **extra, **values)
         return found
