@@ -746,14 +746,13 @@ def test_catalog_datasets_round_trip_atomically_and_find_partitions(tmp_path, pr
     found["objectnav"].delete()
     assert list(cat.find("episodes", scene)) == ["pointnav"]
     # another process's atomic write in progress (a shard exporting while a dataset-level step lists the
-    # folder: the concurrent fault scenario, 2026-12-07) and the copy it swaps out are no datasets yet
-    folder = cat.dataset("episodes", scene, task="pointnav").path.parent
-    for temp in (".tmp-objectnav.parquet-host-123-abc", ".old-objectnav.parquet-host-123-abc"):
-        (folder / temp).write_bytes(b"half")
-    assert list(cat.find("episodes", scene)) == ["pointnav"]
+    # folder: the concurrent fault scenario, 2026-12-07) and the copy it swaps out are no datasets yet;
+    # a template whose free field is a whole path component is where atomic_path's siblings can match
     export = cat.dataset("export_scene", scene, export_name="d").path
-    (export.parent / f".tmp-{scene.scene_id}-host-1-x").mkdir(parents=True)
-    assert cat.find("export_scene", export_name="d") == {}
+    export.mkdir(parents=True)
+    for temp in (f".tmp-{scene.scene_id}-host-1-x", f".old-{scene.scene_id}-123"):
+        (export.parent / temp).mkdir()
+    assert list(cat.find("export_scene", export_name="d")) == [f"{scene.group}/{scene.scene_id}"]
     g = cat.dataset("scene", scene)
     assert isinstance(g, GaussianDataset)
     rng = np.random.default_rng(0)
