@@ -612,6 +612,48 @@ def test_shipped_pointnav_baseline_beats_depth_reactive(episode_run):
     assert wins["pointnav_bc"] > wins["depth_reactive"], wins
 
 
+@pytest.mark.parametrize("name,task", [("pointnav_bc", "pointnav"), ("imagenav_bc", "imagenav")])
+def test_learned_agents_read_the_renderers_frames_in_place_with_the_same_actions(episode_run, name, task):
+    """The batched evaluator hands a learned policy its frames (and ImageNav's goal images) as the
+    renderer's tensors, not host copies (the round trip that held a learned policy at a few hundred
+    steps/s at 640 x 480); the episodes' results are those of the host-copy path, action for action."""
+    import torch
+
+    from navcore.baselines.agent import LearnedNavAgent
+    from navcore.eval.agents import agent_for
+    from navcore.eval.dataset import NavDataset
+    from navcore.eval.loop import InProcessBatch, run_episodes_batched
+
+    ds = NavDataset(episode_run[0])
+    sid = ds.scene_ids(task)[0]
+    eps = ds.episodes(sid, task)[:4]
+    for e in eps:
+        e.max_steps = min(e.max_steps, 25)
+    ctx = ds.scene_context(sid, renderer="cpu")
+    cfg = ds.env_config(width=64, height=48)
+    seen, act_batch = [], LearnedNavAgent.act_batch.__func__
+
+    def spy(cls, agents, observations):
+        seen.extend(type(o[k]) for o in observations for k in ("rgb", "depth", "goal_image") if k in o)
+        return act_batch(cls, agents, observations)
+
+    rows = {}
+    for on_device in (True, False):
+        seen.clear()
+        client = InProcessBatch(lambda: agent_for(name, device="cpu"))
+        assert client.device_frames
+        client.device_frames = on_device
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(LearnedNavAgent, "act_batch", classmethod(spy))
+            rows[on_device] = run_episodes_batched(ctx, eps, client, 3, cfg)
+        assert seen and set(seen) == ({torch.Tensor} if on_device else {np.ndarray})
+    assert not InProcessBatch(lambda: agent_for("depth_reactive")).device_frames  # numpy for every other agent
+    for a, b in zip(rows[True], rows[False], strict=True):
+        assert np.array_equal(a.pop("trajectory"), b.pop("trajectory"))
+        a.pop("seconds"), b.pop("seconds")
+        assert a == b
+
+
 def test_model_cards_and_docs_are_generated_from_the_cards():
     from benchmarks.baselines.evaluation_page import write_docs
     from navcore.baselines.card import cards

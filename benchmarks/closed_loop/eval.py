@@ -5,7 +5,9 @@ protocols; they do not look, so nothing is rendered), the environment's own cost
 (everything but rendering), and environment steps per second with the CPU renderer at 160x120 and
 640x480 on a 100 k-Gaussian scene. GPU (`--gpu`, on a CUDA machine): batched environment steps per
 second at 640x480 RGB-D on a 1 M-Gaussian scene with gsplat's raw frame rate of the same batch
-beside it, and the CPU renderer against gsplat (benchmarks.gpu.render_gpu); written to eval_gpu.json
+beside it, a learned policy's steps per second in one process (the shipped pointnav_bc through the
+evaluate verb's batched loop, its frames read in place and, for the ratio, through the host), and
+the CPU renderer against gsplat (benchmarks.gpu.render_gpu); written to eval_gpu.json
 and merged into the report (`--merge-gpu` folds an existing one in).
 
 Writes data/08_reports/bench_eval.json and bench_eval.md.
@@ -93,6 +95,33 @@ def steps_per_second(ctx, width: int, height: int, n_slots: int, n_steps: int, r
             "slots": n_slots, "width": width, "height": height}
 
 
+def learned_steps_per_second(ctx, width: int, height: int, n_slots: int, rng, device_frames: bool,
+                             episodes: int = 256, max_steps: int = 60) -> dict:
+    """The evaluate verb's loop (run_episodes_batched) driving the shipped pointnav_bc in this
+    process, render, forward pass and metrics included: policy steps per second over a queue of
+    random PointNav episodes (median of 3 runs). device_frames False: the frames go through the host
+    (numpy) as they did before the learned agent read the renderer's tensors."""
+    from navcore.eval.agents import agent_for
+    from navcore.eval.loop import InProcessBatch, run_episodes_batched
+
+    cfg = EnvConfig(width=width, height=height, protocol="explicit_stop")
+    eps = random_episodes(ctx, episodes, rng, max_steps=max_steps)
+    warm = InProcessBatch(lambda: agent_for("pointnav_bc"))
+    warm.device_frames = device_frames
+    run_episodes_batched(ctx, eps[:n_slots], warm, n_slots, cfg)  # the network loaded, kernels warm
+    rates = []
+    for _ in range(3):
+        client = InProcessBatch(lambda: agent_for("pointnav_bc"))
+        client.device_frames = device_frames
+        _sync()
+        t0 = time.perf_counter()
+        rows = run_episodes_batched(ctx, eps, client, n_slots, cfg)
+        _sync()
+        rates.append(sum(r["steps"] for r in rows) / (time.perf_counter() - t0))
+    return {"steps_per_s": float(np.median(rates)), "runs": rates, "slots": n_slots, "width": width,
+            "height": height, "episodes": episodes, "device_frames": device_frames}
+
+
 def _sync():
     import torch
 
@@ -153,8 +182,11 @@ def gpu_main(out: Path) -> dict:
     batch = 64
     steps = steps_per_second(ctx, 640, 480, batch, 60, rng, device_obs=True)
     one = steps_per_second(ctx, 640, 480, 1, 300, rng, device_obs=True)  # one env: a render call per step
+    learned = {f: learned_steps_per_second(ctx, 640, 480, batch, rng, device_frames=f) for f in (True, False)}
     res = {"device": torch.cuda.get_device_name(0), "gpu_steps_per_s": steps["steps_per_s"], "gpu_steps": steps,
            "gpu_steps_per_s_one_env": one["steps_per_s"], "gpu_steps_one_env": one,
+           "learned_steps_per_s": learned[True]["steps_per_s"], "learned_steps": learned[True],
+           "learned_steps_per_s_host": learned[False]["steps_per_s"], "learned_steps_host": learned[False],
            "gsplat_raw_fps": steps["raw_render_fps"], "gsplat_raw_fps_room_views": cmp["gsplat_raw_fps"],
            "psnr_cpu_vs_gsplat": cmp["psnr_cpu_vs_gsplat_min"],
            "psnr_cpu_vs_gsplat_median": cmp["psnr_cpu_vs_gsplat_median"],
@@ -196,7 +228,8 @@ def main(argv=None) -> dict:
     gpu = out / "eval_gpu.json"
     if gpu.exists():
         g = json.loads(gpu.read_text())
-        result.update({k: g[k] for k in ("gpu_steps_per_s", "gsplat_raw_fps", "psnr_cpu_vs_gsplat", "depth_mae_m")})
+        result.update({k: g[k] for k in ("gpu_steps_per_s", "gsplat_raw_fps", "psnr_cpu_vs_gsplat", "depth_mae_m",
+                                         "learned_steps_per_s", "learned_steps_per_s_host") if k in g})
         result["gpu"] = g
     path.write_text(jsonio.dumps(result, indent=1))
     (out / "bench_eval.md").write_text(markdown(result))
@@ -213,6 +246,9 @@ def markdown(r: dict) -> str:
              f"| depth median abs. error (max over views) | {f('depth_mae_m', '{:.2e} m')} | <= 0.01 m |",
              f"| GPU batched env steps/s, 640x480 RGB-D, 1 M Gaussians | {f('gpu_steps_per_s', '{:.0f}')} | >= 1000 |",
              f"| gsplat raw frames/s, same batch | {f('gsplat_raw_fps', '{:.0f}')} | (about 3400) |",
+             f"| a learned policy (pointnav_bc) in one process, steps/s, same scene and size, 64 slots | "
+             f"{f('learned_steps_per_s', '{:.0f}')} | >= 3000 |",
+             f"| the same, its frames through the host (before 2026-12-07) | {f('learned_steps_per_s_host', '{:.0f}')} | |",
              f"| CPU env steps/s, 160x120, 100 k Gaussians | {f('cpu_steps_per_s_160', '{:.2f}')} | |",
              f"| CPU env steps/s, 640x480, 100 k Gaussians | {f('cpu_steps_per_s_640', '{:.2f}')} | |",
              f"| env overhead per step, excluding rendering | {f('env_overhead_us', '{:.1f} us')} | <= 50 us |",

@@ -99,6 +99,11 @@ class LearnedNavAgent:
             names one). stop_check / stop_force: its thresholds (None: the card's; else 0.5 and never).
     """
 
+    reads_device_frames = True
+    """The batched evaluator may hand over frames as torch tensors on the renderer's device
+    (observation_input reads both): at 640 x 480 and 64 slots, the host round trip of every step's
+    frames and goal images cost more than the render and the forward pass together."""
+
     def __init__(self, checkpoint: str | None = None, name: str = "pointnav_bc", device: str | None = "auto",
                  sha256: str | None = None, sample: bool | None = None, stop_threshold: float | None = None, seed: int = 0,
                  stop_gate: float | None = None, verifier: str | None = None, stop_check: float | None = None,

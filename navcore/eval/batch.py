@@ -59,7 +59,7 @@ class BatchNavEnv:
         if not want:
             return
         poses = np.stack([self.envs[i].state.ep.shown_goal.goal_pose for i in want])
-        rgb, _ = self.ctx.render(poses, self.w, self.h)
+        rgb, _ = self.ctx.render(poses, self.w, self.h, self.device_obs)
         for k, i in enumerate(want):
             self.envs[i]._goal_image = rgb[k]
 

@@ -69,10 +69,15 @@ class InProcessBatch:
 
     def __init__(self, factory):
         self.factory, self.agents, self.benv = factory, {}, None
+        self._spare = factory()  # the first slot's agent, made now to learn what frames the agents read
+        self.device_frames = bool(getattr(self._spare, "reads_device_frames", False))
+        """The agents read rgb / depth / goal_image as torch tensors on the renderer's device (a learned
+        policy on the GPU): the batch environment hands its frames over without copying them to the host."""
 
     def start(self, tasks: dict) -> None:
         for slot, task in tasks.items():
-            self.agents[slot] = self.factory()
+            self.agents[slot] = self._spare if self._spare is not None else self.factory()
+            self._spare = None
             self.agents[slot].reset(task)
             if hasattr(self.agents[slot], "bind") and self.benv is not None:
                 self.agents[slot].bind(self.benv.envs[slot])
@@ -103,7 +108,7 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
     episode finishes."""
     from navcore.eval.batch import BatchNavEnv
 
-    benv = BatchNavEnv(ctx, slots, cfg)
+    benv = BatchNavEnv(ctx, slots, cfg, device_obs=getattr(client, "device_frames", False))
     if isinstance(client, InProcessBatch):
         client.benv = benv
     queue = list(episodes)
