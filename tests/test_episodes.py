@@ -492,6 +492,45 @@ def test_view_depths_reach_the_first_wall(room_with_door):
     assert cm.fov_depth((1.0, 1.0), 0.0, 90.0, max_range=0.5) == pytest.approx(0.5)
 
 
+def _view_depths_reference(cm, xy, angles, max_range):
+    """view_depths as the array program it was before the numba kernel (2026-12-07): all rays
+    stepped together, each stopped by a mask."""
+    a = np.asarray(angles, float)
+    o, dirs, res = np.asarray(xy, float)[None, :], np.column_stack([np.cos(a), np.sin(a)]), cm.resolution
+    ny, nx = cm.clearance.shape
+    d, alive = np.zeros(len(a)), np.ones(len(a), bool)
+    for _ in range(int(max_range / res) + 2):
+        p = o + d[:, None] * dirs
+        ix = np.floor((p[:, 0] - cm.origin[0]) / res).astype(np.int64)
+        iy = np.floor((p[:, 1] - cm.origin[1]) / res).astype(np.int64)
+        inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
+        c = np.where(inside, cm.clearance[iy.clip(0, ny - 1), ix.clip(0, nx - 1)], 0.0)
+        alive &= inside & ~((c >= 0) & (c < res))
+        if not alive.any():
+            break
+        d = np.where(alive, np.minimum(d + np.maximum(c - res, res), max_range), d)
+        alive &= d < max_range
+    return d
+
+
+def test_view_depths_equal_the_array_program_bit_for_bit(grid_costmap):
+    """The per-ray kernel gives the depths of the array form it replaced, exactly (the searching
+    expert's labels, and so the training data, stay the same bytes), on clutter, unsupported cells,
+    rays leaving the map and both range limits."""
+    rng = np.random.default_rng(3)
+    free = rng.random((90, 120)) > 0.04
+    free[[0, -1], :40] = False
+    cm = grid_costmap(free)
+    cm.clearance[rng.random(cm.clearance.shape) < 0.01] = -1.0  # no floor: not an obstacle to the eye
+    ny, nx = cm.clearance.shape
+    for max_range in (2.0, 10.0):
+        for _ in range(200):
+            xy = cm.origin + rng.uniform([-0.2, -0.2], [nx * cm.resolution + 0.2, ny * cm.resolution + 0.2])
+            angles = rng.uniform(-np.pi, np.pi) + np.linspace(-0.7, 0.7, 31)
+            assert np.array_equal(cm.view_depths(xy, angles, max_range=max_range),
+                                  _view_depths_reference(cm, xy, angles, max_range))
+
+
 def test_imagenav_goal_cameras_do_not_face_a_wall_at_arms_length(room_with_door):
     """Every stored goal camera sees at least goal_view_min_depth (median of its field of view);
     with the rule off, random yaws in these 2 m-wide rooms often face a wall closer than that."""

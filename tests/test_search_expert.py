@@ -114,3 +114,24 @@ def test_imagenav_expert_searches_until_the_view_matches_then_reaches_the_goal(c
     first = [f for f, _ in found].index(True)
     x, _, _ = trace[first]
     assert x > 1.8 and math.cos(found[first][1]) > 0  # at the door or beyond it, looking east
+
+
+def test_the_next_target_is_the_nearest_unseen_cell_past_min_hop(ctx, make_episode):
+    """_pick against a brute force over the unbounded geodesic field: the nearest valid unseen cell
+    at least min_hop away, the first in row-major order among equals (its staged, bounded searches
+    give that cell), or False when there is none."""
+    ep = make_episode(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), radius=0.3, task="objectnav")
+    rng = np.random.default_rng(5)
+    cells = ctx.graph.cells[rng.choice(len(ctx.graph.cells), 40, replace=False)]
+    for k, cell in enumerate(cells):
+        ex, _ = expert_for(ctx, ep)
+        ex.horizon = (1.2, 6.0)[k % 2]
+        ex.seen = rng.random(ex.seen.shape) < (0.2, 0.6, 0.97, 1.0)[k % 4]
+        x, y = ctx.costmap.cell_centers(cell[None])[0]
+        d = ctx.graph.field(cell[None]).grid
+        cand = np.where(ctx.graph.valid & ~ex.seen & (d >= ex.min_hop), d, np.inf)
+        found = bool(np.isfinite(cand.min()))
+        assert ex._pick(x, y) == found
+        if found:
+            want = ctx.costmap.cell_centers(np.array([np.unravel_index(int(np.argmin(cand)), cand.shape)]))[0]
+            assert np.array_equal(ex.target, want)

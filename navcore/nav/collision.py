@@ -126,6 +126,32 @@ def _motions_valid(f, ox, oy, inv_res, thr, seg):
     return out
 
 
+@numba.njit(cache=True)
+def ray_depths(clear, ox, oy, res, res_c, x, y, cos_a, sin_a, max_range):
+    """Costmap.view_depths' sphere tracing, one ray at a time (the same arithmetic as the array form
+    it replaced, so the same depths): per ray, step by the clearance less a cell (at least a cell)
+    until a cell with clearance in [0, res) (an obstacle), the map's edge or max_range. res_c: the
+    cell size in the clearance's dtype, in which the step is computed (as the array form did)."""
+    ny, nx = clear.shape
+    n = cos_a.shape[0]
+    out = np.zeros(n)
+    for k in range(n):
+        d = 0.0
+        for _ in range(int(max_range / res) + 2):
+            ix = int(np.floor((x + d * cos_a[k] - ox) / res))
+            iy = int(np.floor((y + d * sin_a[k] - oy) / res))
+            if ix < 0 or ix >= nx or iy < 0 or iy >= ny:
+                break
+            c = clear[iy, ix]
+            if c >= 0 and c < res_c:
+                break
+            d = min(d + max(c - res_c, res_c), max_range)
+            if d >= max_range:
+                break
+        out[k] = d
+    return out
+
+
 # Batched queries in two builds: threaded for large batches, serial for small ones (waking the
 # thread pool costs up to milliseconds when it has gone idle between calls).
 states_valid = numba.njit(cache=True, parallel=True)(_states_valid)

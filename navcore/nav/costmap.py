@@ -95,25 +95,10 @@ class Costmap:
         max_range: sphere tracing on the clearance, so a ray costs a few steps in open space.
         Cells without floor support do not stop a ray (they are no obstacle to the eye)."""
         a = np.asarray(angles, float)
-        o = np.asarray(xy, float)[None, :]
-        dirs = np.column_stack([np.cos(a), np.sin(a)])
-        res = self.resolution
-        ny, nx = self.clearance.shape
-        d = np.zeros(len(a))
-        alive = np.ones(len(a), bool)
-        for _ in range(int(max_range / res) + 2):  # at least one cell a step
-            p = o + d[:, None] * dirs
-            ix = np.floor((p[:, 0] - self.origin[0]) / res).astype(np.int64)
-            iy = np.floor((p[:, 1] - self.origin[1]) / res).astype(np.int64)
-            inside = (ix >= 0) & (ix < nx) & (iy >= 0) & (iy < ny)
-            c = np.where(inside, self.clearance[iy.clip(0, ny - 1), ix.clip(0, nx - 1)], 0.0)
-            alive &= inside & ~((c >= 0) & (c < res))
-            if not alive.any():
-                break
-            # the clearance is measured from cell centres: step a cell short of it to stay in the free disk
-            d = np.where(alive, np.minimum(d + np.maximum(c - res, res), max_range), d)
-            alive &= d < max_range
-        return d
+        x, y = (float(v) for v in np.asarray(xy, float).reshape(2))
+        res = float(self.resolution)
+        return K.ray_depths(self.clearance, float(self.origin[0]), float(self.origin[1]), res,
+                            self.clearance.dtype.type(res), x, y, np.cos(a), np.sin(a), float(max_range))
 
     def fov_depth(self, xy, yaw: float, hfov_deg: float, max_range: float = 10.0) -> float:
         """The median free distance (metres, at most max_range) of 9 rays spread across a camera's
