@@ -535,10 +535,16 @@ class Collector:
         slot_ep, slot_seq, oracle = [None] * n, [None] * n, [None] * n
         h = self.net.initial_state(n, dev)
         prev = torch.full((n,), NO_ACTION, dtype=torch.long, device=dev)
-        obs = [None] * n
 
-        def start(i):
-            ep = queue.pop(0)
+        def start(slots):
+            """New episodes in these slots, their first views in one render call (a call per slot
+            renders the whole scene once per finished episode)."""
+            eps = {i: queue.pop(0) for i in slots[:len(queue)]}
+            for i, ep in eps.items():
+                begin(i, ep)
+            obs.update(benv.reset_slots(eps) if eps else {})
+
+        def begin(i, ep):
             slot_ep[i] = ep
             oracle[i] = DiscreteOracle(ctx.field(ep).grid, ctx.costmap, ep.regions, ep.success_radius, ep.goal_yaw,
                                        ep.heading_tolerance, env_cfg.actions.forward_step, env_cfg.actions.turn)
@@ -550,10 +556,9 @@ class Collector:
             slot_seq[i] = {"obs": [], "goal": [], "prev": [], "label": [], "aux": [], "goal_image": None}
             h[:, i] = 0
             prev[i] = NO_ACTION
-            obs[i] = benv.reset_slot(i, ep)
 
-        for i in range(n):
-            start(i)
+        obs = {}
+        start(list(range(n)))
         while any(e is not None for e in slot_ep):
             live = [i for i in range(n) if slot_ep[i] is not None]
             frames, g = observation_input([obs[i] for i in live], cfg.spec, dev)
@@ -584,14 +589,15 @@ class Collector:
                 actions[i] = a
                 prev[i] = a
             obs_all, _ = benv.step(actions)
+            ended = []
             for i in live:
                 obs[i] = obs_all[i]
                 s = benv.envs[i].state
                 if s.done or s.steps >= cfg.max_learner_steps:
                     seqs.append(slot_seq[i])
                     slot_ep[i] = None
-                    if queue:
-                        start(i)
+                    ended.append(i)
+            start(ended)
         return Steps(np.concatenate([np.stack(s["obs"]) for s in seqs]),
                      np.concatenate([np.stack(s["goal"]) for s in seqs]).astype(np.float32),
                      np.concatenate([np.asarray(s["prev"], np.int8) for s in seqs]),

@@ -137,15 +137,14 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
             client.close()  # the next start reconnects: no stray frame of these episodes is read
 
     def start(free):
-        new = {}
-        for i in free:
-            if queue:
-                ep = queue.pop(0)
-                obs[i] = benv.reset_slot(i, ep)
-                running[i] = (ep, benv.envs[i].geodesic_to_goal(), time.perf_counter())
-                new[i] = task_info(ep)
-        if new:
-            client.start(new)
+        eps = {i: queue.pop(0) for i in free[:len(queue)]}
+        if not eps:
+            return
+        obs.update(benv.reset_slots(eps))  # the new episodes' first views in one render call
+        t0 = time.perf_counter()
+        for i, ep in eps.items():
+            running[i] = (ep, benv.envs[i].geodesic_to_goal(), t0)
+        client.start({i: task_info(ep) for i, ep in eps.items()})
 
     while queue or running:
         if unreachable >= max_connect_failures:
