@@ -104,18 +104,20 @@ def learned_steps_per_second(ctx, width: int, height: int, n_slots: int, rng, de
     from navcore.eval.agents import agent_for
     from navcore.eval.loop import InProcessBatch, run_episodes_batched
 
+    def client() -> InProcessBatch:
+        c = InProcessBatch(lambda: agent_for("pointnav_bc"))
+        c.device_frames = device_frames
+        return c
+
     cfg = EnvConfig(width=width, height=height, protocol="explicit_stop")
     eps = random_episodes(ctx, episodes, rng, max_steps=max_steps)
-    warm = InProcessBatch(lambda: agent_for("pointnav_bc"))
-    warm.device_frames = device_frames
-    run_episodes_batched(ctx, eps[:n_slots], warm, n_slots, cfg)  # the network loaded, kernels warm
+    run_episodes_batched(ctx, eps[:n_slots], client(), n_slots, cfg)  # the network loaded, kernels warm
     rates = []
     for _ in range(3):
-        client = InProcessBatch(lambda: agent_for("pointnav_bc"))
-        client.device_frames = device_frames
+        c = client()
         _sync()
         t0 = time.perf_counter()
-        rows = run_episodes_batched(ctx, eps, client, n_slots, cfg)
+        rows = run_episodes_batched(ctx, eps, c, n_slots, cfg)
         _sync()
         rates.append(sum(r["steps"] for r in rows) / (time.perf_counter() - t0))
     return {"steps_per_s": float(np.median(rates)), "runs": rates, "slots": n_slots, "width": width,

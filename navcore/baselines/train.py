@@ -542,7 +542,8 @@ class Collector:
             eps = {i: queue.pop(0) for i in slots[:len(queue)]}
             for i, ep in eps.items():
                 begin(i, ep)
-            obs.update(benv.reset_slots(eps) if eps else {})
+            if eps:
+                obs.update(benv.reset_slots(eps))
 
         def begin(i, ep):
             slot_ep[i] = ep

@@ -11,7 +11,7 @@ from navcore.eval.env import EnvConfig, NavEnv
 class BatchNavEnv:
     """N episode slots of one SceneContext; step(actions) moves every running slot, then renders
     all of them in one call (the GPU's batch). Finished slots keep their last observation until
-    reset_slot() gives them a new episode."""
+    reset_slots() gives them new episodes."""
 
     def __init__(self, ctx, n: int, cfg: EnvConfig | None = None, device_obs: bool = False):
         cfg = cfg or EnvConfig()
@@ -30,9 +30,6 @@ class BatchNavEnv:
             self.envs[i].reset(ep)
         self._goal_images(range(len(episodes)))
         return self._observe(range(len(episodes)))
-
-    def reset_slot(self, i: int, ep) -> dict:
-        return self.reset_slots({i: ep})[i]
 
     def reset_slots(self, episodes: dict) -> dict:
         """New episodes in several slots ({slot: episode}), their first views in one render call."""
