@@ -119,8 +119,9 @@ def evaluate(args) -> tuple[list[dict], bool, str]:
     did not). Ctrl-C and SIGTERM stop it after the episode in flight; an agent server that cannot be
     reached for several episodes in a row stops it too."""
     import signal
+    from functools import partial
 
-    from navcore.eval.loop import AgentUnreachable, evaluate_episodes
+    from navcore.eval.loop import AgentUnreachable, SceneEpisodes, evaluate_episodes, evaluate_scenes
     from navcore.io.tool_progress import ToolProgress
     from navcore.seeds import stream_seed
 
@@ -145,18 +146,26 @@ def evaluate(args) -> tuple[list[dict], bool, str]:
             rows.append(row)
             progress.advance(frames=int(row["steps"]), budget=budget.get((row["task"], row["episode_id"], row["scene_id"]), 0))
 
+        def context(sid):
+            return ds.scene_context(sid, render=not args.no_render, renderer=args.renderer)
+
+        seed = {sid: stream_seed(args.seed, sid, "evaluate") % 2**31 for sid in plan}
         try:
-            for sid, eps in plan.items():
-                ctx = ds.scene_context(sid, render=not args.no_render, renderer=args.renderer)
-                evaluate_episodes(ctx, eps, args.agent, cfg, seed=stream_seed(args.seed, sid, "evaluate") % 2**31,
-                                  timeout=args.timeout, agent_args=dict(args.agent_arg), batch_slots=args.batch_slots,
-                                  on_result=done)
+            if args.batch_slots > 1:  # every scene through one batch: several in flight keep the slots full
+                evaluate_scenes([SceneEpisodes(eps, partial(context, sid), seed[sid]) for sid, eps in plan.items()],
+                                args.agent, cfg, timeout=args.timeout, agent_args=dict(args.agent_arg),
+                                batch_slots=args.batch_slots, scenes_at_once=args.scenes_at_once, on_result=done)
+            for sid, eps in plan.items() if args.batch_slots <= 1 else ():
+                evaluate_episodes(context(sid), eps, args.agent, cfg, seed=seed[sid], timeout=args.timeout,
+                                  agent_args=dict(args.agent_arg), on_result=done)
         except KeyboardInterrupt:
             interrupted = True
         except AgentUnreachable as e:
             stopped = str(e)
         finally:
             signal.signal(signal.SIGTERM, previous)
+    rank = {(e.task, e.episode_id, e.scene_id): k for k, e in enumerate(e for eps in plan.values() for e in eps)}
+    rows.sort(key=lambda r: rank.get((r["task"], r["episode_id"], r["scene_id"]), len(rank)))  # the plan's order
     return rows, interrupted, stopped
 
 
@@ -203,6 +212,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--width", type=int, default=None, help="image width (default: the embodiment's)")
     ap.add_argument("--height", type=int, default=None)
     ap.add_argument("--batch-slots", type=int, default=1, metavar="N", help="episodes stepped together (one render call per step)")
+    ap.add_argument("--scenes-at-once", type=int, default=4, metavar="N",
+                    help="with --batch-slots: scenes in flight together, so that the slots stay full when a scene "
+                         "has fewer episodes than slots (each holds its Gaussians in memory)")
     ap.add_argument("--embodiment", default=None, metavar="NAME", help="the costmap of this embodiment (data roots with several)")
     ap.add_argument("--seed", type=int, default=0, help="seed of stochastic agents")
     ap.add_argument("--decoy-goal", action="store_true",
@@ -211,6 +223,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default=None, help="output folder (default: navarena_eval/{agent}_{protocol})")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
     args = ap.parse_args(argv)
+    if args.batch_slots < 1 or args.scenes_at_once < 1:
+        ap.error(f"--batch-slots {args.batch_slots} and --scenes-at-once {args.scenes_at_once}: each at least 1")
     shorten(args, quick.EVAL, "navarena eval")
     if quick.quick():
         print(f"navarena eval: NAVARENA_QUICK is set: at most {quick.EVAL_STEPS} steps an episode", file=sys.stderr)

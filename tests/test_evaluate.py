@@ -330,6 +330,44 @@ def test_batched_loop_equals_the_single_loop_for_in_process_agents(ctx, make_epi
     assert len({v[2] for v in single.values()}) == len(eps)  # and the episodes' streams differ
 
 
+def test_several_scenes_in_flight_give_each_episode_the_result_it_has_alone(ctx, make_episode):
+    """evaluate_scenes: scenes whose episodes run beside each other's in one batch (fewer slots than
+    episodes, two scenes in flight) give every episode the steps, success and trajectory it has when its
+    scene runs alone, one episode at a time, with the scene's seed (random: seeded per scene and
+    episode; oracle: bound to its own slot's environment); the rows come in the scenes' order, and a
+    scene's context is made only when it joins: the third after the first scene's last episode ended."""
+    from navcore.eval.loop import SceneEpisodes, evaluate_episodes, evaluate_scenes
+
+    cfg = EnvConfig(render=False)
+    goals = ((3.0, 0.5), (3.5, 2.5), (1.5, 2.5), (3.0, 1.5))
+    scenes = []
+    for k in range(3):
+        eps = [make_episode(start=(1.0, 0.5, 0.4 * j), goal=goals[(j + k) % 4], geodesic=2.3, max_steps=40 + 30 * j)
+               for j in range(k + 2)]
+        for e in eps:
+            e.scene_id = f"s{k}"
+        scenes.append(eps)
+    key = lambda rows: [(r["scene_id"], r["episode_id"], r["steps"], r["sr"], tuple(np.round(r["trajectory"].ravel(), 6)))  # noqa: E731
+                        for r in rows]
+    for agent in ("random", "oracle"):
+        alone = [r for k, eps in enumerate(scenes) for r in evaluate_episodes(ctx, eps, agent, cfg, seed=100 + k)]
+        events = []
+
+        def made(k):
+            events.append(("context", k))
+            return ctx
+
+        together = evaluate_scenes([SceneEpisodes(eps, lambda k=k: made(k), 100 + k) for k, eps in enumerate(scenes)],
+                                   agent, cfg, batch_slots=3, scenes_at_once=2,
+                                   on_result=lambda row, frames: events.append(("row", row["scene_id"])))
+        assert key(together) == key(alone) and len(together) == 9
+        if agent == "random":  # the scenes' seeds matter: another seed gives other moves
+            assert key(evaluate_episodes(ctx, scenes[0], agent, cfg, seed=7)) != key(alone[:2])
+        rows_of_first = [i for i, e in enumerate(events) if e == ("row", "s0")]
+        assert events[:2] == [("context", 0), ("context", 1)] and len(rows_of_first) == 2
+        assert events.index(("context", 2)) > rows_of_first[-1]
+
+
 # ---- blocked moves (navcore.nav.dynamics) ----------------------------------------------------------
 
 def _env_with(ctx, mode):

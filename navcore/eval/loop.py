@@ -1,7 +1,10 @@
 """In-process evaluation loop: episodes x agent -> per-episode metrics and executed trajectories."""
 from __future__ import annotations
 
+import dataclasses
+import itertools
 import time
+from typing import Any, Callable
 
 import numpy as np
 
@@ -64,23 +67,36 @@ def run_episodes(ctx, episodes, agent, cfg: EnvConfig | None = None) -> list[dic
 
 
 class InProcessBatch:
-    """In-process agents behind the batch interface of run_episodes_batched: one agent per slot
-    (privileged ones are bound to their slot's environment)."""
+    """In-process agents behind the batch interface of run_scenes_batched: one agent per slot
+    (privileged ones are bound to their slot's environment).
 
-    def __init__(self, factory):
-        self.factory, self.agents, self.benv = factory, {}, None
-        self._spare = factory()  # the first slot's agent, made now to learn what frames the agents read
+    Args:
+        factory: makes one agent: factory(), or factory(seed) with `seeded` (the scene's seed of a
+            run over several scenes: each scene's agents as evaluate_episodes would make them alone).
+        seeded: the factory takes the scene's seed.
+        seed: the seed of the agent made first, to learn what frames the agents read (kept for the
+            first slot of a scene with that seed)."""
+
+    def __init__(self, factory, seeded: bool = False, seed: int = 0):
+        self.factory, self.seeded, self.agents = factory, seeded, {}
+        self._spare, self._spare_seed = self._make(seed), seed
         self.device_frames = bool(getattr(self._spare, "reads_device_frames", False))
         """The agents read rgb / depth / goal_image as torch tensors on the renderer's device (a learned
         policy on the GPU): the batch environment hands its frames over without copying them to the host."""
 
-    def start(self, tasks: dict) -> None:
+    def _make(self, seed: int):
+        return self.factory(seed) if self.seeded else self.factory()
+
+    def start(self, tasks: dict, envs: dict | None = None, seed: int = 0) -> None:
+        """New episodes in these slots ({slot: task}); `envs` ({slot: NavEnv}) for agents that bind to
+        theirs; `seed`: the scene's (a seeded factory's)."""
         for slot, task in tasks.items():
-            self.agents[slot] = self._spare if self._spare is not None else self.factory()
-            self._spare = None
+            spare = self._spare is not None and (not self.seeded or seed == self._spare_seed)
+            self.agents[slot] = self._spare if spare else self._make(seed)
+            self._spare = None if spare else self._spare
             self.agents[slot].reset(task)
-            if hasattr(self.agents[slot], "bind") and self.benv is not None:
-                self.agents[slot].bind(self.benv.envs[slot])
+            if hasattr(self.agents[slot], "bind") and envs is not None:
+                self.agents[slot].bind(envs[slot])
 
     def act(self, observations: dict) -> dict:
         slots = list(observations)
@@ -94,39 +110,98 @@ class InProcessBatch:
         pass
 
 
+@dataclasses.dataclass
+class SceneEpisodes:
+    """One scene's share of a batched run (run_scenes_batched)."""
+
+    episodes: list
+    context: Callable[[], Any]
+    """Makes the scene's SceneContext; called when the scene joins the run (its Gaussians loaded then,
+    released when its last episode ends)."""
+    seed: int = 0
+    """The seed of the scene's in-process agents (InProcessBatch with a seeded factory)."""
+
+
 def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | None = None,
                          max_connect_failures: int = 2, on_result=None) -> list[dict]:
-    """Episodes through a batch agent (`client`: start(tasks by slot), act(observations by slot) ->
-    actions by slot, end(results by slot); e.g. protocol.RemoteBatchAgent), `slots` at a time,
-    one render call per step (BatchNavEnv).
+    """One scene's episodes through a batch agent, `slots` at a time (run_scenes_batched with one scene)."""
+    return run_scenes_batched([SceneEpisodes(list(episodes), lambda: ctx)], client, slots, cfg, max_connect_failures,
+                              on_result)
+
+
+class _LiveScene:
+    """A scene of run_scenes_batched while its episodes run: its batch environment (one render call
+    per step for its slots) and its episodes not started yet."""
+
+    def __init__(self, scene: SceneEpisodes, slots: int, cfg, device_obs: bool):
+        from navcore.eval.batch import BatchNavEnv
+
+        self.scene, self.queue = scene, list(scene.episodes)
+        self.benv = BatchNavEnv(scene.context(), slots, cfg, device_obs=device_obs)
+        self.keys: set[int] = set()
+
+
+def run_scenes_batched(scenes, client, slots: int, cfg: EnvConfig | None = None, max_connect_failures: int = 2,
+                       on_result=None, scenes_at_once: int = 1) -> list[dict]:
+    """Episodes of several scenes through a batch agent (`client`: start(tasks by slot), act(observations
+    by slot) -> actions by slot, end(results by slot); e.g. protocol.RemoteBatchAgent or InProcessBatch),
+    `slots` at a time, with up to `scenes_at_once` scenes in flight: each step, one act call for every
+    running slot (a learned policy: one forward pass) and one render call per scene in flight
+    (navcore.eval.batch.BatchNavEnv).
+
+    `scenes` (SceneEpisodes, an iterable read as scenes join) join in order: the next one when every
+    episode of those in flight has started and a slot is free, so that a scene's last, longest
+    episodes run beside the next scene's first ones instead of leaving the slots idle. A scene's
+    context is made when it joins and released when its last episode ends. Each episode's result is
+    the same whichever slot, batch or companion scenes it ran with (its agent is made for it, with its
+    scene's seed).
 
     Every episode gets a result row. A client failure fails the episodes in flight, and the queue
     goes on (a RemoteBatchAgent reconnects); after `max_connect_failures` consecutive failures to
-    reach the server at all, the rest of the queue fails with that reason instead of waiting for
-    each. An action the environment rejects (NaN, malformed) counts as an invalid step of its own
-    slot's episode (recorded in `invalid_actions`), which goes on. `on_result(row)` is called as each
-    episode finishes."""
-    from navcore.eval.batch import BatchNavEnv
-
-    benv = BatchNavEnv(ctx, slots, cfg, device_obs=getattr(client, "device_frames", False))
-    if isinstance(client, InProcessBatch):
-        client.benv = benv
-    queue = list(episodes)
-    running: dict[int, tuple] = {}
-    rows = []
-    obs = {}
+    reach the server at all, the episodes of the scenes in flight fail with that reason instead of
+    waiting for each, and no further scene joins. An action the environment rejects (NaN, malformed)
+    counts as an invalid step of its own slot's episode (recorded in `invalid_actions`), which goes
+    on. `on_result(row)` is called as each episode finishes. Returns the rows in the order of the
+    scenes and their episodes."""
+    device_obs = bool(getattr(client, "device_frames", False))
+    in_process = isinstance(client, InProcessBatch)
+    pending = iter(scenes)
+    order: dict[tuple, int] = {}
+    live: list[_LiveScene] = []
+    free = list(range(slots))
+    running: dict[int, tuple] = {}  # slot -> (episode, d0, t0, its scene)
+    rows, obs = [], {}
     unreachable = 0
+    more = True
+
+    def admit():
+        nonlocal more
+        while more and len(live) < max(1, scenes_at_once) and len(free) > sum(len(s.queue) for s in live):
+            scene = next(pending, None)
+            if scene is None:
+                more = False
+            elif scene.episodes:
+                for ep in scene.episodes:
+                    order.setdefault((ep.task, ep.episode_id, ep.scene_id), len(order))
+                live.append(_LiveScene(scene, slots, cfg, device_obs))
 
     def finish(i, error=""):
-        ep, d0, t0 = running.pop(i)
-        env = benv.envs[i]
+        ep, d0, t0, s = running.pop(i)
+        env = s.benv.envs[i]
         if error:
             env.state.fail()
         rows.append(result_row(env, ep, d0, error, time.perf_counter() - t0))
+        s.keys.discard(i)
+        free.append(i)
+        free.sort()
         if on_result is not None:
             on_result(rows[-1])
-        s = env.state
-        return {"episode_id": ep.episode_id, "success": bool(s.success), "steps": s.steps, "end_reason": s.end_reason}
+        st = env.state
+        return {"episode_id": ep.episode_id, "success": bool(st.success), "steps": st.steps, "end_reason": st.end_reason}
+
+    def retire():  # scenes with nothing left to run leave (their Gaussians with them), the next ones join
+        live[:] = [s for s in live if s.queue or s.keys]
+        admit()
 
     def fail_all(e):
         nonlocal unreachable
@@ -135,48 +210,61 @@ def run_episodes_batched(ctx, episodes, client, slots: int, cfg: EnvConfig | Non
             finish(i, f"{type(e).__name__}: {e}")
         if hasattr(client, "close"):
             client.close()  # the next start reconnects: no stray frame of these episodes is read
+        live[:] = [s for s in live if s.queue or s.keys]
+        if unreachable < max_connect_failures:
+            admit()
 
-    def start(free):
-        eps = {i: queue.pop(0) for i in free[:len(queue)]}
-        if not eps:
-            return
-        obs.update(benv.reset_slots(eps))  # the new episodes' first views in one render call
-        t0 = time.perf_counter()
-        for i, ep in eps.items():
-            running[i] = (ep, benv.envs[i].geodesic_to_goal(), t0)
-        client.start({i: task_info(ep) for i, ep in eps.items()})
+    def start():
+        for s in live:
+            if not (s.queue and free):
+                continue
+            eps = {free.pop(0): s.queue.pop(0) for _ in range(min(len(free), len(s.queue)))}
+            obs.update(s.benv.reset_slots(eps))  # the new episodes' first views in one render call
+            t0 = time.perf_counter()
+            for i, ep in eps.items():
+                running[i] = (ep, s.benv.envs[i].geodesic_to_goal(), t0, s)
+                s.keys.add(i)
+            tasks = {i: task_info(ep) for i, ep in eps.items()}
+            if in_process:
+                client.start(tasks, envs={i: s.benv.envs[i] for i in eps}, seed=s.scene.seed)
+            else:
+                client.start(tasks)
 
-    while queue or running:
+    admit()
+    while live:
         if unreachable >= max_connect_failures:
-            while queue:  # the server is gone: record the rest without waiting for each
-                ep = queue.pop(0)
-                benv.envs[0].reset(ep)
-                running[0] = (ep, benv.envs[0].geodesic_to_goal(), time.perf_counter())
-                finish(0, "ConnectionError: agent server unreachable (earlier episodes of this scene could not connect)")
+            more = False  # the server is gone: the rest of the scenes in flight fail without waiting for each
+            for s in live:
+                while s.queue:
+                    ep = s.queue.pop(0)
+                    s.benv.envs[0].reset(ep)
+                    running[0] = (ep, s.benv.envs[0].geodesic_to_goal(), time.perf_counter(), s)
+                    finish(0, "ConnectionError: agent server unreachable (earlier episodes of this scene could not connect)")
             break
         try:
-            start([i for i in range(slots) if i not in running])
+            start()
             actions = client.act({i: obs[i] for i in running})
-            acts = [actions.get(i) if i in running else None for i in range(slots)]
-            missing = [i for i in running if acts[i] is None]
+            missing = [i for i in running if actions.get(i) is None]
             if missing:
                 raise RuntimeError(f"batch_action has no action for slot(s) {missing}")
         except Exception as e:  # noqa: BLE001 - the client failed: the episodes in flight fail
             fail_all(e)
             continue
         unreachable = 0
-        out, _ = benv.step(acts)
-        for i in running:
-            obs[i] = out[i]
-        done = [i for i in list(running) if benv.envs[i].state.done]
+        for s in live:
+            if s.keys:
+                out, _ = s.benv.step([actions[i] if i in s.keys else None for i in range(slots)])
+                for i in s.keys:
+                    obs[i] = out[i]
+        done = [i for i in list(running) if running[i][3].benv.envs[i].state.done]
         if done:
-            ended = {i: finish(i, benv.errors.pop(i, "")) for i in done}
+            ended = {i: finish(i, running[i][3].benv.errors.pop(i, "")) for i in done}
             try:
                 client.end(ended)
             except Exception as e:  # noqa: BLE001
                 fail_all(e)
-    order = {(ep.task, ep.episode_id): k for k, ep in enumerate(episodes)}
-    rows.sort(key=lambda r: order.get((r["task"], r["episode_id"]), 0))
+            retire()
+    rows.sort(key=lambda r: order.get((r["task"], r["episode_id"], r["scene_id"]), 0))
     return rows
 
 
@@ -217,19 +305,15 @@ def evaluate_episodes(ctx, episodes, agent: str, cfg: EnvConfig, *, seed: int = 
     Raises:
         AgentUnreachable: the agent server could not be reached; the rows reported so far stand.
     """
+    if batch_slots > 1:
+        return evaluate_scenes([SceneEpisodes(list(episodes), lambda: ctx, seed)], agent, cfg, timeout=timeout,
+                               agent_args=agent_args, batch_slots=batch_slots, on_result=on_result,
+                               max_connect_failures=max_connect_failures)
     kwargs = dict(agent_args or {})
     report = on_result or (lambda row, frames: None)
     remote = agent.startswith(("ws://", "wss://"))
     client = None
     try:
-        if batch_slots > 1:
-            client = agent_for(agent, seed, timeout, batch=True, **kwargs) if remote else \
-                InProcessBatch(lambda: agent_for(agent, seed, timeout, **kwargs))
-            rows = run_episodes_batched(ctx, episodes, client, batch_slots, cfg, max_connect_failures,
-                                        on_result=lambda row: report(row, None))
-            if remote and len(rows) >= max_connect_failures and all(_unreachable(r) for r in rows[-max_connect_failures:]):
-                raise AgentUnreachable(f"agent server {agent} unreachable for {max_connect_failures} episodes in a row")
-            return rows
         env, client, rows = NavEnv(ctx, cfg), agent_for(agent, seed, timeout, **kwargs), []
         failed = 0
         for k, ep in enumerate(episodes):
@@ -240,6 +324,40 @@ def evaluate_episodes(ctx, episodes, agent: str, cfg: EnvConfig, *, seed: int = 
             if failed >= max_connect_failures:
                 raise AgentUnreachable(f"agent server {agent} unreachable for {failed} episodes in a row "
                                        f"({rows[-1]['error']})")
+        return rows
+    finally:
+        if client is not None and hasattr(client, "close"):
+            client.close()
+
+
+def evaluate_scenes(scenes, agent: str, cfg: EnvConfig, *, timeout: float = 60.0, agent_args: dict | None = None,
+                    batch_slots: int = 64, scenes_at_once: int = 1, on_result=None,
+                    max_connect_failures: int = 3) -> list[dict]:
+    """The batched evaluate verb over several scenes (`scenes`: SceneEpisodes, each with its context's
+    maker and its agents' seed): one agent client for the whole run, `batch_slots` episodes stepped
+    together, up to `scenes_at_once` scenes in flight (run_scenes_batched), so that the slots stay
+    full when a scene has fewer episodes than slots or runs its last long ones. The arguments are
+    evaluate_episodes'; on_result(row, None) as each episode finishes. Returns the rows in the
+    scenes' and episodes' order.
+
+    Raises:
+        AgentUnreachable: the agent server could not be reached; the rows reported so far stand.
+    """
+    kwargs = dict(agent_args or {})
+    report = on_result or (lambda row, frames: None)
+    remote = agent.startswith(("ws://", "wss://"))
+    scenes = iter(scenes)
+    first = next(scenes, None)
+    if first is None:
+        return []
+    client = None
+    try:
+        client = agent_for(agent, first.seed, timeout, batch=True, **kwargs) if remote else \
+            InProcessBatch(lambda seed: agent_for(agent, seed, timeout, **kwargs), seeded=True, seed=first.seed)
+        rows = run_scenes_batched(itertools.chain([first], scenes), client, batch_slots, cfg, max_connect_failures,
+                                  on_result=lambda row: report(row, None), scenes_at_once=scenes_at_once)
+        if remote and len(rows) >= max_connect_failures and all(_unreachable(r) for r in rows[-max_connect_failures:]):
+            raise AgentUnreachable(f"agent server {agent} unreachable for {max_connect_failures} episodes in a row")
         return rows
     finally:
         if client is not None and hasattr(client, "close"):
