@@ -723,6 +723,33 @@ def test_a_card_holds_further_tables_and_says_when_real_captures_were_measured(t
         add_evaluation("tiny", [bad], "", "", tmp_path, title="On real captures", replace=True)
 
 
+def test_a_card_pairs_each_decoy_run_with_its_own_goal_run_and_states_the_goal_gain():
+    """The decoy check in a card: a run shown decoy goals is labelled so in the results table, and
+    beside the run of the same agent, arguments, protocol, rendering and episodes shown its own goals it
+    gives the goal gain (own SR minus decoy SR; ImageNav's Pose SR beside); a decoy run without such a
+    partner (another protocol) has no gain row, and an evaluation without decoy runs no gain table."""
+    from navcore.baselines.card import goal_gain_table, results_table
+
+    def run(sr, decoy, protocol="distance", pose=0.1):
+        m = {"episodes": 40, "sr": sr, "spl": sr / 2, "ne": 1.0, "collision_rate": 0.1, "steps": 300, "pose_sr": pose}
+        return {"root": "r", "agent": "learned", "label": "net", "agent_args": {"checkpoint": "m.pt"}, "protocol": protocol,
+                "split": "val_unseen", "episodes_per_scene": 20, "decoy_goal": decoy,
+                "render": {"width": 640, "height": 480, "renderer": "gsplat"}, "tasks": {"imagenav": {"overall": m}}}
+
+    card = {"task": "imagenav"}
+    ev = {"runs": {"own": run(0.45, False), "decoy": run(0.20, True, pose=0.05),
+                   "lonely": run(0.30, True, "explicit_stop")}}
+    table = results_table(card, ev)
+    assert "| net (decoy goal) | distance | 640x480 gsplat | overall | 40 | 0.200 |" in table
+    gain = goal_gain_table(card, ev)
+    assert gain in table and "| net | distance | 640x480 gsplat | 40 | 0.450 | 0.200 | +0.250 | 0.100 | 0.050 |" in gain
+    assert "explicit_stop" not in gain
+    other = run(0.45, False)
+    other["agent_args"] = {"checkpoint": "other.pt"}  # another network's run is no partner
+    assert goal_gain_table(card, {"runs": {"own": other, "decoy": run(0.2, True)}}) == ""
+    assert goal_gain_table(card, {"runs": {"own": run(0.45, False)}}) == ""
+
+
 @pytest.mark.parametrize("name,task", [("pointnav_bc", "pointnav"), ("objectnav_bc", "objectnav")])
 def test_shipped_baseline_behind_the_agent_server_acts_as_in_process(name, task, episode_run, tmp_path):
     """navarena serve-agent --agent NAME, evaluated over ws:// by navarena eval: the same episodes

@@ -293,8 +293,48 @@ def results_table(card: dict, ev: dict | None = None) -> str:
         for group in sorted(groups, key=lambda g: ORDER.index(g) if g in ORDER else len(ORDER)):
             m = groups[group]
             cells = [num(m.get(k), 0 if k == "steps" else 2 if k == "ne" else 3) for _, k in columns]
-            lines.append(f"| {summ.get('label') or summ['agent']} | {summ['protocol']} | {shown} | {group} | {m['episodes']} | "
+            lines.append(f"| {run_label(summ)} | {summ['protocol']} | {shown} | {group} | {m['episodes']} | "
                          + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n" + goal_gain_table(card, ev)
+
+
+def run_label(summ: dict) -> str:
+    """A run's agent as its table names it (a decoy run says so)."""
+    return (summ.get("label") or summ["agent"]) + (" (decoy goal)" if summ.get("decoy_goal") else "")
+
+
+def goal_gain_table(card: dict, ev: dict) -> str:
+    """The decoy check of an evaluation's runs (navarena eval --decoy-goal, docs/evaluation.md): for each run
+    shown another goal of its scene beside the run of the same agent, arguments, protocol, rendering and
+    episodes shown its own, SR with each and the goal gain (own minus decoy); ImageNav's Pose SR too. ''
+    when the evaluation holds no such pair."""
+    task = card["task"]
+
+    def key(summ):
+        return (summ.get("label") or summ["agent"], json.dumps(summ.get("agent_args") or {}, sort_keys=True),
+                summ["protocol"], json.dumps(summ.get("render"), sort_keys=True), summ.get("split"),
+                summ.get("episodes_per_scene"), summ.get("difficulty"))
+
+    runs = (ev.get("runs") or {}).values()
+    own = {key(s): s for s in runs if not s.get("decoy_goal") and task in s.get("tasks", {})}
+    pairs = [(own[key(s)], s) for s in runs if s.get("decoy_goal") and key(s) in own and task in s.get("tasks", {})]
+    if not pairs:
+        return ""
+    pose = task == "imagenav"
+    lines = ["", "Goal gain, the decoy check (the same episodes with another goal of the scene shown, scored on "
+             "their own goal):", "",
+             "| agent | protocol | rendered | n | SR, own goal | SR, decoy goal | goal gain |"
+             + (" Pose SR, own | Pose SR, decoy |" if pose else ""),
+             "|---|---|---|---:|---:|---:|---:|" + ("---:|---:|" if pose else "")]
+    for a, b in pairs:
+        ma, mb = a["tasks"][task]["overall"], b["tasks"][task]["overall"]
+        r = a.get("render")
+        shown = f"{r['width'] or ''}x{r['height'] or ''} {r['renderer']}" if r else "no"
+        n = str(ma["episodes"]) if ma["episodes"] == mb["episodes"] else f"{ma['episodes']} / {mb['episodes']}"
+        gain = None if ma.get("sr") is None or mb.get("sr") is None else ma["sr"] - mb["sr"]
+        lines.append(f"| {a.get('label') or a['agent']} | {a['protocol']} | {shown} | {n} | {num(ma.get('sr'))} | "
+                     f"{num(mb.get('sr'))} | {'-' if gain is None else f'{gain:+.3f}'} |"
+                     + (f" {num(ma.get('pose_sr'))} | {num(mb.get('pose_sr'))} |" if pose else ""))
     return "\n".join(lines) + "\n"
 
 
