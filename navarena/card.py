@@ -27,7 +27,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="navarena card", description="A navarena train run's model card: ship it into "
                                  "--models, add closed-loop figures, costs and notes, write its markdown. "
                                  "navarena card COMMAND --help for each.")
-    ap.add_argument("--models", type=Path, default=MODELS, help=f"the folder of cards ({MODELS})")
+    ap.add_argument("--models", type=Path, default=MODELS, help="the folder of cards (default: the installed library's navcore/models)")
     sub = ap.add_subparsers(dest="cmd", required=True)
     s = sub.add_parser("ship", help="a navarena train run's model.pt and card into --models/NAME")
     s.add_argument("run", type=Path)
