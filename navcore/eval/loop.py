@@ -152,9 +152,9 @@ def run_scenes_batched(scenes, client, slots: int, cfg: EnvConfig | None = None,
     `scenes` (SceneEpisodes, an iterable read as scenes join) join in order: the next one when every
     episode of those in flight has started and a slot is free, so that a scene's last, longest
     episodes run beside the next scene's first ones instead of leaving the slots idle. A scene's
-    context is made when it joins and released when its last episode ends. Each episode's result is
-    the same whichever slot, batch or companion scenes it ran with (its agent is made for it, with its
-    scene's seed).
+    context is made when it joins and released when its last episode ends. Each episode gets an agent
+    of its own, made with its scene's seed, so its result does not depend on the slot or on the scenes
+    beside it (for a network batched on a GPU, up to the last bits of the batched arithmetic).
 
     Every episode gets a result row. A client failure fails the episodes in flight, and the queue
     goes on (a RemoteBatchAgent reconnects); after `max_connect_failures` consecutive failures to
