@@ -213,8 +213,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--height", type=int, default=None)
     ap.add_argument("--batch-slots", type=int, default=1, metavar="N", help="episodes stepped together (one render call per step)")
     ap.add_argument("--scenes-at-once", type=int, default=4, metavar="N",
-                    help="with --batch-slots: scenes in flight together, so that the slots stay full when a scene "
-                         "has fewer episodes than slots (each holds its Gaussians in memory)")
+                    help="with --batch-slots: scenes in flight at once, to keep the slots full")
     ap.add_argument("--embodiment", default=None, metavar="NAME", help="the costmap of this embodiment (data roots with several)")
     ap.add_argument("--seed", type=int, default=0, help="seed of stochastic agents")
     ap.add_argument("--decoy-goal", action="store_true",
