@@ -288,14 +288,19 @@ def results_table(card: dict, ev: dict | None = None) -> str:
              "|---|---|---|---|---:|" + "---:|" * len(columns)]
     for run, summ in runs.items():
         groups = summ["tasks"][card["task"]]
-        r = summ.get("render")
-        shown = f"{r['width'] or ''}x{r['height'] or ''} {r['renderer']}" if r else "no"
+        shown = rendered(summ)
         for group in sorted(groups, key=lambda g: ORDER.index(g) if g in ORDER else len(ORDER)):
             m = groups[group]
             cells = [num(m.get(k), 0 if k == "steps" else 2 if k == "ne" else 3) for _, k in columns]
             lines.append(f"| {run_label(summ)} | {summ['protocol']} | {shown} | {group} | {m['episodes']} | "
                          + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n" + goal_gain_table(card, ev)
+
+
+def rendered(summ: dict) -> str:
+    """How a run's frames were rendered, as its tables say it ("640x480 gsplat", or "no")."""
+    r = summ.get("render")
+    return f"{r['width'] or ''}x{r['height'] or ''} {r['renderer']}" if r else "no"
 
 
 def run_label(summ: dict) -> str:
@@ -328,8 +333,7 @@ def goal_gain_table(card: dict, ev: dict) -> str:
              "|---|---|---|---:|---:|---:|---:|" + ("---:|---:|" if pose else "")]
     for a, b in pairs:
         ma, mb = a["tasks"][task]["overall"], b["tasks"][task]["overall"]
-        r = a.get("render")
-        shown = f"{r['width'] or ''}x{r['height'] or ''} {r['renderer']}" if r else "no"
+        shown = rendered(a)
         n = str(ma["episodes"]) if ma["episodes"] == mb["episodes"] else f"{ma['episodes']} / {mb['episodes']}"
         gain = None if ma.get("sr") is None or mb.get("sr") is None else ma["sr"] - mb["sr"]
         lines.append(f"| {a.get('label') or a['agent']} | {a['protocol']} | {shown} | {n} | {num(ma.get('sr'))} | "

@@ -138,7 +138,6 @@ class _LiveScene:
 
         self.scene, self.queue = scene, list(scene.episodes)
         self.benv = BatchNavEnv(scene.context(), slots, cfg, device_obs=device_obs)
-        self.keys: set[int] = set()
 
 
 def run_scenes_batched(scenes, client, slots: int, cfg: EnvConfig | None = None, max_connect_failures: int = 2,
@@ -191,7 +190,6 @@ def run_scenes_batched(scenes, client, slots: int, cfg: EnvConfig | None = None,
         if error:
             env.state.fail()
         rows.append(result_row(env, ep, d0, error, time.perf_counter() - t0))
-        s.keys.discard(i)
         free.append(i)
         free.sort()
         if on_result is not None:
@@ -199,9 +197,13 @@ def run_scenes_batched(scenes, client, slots: int, cfg: EnvConfig | None = None,
         st = env.state
         return {"episode_id": ep.episode_id, "success": bool(st.success), "steps": st.steps, "end_reason": st.end_reason}
 
+    def slots_of(s):
+        return [i for i, r in running.items() if r[3] is s]
+
     def retire():  # scenes with nothing left to run leave (their Gaussians with them), the next ones join
-        live[:] = [s for s in live if s.queue or s.keys]
-        admit()
+        live[:] = [s for s in live if s.queue or slots_of(s)]
+        if unreachable < max_connect_failures:
+            admit()
 
     def fail_all(e):
         nonlocal unreachable
@@ -210,9 +212,7 @@ def run_scenes_batched(scenes, client, slots: int, cfg: EnvConfig | None = None,
             finish(i, f"{type(e).__name__}: {e}")
         if hasattr(client, "close"):
             client.close()  # the next start reconnects: no stray frame of these episodes is read
-        live[:] = [s for s in live if s.queue or s.keys]
-        if unreachable < max_connect_failures:
-            admit()
+        retire()
 
     def start():
         for s in live:
@@ -223,7 +223,6 @@ def run_scenes_batched(scenes, client, slots: int, cfg: EnvConfig | None = None,
             t0 = time.perf_counter()
             for i, ep in eps.items():
                 running[i] = (ep, s.benv.envs[i].geodesic_to_goal(), t0, s)
-                s.keys.add(i)
             tasks = {i: task_info(ep) for i, ep in eps.items()}
             if in_process:
                 client.start(tasks, envs={i: s.benv.envs[i] for i in eps}, seed=s.scene.seed)
@@ -252,9 +251,10 @@ def run_scenes_batched(scenes, client, slots: int, cfg: EnvConfig | None = None,
             continue
         unreachable = 0
         for s in live:
-            if s.keys:
-                out, _ = s.benv.step([actions[i] if i in s.keys else None for i in range(slots)])
-                for i in s.keys:
+            mine = set(slots_of(s))
+            if mine:
+                out, _ = s.benv.step([actions[i] if i in mine else None for i in range(slots)])
+                for i in mine:
                     obs[i] = out[i]
         done = [i for i in list(running) if running[i][3].benv.envs[i].state.done]
         if done:
