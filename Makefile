@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml scripts/torchvision_fix.py
 	$(PIP) "torch==2.13.0" || $(PIP) torch --index-url https://download.pytorch.org/whl/cpu
 	# the consumer library (navcore, navarena) editable, with the pipeline project's dependency groups
 	# (pyproject.toml [dependency-groups]; pip >= 25.1)
-	$(PIP) -e ".[gpu,lerobot,open_vocab,pretrained]" --group pipeline --group test --group bench --group docs
+	$(PIP) -e ".[gpu,lerobot,media,open_vocab,pretrained]" --group pipeline --group test --group bench --group docs
 	# the pipeline (pipeline/, stages/) is the checkout's own, never in the wheel: this venv imports it
 	# from here, wherever it runs (navarena run, python -m pipeline, Dask workers)
 	$(BIN)/python -c "import pathlib, sysconfig; pathlib.Path(sysconfig.get_paths()['purelib'], 'navarena_checkout.pth').write_text(str(pathlib.Path.cwd()) + chr(10))"

@@ -11,6 +11,8 @@ from __future__ import annotations
 import importlib
 import sys
 
+from navcore.optional import MissingPackage
+
 CONSUMER = {"inspect": ("navarena.inspect_scene", "a 3DGS file before any run: format, size, extent, up axis, picture"),
             "doctor": ("navarena.doctor", "what this machine has: Python, packages, GPU, gsplat, FFmpeg, extras"),
             "eval": ("navarena.evaluate", "evaluate an agent in closed loop on a data root or a release"),
@@ -102,6 +104,9 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:  # Ctrl-C outside a command's own handling (imports, loading): no traceback
         print(f"\nnavarena {args[0]}: interrupted", file=sys.stderr)
         sys.exit(130)
+    except MissingPackage as e:  # a feature used without its extra: what to install, no traceback
+        print(f"navarena {args[0]}: {e}", file=sys.stderr)
+        sys.exit(2)
     if isinstance(code, int) and code:  # the commands that report failure by their exit status
         sys.exit(code)
 

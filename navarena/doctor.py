@@ -26,7 +26,7 @@ import sys
 from dataclasses import asdict, dataclass
 
 CORE = ("numpy", "scipy", "numba", "torch", "hydra-core", "dask", "zarr", "pyarrow", "pandas", "ompl",
-        "opencv-python-headless", "msgpack", "av")
+        "opencv-python-headless", "msgpack")
 
 
 @dataclass
@@ -142,8 +142,10 @@ def checks() -> list[Check]:
                          part="pipeline"))
     except Exception as e:  # noqa: BLE001
         out.append(Check("detector weights", False, f"{type(e).__name__}: {e}", part="pipeline"))
-    ok, why = _try("av")
-    out.append(Check("video (PyAV)", ok, (_version("av") or "") if ok else why, True))
+    pkg = "-e '.[{}]'" if checkout else "'navarena[{}]'"
+    for name, module in (("videos (PyAV)", "av"), ("figures (matplotlib)", "matplotlib")):
+        ok, why = _try(module)
+        out.append(Check(name, ok, (_version(module) or "") if ok else f"{why} (pip install {pkg.format('media')})"))
     ffmpeg = shutil.which("ffmpeg")
     ok, why = _try("torchcodec.decoders")
     out.append(Check("ffmpeg libraries (torchcodec)", ok, "torchcodec loads" + (f"; ffmpeg {ffmpeg}" if ffmpeg else "")
@@ -151,7 +153,6 @@ def checks() -> list[Check]:
                                 "libraries: sh scripts/system_packages.sh"))
     browser = next((shutil.which(b) for b in ("chromium", "chromium-browser", "google-chrome") if shutil.which(b)), None)
     out.append(Check("chromium", browser is not None, browser or "not found (only the HTML report's browser test uses it)"))
-    pkg = "-e '.[{}]'" if checkout else "'navarena[{}]'"
     for name, module, extra in (("open_vocab segmenter", "transformers", f"pip install {pkg.format('open_vocab')}"),
                                 ("sam3 segmenter", "sam3", f"pip install {pkg.format('sam3')} on a CUDA machine, weights: docs"),
                                 ("lerobot export", "datasets", f"pip install {pkg.format('lerobot')}"),

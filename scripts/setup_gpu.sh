@@ -79,7 +79,7 @@ if [ -n "$PIP_SRC" ]; then
   "$BIN/python" -c "from navarena.doctor import pipeline_group; g = pipeline_group(); g and g[1] and print('make setup-gpu: the pipeline group lacks', ', '.join(g[1]), '(add their wheels to $WHEELS)')"
 else
   # the library with its gpu extra, plus the pipeline project's dependency groups (pyproject.toml)
-  "$BIN/python" -m pip install -q -e ".[gpu,open_vocab,pretrained]" --group pipeline --group test
+  "$BIN/python" -m pip install -q -e ".[gpu,media,open_vocab,pretrained]" --group pipeline --group test
 fi
 # the checkout's pipeline/ and stages/ on the venv's path (as make setup does)
 "$BIN/python" -c "import pathlib, sysconfig; pathlib.Path(sysconfig.get_paths()['purelib'], 'navarena_checkout.pth').write_text(str(pathlib.Path.cwd()) + chr(10))"

@@ -44,6 +44,21 @@ def test_optional_package_error_names_the_feature_and_the_extra(monkeypatch):
     assert require("numpy", "anything") is np
 
 
+def test_a_command_without_its_media_extra_says_what_to_install_in_one_line(tmp_path):
+    """Videos and figures are the media extra's (a consumer venv without PyAV and matplotlib is about
+    180 MB smaller): render-episodes without PyAV exits 2 before it reads anything, with one line
+    naming the extra, and writes no output folder."""
+    code = ("import sys; sys.modules['av'] = None\n"
+            "from navarena.cli import main\n"
+            f"main(['render-episodes', '--root', {str(tmp_path / 'nowhere')!r}, '--out', {str(tmp_path / 'out')!r}])")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2, p.stderr
+    assert p.stderr.strip().splitlines() == [
+        "navarena render-episodes: navarena render-episodes (its videos) needs the package 'av', which is not "
+        'installed: it comes with the media extra: pip install "navarena[media]"']
+    assert not (tmp_path / "out").exists()
+
+
 def test_embodiments_are_package_data_with_checked_keys(tmp_path, monkeypatch):
     import navcore.nav.embodiment as emb
 

@@ -29,7 +29,9 @@ class H264Writer:
 
     def __init__(self, path: str | Path, fps: int, crf: int = 20, preset: str = "medium",
                  b_frames: int | None = None):
-        import av
+        from navcore.optional import require
+
+        av = require("av", "writing an episode video")
 
         self.path = Path(path)
         self.fps = fps
@@ -40,7 +42,7 @@ class H264Writer:
         self.stream = None
 
     def add(self, rgb: np.ndarray) -> None:
-        import av
+        import av  # imported by __init__ (require)
 
         if self.stream is None:
             self.stream = self.container.add_stream("libx264", rate=self.fps)
