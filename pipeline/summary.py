@@ -123,6 +123,23 @@ def write_summary(summary: dict, catalog: Catalog, started: dt.datetime, shard: 
     return runs / "latest.json"
 
 
+TABLE_ROWS = 20
+"""Rows a per-scene table prints (the worst first); the rest are counted below it. A 2,000-scene
+run listed every scene: thousands of lines, and seconds of the resume spent laying them out."""
+
+
+def _more(console: Console, rows: list, kind, key: str, root: str) -> None:
+    """Under a table cut at TABLE_ROWS: how many rows it left out, counted by `kind`, and where
+    the run summary lists them all."""
+    if len(rows) <= TABLE_ROWS:
+        return
+    counts: dict[str, int] = {}
+    for r in rows[TABLE_ROWS:]:
+        counts[kind(r)] = counts.get(kind(r), 0) + 1
+    console.print(f"  ... and {len(rows) - TABLE_ROWS} more ({', '.join(f'{k} {v}' for k, v in sorted(counts.items()))}): "
+                  f"every row is under \"{key}\" in {root}/_runs/latest.json", style="dim")
+
+
 def print_summary(summary: dict, console: Console) -> None:
     t = Table(title="run summary")
     statuses = ["done", "cached", "n/a", "failed", "skipped"]
@@ -171,16 +188,20 @@ def print_summary(summary: dict, console: Console) -> None:
         console.print(f)
         console.print("[red]some tasks failed[/]: the run exits with status 1" if not summary.get("allow_failures")
                       else "some tasks failed; allow_failures=true: the run exits with status 0")
+    root = summary.get("data_root") or "data"  # the run's own (data_root=...), as a user would type it
     if summary["shortfalls"]:
+        rows = [(r, x) for r in summary["shortfalls"] for x in r["shortfall"]]
+        # the largest deficits first (short of episodes before a difficulty mix that is off)
+        rows.sort(key=lambda rx: (-(rx[1].get("requested") or 0) + (rx[1].get("episodes") or 0), rx[0]["scene_id"]))
         f = Table(title="scenes that could not yield the requested outputs")
         for col in ("scene", "stage", "what", "got / asked", "rejections by reason"):
             f.add_column(col, overflow="fold")
-        for r in summary["shortfalls"]:
-            for s in r["shortfall"]:
-                f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], s.get("task", ""),
-                          f"{s.get('episodes')} / {s.get('requested')}",
-                          ", ".join(f"{k} {v}" for k, v in s.get("rejections", {}).items()) or s.get("reason", ""))
+        for r, x in rows[:TABLE_ROWS]:
+            f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], x.get("task", ""),
+                      f"{x.get('episodes')} / {x.get('requested')}",
+                      ", ".join(f"{k} {v}" for k, v in x.get("rejections", {}).items()) or x.get("reason", ""))
         console.print(f)
+        _more(console, rows, lambda rx: f"{rx[0]['stage']} {rx[1].get('task', '')}".strip(), "shortfalls", root)
     if summary.get("goal_mappings"):
         f = Table(title="ObjectNav goal categories from dataset classes (instances)")
         for col in ("scene", "goal category", "dataset classes"):
@@ -198,14 +219,15 @@ def print_summary(summary: dict, console: Console) -> None:
         f.add_column("verdict", no_wrap=True)
         f.add_column("episodes", no_wrap=True)
         style = {"pass": "green", "warn": "yellow", "reject": "red"}
-        for r in summary["screening"]:
+        scr = sorted(summary["screening"], key=lambda r: (r["score"], r["scene"]))  # the worst first
+        for r in scr[:TABLE_ROWS]:
             f.add_row(escape(r["scene"]), f"{r['score']:.2f}",
                       *(f"{100 * r[k]:.1f}%" for k in ("blur_share", "hole_share", "view_blur_share", "view_hole_share",
                                                         "unseen_share")),
                       f"[{style[r['verdict']]}]{r['verdict']}[/]" if r.get("verdict") else "-",
                       "-" if r.get("kept") is None else "kept" if r["kept"] else "rejected")
         console.print(f)
-        root = summary.get("data_root") or "data"  # the run's own (data_root=...), as a user would type it
+        _more(console, scr, lambda r: r.get("verdict") or "no verdict", "screening", root)
         console.print("  blobs: floor under blurry blobs; holes: floor holes; blur / v.holes: rendered views blurred / "
                       "with holes; unseen: cells no view covers. A warn keeps the scene, its episodes avoid the flagged "
                       f"cells: look at {root}/03_costmaps/screen/<scene_id>.png (legend on it); screen.reject=true drops "
@@ -237,7 +259,8 @@ def print_summary(summary: dict, console: Console) -> None:
         f = Table(title="warnings")
         for col in ("scene", "stage", "warning"):
             f.add_column(col, overflow="fold")
-        for r in summary["warnings"]:
-            for w in r["warnings"]:
-                f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], w)
+        rows = [(r, w) for r in summary["warnings"] for w in r["warnings"]]
+        for r, w in rows[:TABLE_ROWS]:
+            f.add_row(f"{r['scene_id']} ({r['scene']})", r["stage"], w)
         console.print(f)
+        _more(console, rows, lambda rw: rw[0]["stage"], "warnings", root)

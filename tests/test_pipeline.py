@@ -1123,6 +1123,39 @@ def test_the_screening_hint_names_the_runs_own_data_root(tmp_path):
     assert "data/real_indoor/03_costmaps/screen/<scene_id>.png" in text and "data/real_indoor/_runs/latest.json" in text
 
 
+def test_per_scene_tables_print_the_worst_rows_and_count_the_rest(tmp_path):
+    """A run of thousands of scenes prints at most TABLE_ROWS rows of each per-scene table (the
+    largest shortfalls, the lowest screening scores first) and one line counting the rest by kind
+    and naming where the run summary lists them all."""
+    import datetime as dt
+
+    from rich.console import Console
+
+    from pipeline.summary import TABLE_ROWS, build_summary, print_summary
+
+    summary = build_summary([], dt.datetime.now(dt.timezone.utc), tmp_path / "c.yaml", [0, 1], [], {})
+    n = TABLE_ROWS + 30
+    summary["shortfalls"] = [{"scene_id": f"s{i:03d}", "scene": f"room{i}", "stage": "episodes",
+                              "shortfall": [{"task": "pointnav", "episodes": 10 if i else 3, "requested": 10,
+                                             "reason": "difficulty easy 80% / medium 20% / hard 0%"}]}
+                             for i in range(n)]
+    summary["screening"] = [{"scene": f"room{i}", "score": 0.99 - i / 1000 if i != 7 else 0.10, "blur_share": 0.0,
+                             "hole_share": 0.0, "view_blur_share": 0.0, "view_hole_share": 0.0, "unseen_share": 0.0,
+                             "verdict": "reject" if i == 7 else "pass", "kept": i != 7} for i in range(n)]
+    summary["data_root"] = "data/big"
+    out = tmp_path / "console.txt"
+    with open(out, "w") as f:
+        print_summary(summary, Console(file=f, width=400))
+    text = out.read_text()
+    lines = text.splitlines()
+    short = [ln for ln in lines if "(room" in ln and "episodes" in ln and "pointnav" in ln]
+    assert len(short) == TABLE_ROWS and "s000 (room0)" in short[0]  # the 3-of-10 scene leads
+    scr = [ln for ln in lines if ln.strip().startswith("room") and ("pass" in ln or "reject" in ln)]
+    assert len(scr) == TABLE_ROWS and scr[0].split()[0] == "room7"  # the lowest score first
+    assert "... and 30 more (episodes pointnav 30): every row is under \"shortfalls\" in data/big/_runs/latest.json" in text
+    assert "... and 30 more (pass 30): every row is under \"screening\" in data/big/_runs/latest.json" in text
+
+
 def test_a_generator_setting_recomputes_no_captured_scene(tmp_path, make_cfg):
     """Scenes read from files are keyed by a chain without the generated-only stages: a changed
     synthetic.* setting (or a new generator default) changes every stage's hash of a generated
