@@ -65,13 +65,36 @@ def scheduler_gaps(results: list[dict]) -> dict:
             "gap_ms_median": 1000 * sorted(gaps)[len(gaps) // 2] if gaps else 0.0}
 
 
+SIM_MARK = ".bench_sim"
+"""A file in a root the simulation made: only such a root (or an empty one) is cleared for a new run."""
+
+
+def fresh_sim_root(root: Path) -> Path:
+    """An empty root for the simulation's first run: a root the simulation made before is removed (a
+    finished one would turn the first run into a resume of cached tasks and its figures into
+    nonsense); a non-empty root it did not make is refused, naming it."""
+    import shutil
+
+    if root.exists() and any(root.iterdir()):
+        if not (root / SIM_MARK).is_file():
+            raise SystemExit(f"bench_scale sim: {root} holds files the simulation did not make (no {SIM_MARK}); "
+                             "pass another --root or remove it")
+        shutil.rmtree(root)
+    root.mkdir(parents=True, exist_ok=True)
+    (root / SIM_MARK).write_text("made by python -m benchmarks.scale.bench_scale sim; cleared by its next run\n")
+    return root
+
+
 def sim(args) -> dict:
-    root = Path(args.root)
+    root = fresh_sim_root(Path(args.root))
     over = [f"scenes.count={args.scenes}", *SIM]
     first = run_pipeline(root, over, Path(args.out) / "logs" / "sim_run.log")
     latest = root / "_runs" / "latest.json"
     summary = json.loads(latest.read_text())
     results = [r for r in summary["results"] if r["scene_id"] != "*"]
+    cached = sum(r["status"] == "cached" for r in results)
+    if cached:
+        raise SystemExit(f"bench_scale sim: the first run found {cached} tasks cached in {root}: not a first run")
     files = [p for p in root.rglob("*") if p.is_file() and p.parts[len(root.parts)] != "_hydra"]
     by_layer = defaultdict(int)
     for p in files:
