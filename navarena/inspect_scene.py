@@ -117,7 +117,12 @@ def main(argv=None) -> int:
     except (FileNotFoundError, ValueError) as e:  # SceneFormatError is a ValueError naming the file
         print(f"navarena inspect: {e}", file=sys.stderr)
         return 2
-    info["picture"] = picture(means, a.file, a.picture or f"{Path(a.file).name.replace('.', '_')}_topdown.png", info)
+    from navcore.optional import MissingPackage
+
+    try:  # the facts do not need the picture's package (the media extra): without it they still print
+        info["picture"] = picture(means, a.file, a.picture or f"{Path(a.file).name.replace('.', '_')}_topdown.png", info)
+    except MissingPackage as e:
+        info["picture"] = f"none ({e})"
     if a.json:
         print(jsonio.dumps(info, indent=1))
         return 0

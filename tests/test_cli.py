@@ -61,6 +61,21 @@ def test_inspect_finds_the_up_axis_and_the_units(tilted_scene, small_scene):
     assert main([str(tilted_scene / "missing.spz")]) == 2
 
 
+def test_inspect_without_the_media_extra_prints_its_facts_and_says_why_no_picture(tilted_scene, monkeypatch, capsys):
+    """matplotlib is the media extra's: without it, inspect still gives the format, size, up axis and
+    units, and names the extra where the picture would be."""
+    import sys
+
+    from navarena.inspect_scene import main
+
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # as if not installed
+    assert main([str(tilted_scene / "room.spz"), "--json", "--picture", str(tilted_scene / "none.png")]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["up_axis"] == "-y" and info["units_hint"] == "plausible for metres"
+    assert info["picture"].startswith("none (") and 'pip install "navarena[media]"' in info["picture"]
+    assert not (tilted_scene / "none.png").exists()
+
+
 def test_inspect_says_file_not_found(tmp_path, capsys):
     from navarena.inspect_scene import main
 
