@@ -155,9 +155,10 @@ def evaluate(args) -> tuple[list[dict], bool, str]:
                 evaluate_scenes([SceneEpisodes(eps, partial(context, sid), seed[sid]) for sid, eps in plan.items()],
                                 args.agent, cfg, timeout=args.timeout, agent_args=dict(args.agent_arg),
                                 batch_slots=args.batch_slots, scenes_at_once=args.scenes_at_once, on_result=done)
-            for sid, eps in plan.items() if args.batch_slots <= 1 else ():
-                evaluate_episodes(context(sid), eps, args.agent, cfg, seed=seed[sid], timeout=args.timeout,
-                                  agent_args=dict(args.agent_arg), on_result=done)
+            else:
+                for sid, eps in plan.items():
+                    evaluate_episodes(context(sid), eps, args.agent, cfg, seed=seed[sid], timeout=args.timeout,
+                                      agent_args=dict(args.agent_arg), on_result=done)
         except KeyboardInterrupt:
             interrupted = True
         except AgentUnreachable as e:
