@@ -14,22 +14,22 @@ def test_sam3_rate_comes_from_the_same_gpu_or_the_h100_default(tmp_path):
     assert sam3_rate(tmp_path, "NVIDIA H200")[0] == SAM3_FPS_H100
 
 
-def test_the_simulation_starts_from_an_empty_root_and_clears_only_its_own(tmp_path):
-    """A finished simulation root left in place made the next first run a resume of cached tasks:
-    the simulation clears a root it made (its mark file), refuses one it did not make, and marks
+def test_a_benchmark_root_starts_empty_and_only_its_own_is_cleared(tmp_path):
+    """A finished simulation or cost-sample root left in place made the next run a resume of cached
+    tasks: a benchmark clears a root it made (its mark file), refuses one it did not make, and marks
     the root it starts."""
     import pytest
 
-    from benchmarks.scale.bench_scale import SIM_MARK, fresh_sim_root
+    from benchmarks.scale.bench_scale import BENCH_MARK, fresh_bench_root
 
-    root = fresh_sim_root(tmp_path / "sim")
-    assert sorted(p.name for p in root.iterdir()) == [SIM_MARK]
+    root = fresh_bench_root(tmp_path / "sim")
+    assert sorted(p.name for p in root.iterdir()) == [BENCH_MARK]
     (root / "_runs").mkdir()
     (root / "_runs" / "latest.json").write_text("{}")
-    assert sorted(p.name for p in fresh_sim_root(root).iterdir()) == [SIM_MARK]  # its own: cleared
+    assert sorted(p.name for p in fresh_bench_root(root).iterdir()) == [BENCH_MARK]  # its own: cleared
     other = tmp_path / "data"
     other.mkdir()
     (other / "keep.txt").write_text("x")
-    with pytest.raises(SystemExit, match=r"data holds files the simulation did not make"):
-        fresh_sim_root(other)
+    with pytest.raises(SystemExit, match=r"bench_scale sim: .*data holds files no benchmark made"):
+        fresh_bench_root(other)
     assert (other / "keep.txt").read_text() == "x"

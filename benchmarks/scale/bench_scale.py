@@ -65,28 +65,30 @@ def scheduler_gaps(results: list[dict]) -> dict:
             "gap_ms_median": 1000 * sorted(gaps)[len(gaps) // 2] if gaps else 0.0}
 
 
-SIM_MARK = ".bench_sim"
-"""A file in a root the simulation made: only such a root (or an empty one) is cleared for a new run."""
+BENCH_MARK = ".bench_root"
+"""A file in a root a benchmark run made (the simulation's, the cost samples'): only such a root (or an
+empty one) is cleared for a new run."""
 
 
-def fresh_sim_root(root: Path) -> Path:
-    """An empty root for the simulation's first run: a root the simulation made before is removed (a
-    finished one would turn the first run into a resume of cached tasks and its figures into
-    nonsense); a non-empty root it did not make is refused, naming it."""
+def fresh_bench_root(root: Path, who: str = "bench_scale sim") -> Path:
+    """An empty root for a benchmark run that must compute every task (the simulation's first run, a
+    cost sample): a root a benchmark made before is removed (a finished one would turn the run into a
+    resume of cached tasks and its figures into nonsense); a non-empty root it did not make is
+    refused, naming it and `who` refuses."""
     import shutil
 
     if root.exists() and any(root.iterdir()):
-        if not (root / SIM_MARK).is_file():
-            raise SystemExit(f"bench_scale sim: {root} holds files the simulation did not make (no {SIM_MARK}); "
-                             "pass another --root or remove it")
+        if not (root / BENCH_MARK).is_file():
+            raise SystemExit(f"{who}: {root} holds files no benchmark made (no {BENCH_MARK}); "
+                             "pass another root or remove it")
         shutil.rmtree(root)
     root.mkdir(parents=True, exist_ok=True)
-    (root / SIM_MARK).write_text("made by python -m benchmarks.scale.bench_scale sim; cleared by its next run\n")
+    (root / BENCH_MARK).write_text(f"made by {who}; cleared by its next run\n")
     return root
 
 
 def sim(args) -> dict:
-    root = fresh_sim_root(Path(args.root))
+    root = fresh_bench_root(Path(args.root))
     over = [f"scenes.count={args.scenes}", *SIM]
     first = run_pipeline(root, over, Path(args.out) / "logs" / "sim_run.log")
     latest = root / "_runs" / "latest.json"

@@ -19,6 +19,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from benchmarks.scale.bench_scale import fresh_bench_root
+
 PROJECT = Path(__file__).resolve().parents[2]
 COST = ["executor=sync", "goal_images.enabled=true", "task.pointnav.episodes_per_scene=400",
         "task.imagenav.episodes_per_scene=400", "task.objectnav.episodes_per_scene=280"]
@@ -45,6 +47,8 @@ def main(argv: list[str] | None = None) -> int:
             _run(["pipeline", "scenes=real_indoor", "data_root=data/real_indoor"])
             _run(["pipeline", "scenes=real_indoor", "data_root=data/real_indoor_compact", "ingest.store=reference",
                   "asset.aligned_format=spz", "voxelize.store_opacity=false"])
+            for root in ("data/cost_real", "data/cost_synthetic"):  # a cost sample computes every stage
+                fresh_bench_root(PROJECT / root, "bench-scale's cost sample")
             _run(["pipeline", "data_root=data/cost_real", "scenes=real_indoor", "scenes.limit=1", *COST], ONE_CORE)
             _run(["pipeline", "data_root=data/cost_synthetic", "scenes.count=1", "scenes.num_gaussians=1500000",
                   *COST], ONE_CORE)
