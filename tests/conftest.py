@@ -148,9 +148,7 @@ def make_episode():
 
     def make(start=(1.0, 0.5, 0.0), goal=(3.0, 0.5), radius=0.5, geodesic=2.0, max_steps=50, **kw):
         g = np.array(goal, float)
-        # an id of its own for each episode: SceneContext caches the goal's distance field per (task, id), and
-        # the session's ctx is shared by every test of a worker (one id for all once handed an ImageNav test
-        # another test's field: the expert drove to the wrong goal)
+        # an id of its own for each episode (SceneContext caches distance fields by goal set, not by id)
         return Episode(kw.pop("episode_id", f"e{next(ids)}"), kw.pop("task", "pointnav"), start, g, g[None], radius,
                        geodesic, max_steps, goal_sources=g[None], **kw)
     return make

@@ -712,3 +712,19 @@ def test_a_network_that_ignores_its_goal_has_no_goal_gain(episode_run, tmp_path)
     sa, sb = (json.loads((tmp_path / k / "summary.json").read_text()) for k in ("true", "decoy"))
     assert sb["decoy_goal"] is True and sa["decoy_goal"] is False
     assert sa["tasks"]["objectnav"]["overall"]["sr"] - sb["tasks"]["objectnav"]["overall"]["sr"] == 0
+
+
+def test_distance_fields_are_shared_by_goal_set_not_by_episode(ctx, make_episode):
+    """A scene's episodes share a few goal sets (an ObjectNav category, the goals PointNav episodes
+    are drawn to): one Dijkstra search per goal set, the same field for every episode of it, whatever
+    the episode's id or task; another goal set gets its own field, equal to the graph's search."""
+    a = make_episode(goal=(3.0, 0.5))
+    b = make_episode(goal=(3.0, 0.5), task="imagenav")
+    c = make_episode(goal=(1.5, 0.5))
+    assert ctx.field(a) is ctx.field(b)
+    assert ctx.field(c) is not ctx.field(a)
+    cells = ctx.costmap.cells_of(np.array([[1.5, 0.5]]))
+    np.testing.assert_array_equal(ctx.field(c).node_dist, ctx.graph.field(cells).node_dist)
+    n = len(ctx._fields)
+    ctx.field(make_episode(goal=(3.0, 0.5), episode_id=a.episode_id))
+    assert len(ctx._fields) == n  # a repeated goal set costs no search

@@ -171,12 +171,16 @@ class SceneContext:
         return cls(cm, graph, emb, gs, renderer)
 
     def field(self, ep: Episode):
-        """Geodesic distance field to the episode's goal (set), cached per episode."""
-        key = (ep.task, ep.episode_id)  # episode ids repeat across tasks
-        if key not in self._fields:
-            cells = self.costmap.cells_of(ep.goal_sources)
-            cells = cells[self.graph.index[cells[:, 0], cells[:, 1]] >= 0]
-            if len(self._fields) >= self.max_fields:  # bounded: drop the oldest
+        """Geodesic distance field to the episode's goal (set), cached per goal set: a scene's episodes
+        share a few (an ObjectNav category's instances, the goals PointNav and ImageNav episodes are
+        drawn to), so a run computes one Dijkstra search per goal set, not one per episode."""
+        cells = self.costmap.cells_of(ep.goal_sources)
+        cells = np.unique(cells[self.graph.index[cells[:, 0], cells[:, 1]] >= 0], axis=0)
+        key = cells.tobytes()
+        if key in self._fields:
+            self._fields[key] = self._fields.pop(key)  # most recently used last
+        else:
+            if len(self._fields) >= self.max_fields:  # bounded: drop the least recently used
                 self._fields.pop(next(iter(self._fields)))
             self._fields[key] = self.graph.field(cells)
         return self._fields[key]
