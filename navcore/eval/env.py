@@ -171,15 +171,17 @@ class SceneContext:
         return cls(cm, graph, emb, gs, renderer)
 
     def field(self, ep: Episode):
-        """Geodesic distance field to the episode's goal (set), cached per goal set: a scene's episodes
-        share a few (an ObjectNav category's instances, the goals PointNav and ImageNav episodes are
-        drawn to), so a run computes one Dijkstra search per goal set, not one per episode."""
-        cells = self.costmap.cells_of(ep.goal_sources)
-        cells = np.unique(cells[self.graph.index[cells[:, 0], cells[:, 1]] >= 0], axis=0)
-        key = cells.tobytes()
+        """Geodesic distance field to the episode's goal (set), cached per goal set (its goal_sources):
+        a scene's episodes share a few (an ObjectNav category's instances, the goals PointNav and
+        ImageNav episodes are drawn to), so a run computes one Dijkstra search per goal set, not one
+        per episode."""
+        src = np.asarray(ep.goal_sources)
+        key = (src.shape, src.dtype.str, src.tobytes())  # every step asks (info's distance): no more than this
         if key in self._fields:
             self._fields[key] = self._fields.pop(key)  # most recently used last
         else:
+            cells = self.costmap.cells_of(src)
+            cells = cells[self.graph.index[cells[:, 0], cells[:, 1]] >= 0]
             if len(self._fields) >= self.max_fields:  # bounded: drop the least recently used
                 self._fields.pop(next(iter(self._fields)))
             self._fields[key] = self.graph.field(cells)
