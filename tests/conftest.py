@@ -6,6 +6,14 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "2")
+# make test runs two xdist workers on two cores, each with numba's and torch's OpenMP threads. Those
+# threads busy-wait between parallel regions (libgomp's default), taking the cores the other worker
+# computes on: with another process busy, the CPU renderer took 11.6 ms a 64x48 frame and a small
+# network's forward pass 3.4 ms, against 6.8 and 1.0 ms with passive waiting (the default policy is
+# faster on an idle machine, so this is for the workers only). Set before numba or torch starts OpenMP;
+# the tests' subprocesses inherit it.
+if int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")) > 1:
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 _PROJECT = Path(__file__).resolve().parents[1]
 # the real 3DGS samples live beside the project (../shared/data/real), never in it;
 # NAVARENA_REAL_DATA points elsewhere
@@ -186,18 +194,38 @@ SHARED_RUN_MODULES = sorted(p.stem for p in Path(__file__).parent.glob("test_*.p
 them to one worker, which builds that root once for all of them (pytest_xdist_make_scheduler)."""
 
 
+LONGEST_FIRST = ("test_docs_run", "episode_run")
+"""The longest units of work, started first, one on each worker: the docs runner (10 minutes on the
+2-core CI machine) and the episode_run modules. xdist's default order (the units with the most tests
+first) started the docs runner last, which then ran alone at the end."""
+
+
+def _unit(nodeid: str) -> str:
+    stem = Path(nodeid.split("::", 1)[0]).stem
+    return "episode_run" if stem in SHARED_RUN_MODULES else stem
+
+
+def pytest_collection_modifyitems(config, items):
+    """LONGEST_FIRST's units first, the others in file order (a stable sort): with --dist loadfile
+    the scheduler below hands the units out in this order."""
+    rank = {u: i for i, u in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(_unit(item.nodeid), len(rank)))
+
+
 def pytest_xdist_make_scheduler(config, log):
     """--dist loadfile, except that the modules using `episode_run` are one unit of work, so that
-    its pipeline run is made once rather than once on each worker. (xdist's loadgroup cannot do
-    this under pytest 9: its group suffix on the node ids no longer takes.)"""
+    its pipeline run is made once rather than once on each worker (xdist's loadgroup cannot do
+    this under pytest 9: its group suffix on the node ids no longer takes), and the units are handed
+    out in the collection's order (pytest_collection_modifyitems), not by their number of tests."""
     if config.getvalue("dist") != "loadfile":
         return None
     from xdist.scheduler import LoadFileScheduling
 
+    config.option.loadscopereorder = False
+
     class LoadFileSharingTheEpisodeRun(LoadFileScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            path = nodeid.split("::", 1)[0]
-            return "episode_run" if Path(path).stem in SHARED_RUN_MODULES else path
+            return _unit(nodeid)
 
     return LoadFileSharingTheEpisodeRun(config, log)
 
