@@ -728,3 +728,24 @@ def test_distance_fields_are_shared_by_goal_set_not_by_episode(ctx, make_episode
     n = len(ctx._fields)
     ctx.field(make_episode(goal=(3.0, 0.5), episode_id=a.episode_id))
     assert len(ctx._fields) == n  # a repeated goal set costs no search
+
+
+def test_an_episode_looks_its_field_up_once_and_its_distances_are_the_fields(ctx, make_episode, monkeypatch):
+    """Every step's info carries the distance to the goal: the episode asks the scene for its goal
+    set's field once (the first call), and each distance is that field's value at the pose; the next
+    episode asks again."""
+    from navcore.nav.oracle import geodesic_potential
+
+    real, asked = type(ctx).field, []
+    monkeypatch.setattr(type(ctx), "field", lambda self, ep: asked.append(ep.episode_id) or real(self, ep))
+    env = NavEnv(ctx, EnvConfig(render=False))
+    a, b = make_episode(goal=(3.0, 0.5)), make_episode(goal=(0.5, 2.5))
+    cm = ctx.costmap
+    for ep in (a, b):
+        env.reset(ep)
+        for action in (TURN_LEFT, MOVE_FORWARD, TURN_RIGHT, MOVE_FORWARD):
+            _, info = env.step(action)
+            s = env.state
+            want = geodesic_potential(real(ctx, ep).grid, cm.origin[0], cm.origin[1], cm.resolution, s.x, s.y)
+            assert info["distance_to_goal"] == pytest.approx(float(want)) and not info["done"]
+    assert asked == [a.episode_id, b.episode_id]

@@ -222,6 +222,7 @@ class EpisodeState:
         self.done = False
         self.success = False
         self.end_reason = ""
+        self.field = None  # the goal set's distance field (SceneContext.field), looked up once
 
     @property
     def pose(self) -> np.ndarray:
@@ -297,11 +298,13 @@ class NavEnv:
                 "distance_to_goal": self.geodesic_to_goal(), "pose": s.pose}
 
     def geodesic_to_goal(self) -> float:
-        """Geodesic distance from the current pose to the goal (set), metres."""
-
-        f = self.ctx.field(self.state.ep)
+        """Geodesic distance from the current pose to the goal (set), metres (every step's info asks:
+        the episode keeps its goal set's field from the first call)."""
+        s = self.state
+        if s.field is None:
+            s.field = self.ctx.field(s.ep)
         cm = self.ctx.costmap
-        return float(geodesic_potential(f.grid, cm.origin[0], cm.origin[1], cm.resolution, self.state.x, self.state.y))
+        return float(geodesic_potential(s.field.grid, cm.origin[0], cm.origin[1], cm.resolution, s.x, s.y))
 
     def _decode(self, action) -> tuple[bool, list[tuple[float, float, float]]]:
         return decode_action(action, self.cfg.actions)
