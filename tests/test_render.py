@@ -35,6 +35,22 @@ def test_camera_convention():
     assert k[0, 0] == pytest.approx(320) and k[0, 2] == 320 and k[1, 2] == 240
 
 
+@pytest.mark.parametrize("pitch", [0.0, -15.0, 25.0])
+def test_batched_viewmats_invert_camera_to_world(pitch):
+    """viewmats' closed form is the inverse of each pose's camera_to_world (np.linalg.inv, the
+    reference): the same float32 bytes for a level camera (every embodiment's default, so renders and
+    stored goal images do not move), within 1e-6 when pitched."""
+    rng = np.random.default_rng(1)
+    poses = np.c_[rng.uniform(-30, 30, (500, 2)), rng.uniform(-4, 4, 500)]
+    ref = np.stack([np.linalg.inv(camera_to_world(x, y, yaw, 0.88, pitch)) for x, y, yaw in poses]).astype(np.float32)
+    got = viewmats(poses, 0.88, pitch)
+    assert got.dtype == np.float32 and got.shape == (500, 4, 4)
+    if pitch == 0:
+        assert np.array_equal(got, ref)
+    np.testing.assert_allclose(got, ref, atol=1e-6)
+    assert viewmats(np.zeros((0, 3)), 0.88, pitch).shape == (0, 4, 4)
+
+
 def scene(means, sigmas, opacities, rgbs) -> GaussianScene:
     n = len(means)
     sh = ((np.asarray(rgbs, float) - 0.5) / C0)[:, None, :]

@@ -589,7 +589,7 @@ class Collector:
                     a = label
                 actions[i] = a
                 prev[i] = a
-            obs_all, _ = benv.step(actions)
+            obs_all, _ = benv.step(actions, infos=False)
             ended = []
             for i in live:
                 obs[i] = obs_all[i]

@@ -38,8 +38,10 @@ class BatchNavEnv:
         self._goal_images(list(episodes))
         return dict(zip(episodes, self._observe(list(episodes))))
 
-    def step(self, actions) -> tuple[list[dict], list[dict]]:
-        """actions: one per slot (None for a finished slot)."""
+    def step(self, actions, infos: bool = True) -> tuple[list[dict], list[dict] | None]:
+        """actions: one per slot (None for a finished slot) -> (observations, infos), one per slot;
+        infos=False skips the infos (None; each holds a geodesic lookup) for callers that read the
+        episodes' state instead, as the evaluation loop and the trainers' collection do."""
         live = []
         for i, (env, a) in enumerate(zip(self.envs, actions)):
             if a is None or env.state is None or env.state.done:
@@ -47,7 +49,7 @@ class BatchNavEnv:
             env.apply(a)  # a malformed action spends its step and is recorded (NavEnv.apply)
             live.append(i)
         self._observe(live)
-        return list(self._obs), [e.info() if e.state else {} for e in self.envs]
+        return list(self._obs), [e.info() if e.state else {} for e in self.envs] if infos else None
 
     def _goal_images(self, slots) -> None:
         if not self.render_enabled:

@@ -253,7 +253,7 @@ def run_scenes_batched(scenes, client, slots: int, cfg: EnvConfig | None = None,
         for s in live:
             mine = set(slots_of(s))
             if mine:
-                out, _ = s.benv.step([actions[i] if i in mine else None for i in range(slots)])
+                out, _ = s.benv.step([actions[i] if i in mine else None for i in range(slots)], infos=False)
                 for i in mine:
                     obs[i] = out[i]
         done = [i for i in list(running) if running[i][3].benv.envs[i].state.done]

@@ -34,10 +34,21 @@ def camera_to_world(x: float, y: float, yaw: float, height: float, pitch_deg: fl
 
 
 def viewmats(poses: np.ndarray, height: float, pitch_deg: float = 0.0) -> np.ndarray:
-    """[B, 3] robot poses (x, y, yaw) -> [B, 4, 4] float32 world -> camera transforms."""
-    out = np.empty((len(poses), 4, 4))
-    for i, (x, y, yaw) in enumerate(np.asarray(poses, float).reshape(-1, 3)):
-        out[i] = np.linalg.inv(camera_to_world(x, y, yaw, height, pitch_deg))
+    """[B, 3] robot poses (x, y, yaw) -> [B, 4, 4] float32 world -> camera transforms: the inverse of
+    camera_to_world, in closed form for the whole batch (rows right, down, forward; translation
+    -R^T t). The evaluation loop asks for every slot's camera each step: a 4x4 inverse per pose took
+    half its host time at 64 slots (2.5 ms a step on the 2-core VM, now 0.05)."""
+    p = np.asarray(poses, float).reshape(-1, 3)
+    yaw = p[:, 2]
+    cp, sp = math.cos(math.radians(pitch_deg)), math.sin(math.radians(pitch_deg))
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    out = np.zeros((len(p), 4, 4))
+    out[:, 0, 0], out[:, 0, 1] = sy, -cy  # right (x), level
+    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = sp * cy, sp * sy, -cp  # down (y) = forward x right
+    out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = cp * cy, cp * sy, sp  # forward (z)
+    t = np.stack([p[:, 0], p[:, 1], np.full(len(p), float(height))], 1)
+    out[:, :3, 3] = -np.einsum("bij,bj->bi", out[:, :3, :3], t)
+    out[:, 3, 3] = 1.0
     return out.astype(np.float32)
 
 
