@@ -77,9 +77,9 @@ dataset: $(STAMP)
 
 # lint (ruff) and the import contracts (navcore <- stages <- pipeline; navarena <- navcore) first, then the tests
 # the default tests, spread over TEST_WORKERS processes (pytest-xdist, a module per process, the
-# modules sharing the session's episode data root on one: tests/conftest.py; 0: this process): on
-# the 2-core CI machine 2 took the tests from 502 s to 439 s (the pipeline tests wait on
-# subprocesses and Python as much as on the cores)
+# modules sharing the session's episode data root on one, the longest units first, the workers'
+# OpenMP threads waiting passively: tests/conftest.py; 0: this process): on the 2-core VM, 2 workers
+# took 14 min 48 s (2026-12-07; 27 min 52 s before the passive wait and the order)
 TEST_WORKERS ?= 2
 test: lint
 	$(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile $(ARGS)
