@@ -195,8 +195,8 @@ them to one worker, which builds that root once for all of them (pytest_xdist_ma
 
 
 LONGEST_FIRST = ("test_docs_run", "episode_run")
-"""The longest units of work, started first, one on each worker: the docs runner (10 minutes on the
-2-core CI machine) and the episode_run modules. xdist's default order (the units with the most tests
+"""The longest units of work, started first, one on each worker: the docs runner (10-12 minutes on a
+2-core VM) and the episode_run modules. xdist's default order (the units with the most tests
 first) started the docs runner last, which then ran alone at the end."""
 
 
