@@ -176,7 +176,7 @@ class SceneContext:
         ImageNav episodes are drawn to), so a run computes one Dijkstra search per goal set, not one
         per episode."""
         src = np.asarray(ep.goal_sources)
-        key = (src.shape, src.dtype.str, src.tobytes())  # every step asks (info's distance): no more than this
+        key = (src.shape, src.dtype.str, src.tobytes())  # the sources as stored: no rounding to cells for a hit
         if key in self._fields:
             self._fields[key] = self._fields.pop(key)  # most recently used last
         else:
